@@ -1,0 +1,1 @@
+//! Metrics the papers report: see the modules.

@@ -1,0 +1,86 @@
+//! A loaded dataset: views (camera + image + optional mask), the train/test split, and what the
+//! format offers for initialisation (sparse points, depth bounds).
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use crate::camera::Camera;
+use crate::image::Image;
+
+/// One photograph with its camera.
+#[derive(Clone, Debug)]
+pub struct View {
+    /// File stem or frame name, for reports.
+    pub name: String,
+    pub camera: Camera,
+    /// RGB, backgrounds of RGBA inputs already composited.
+    pub image: Image,
+    /// Foreground mask (1 channel, 0 or 1) when the dataset has one.
+    pub mask: Option<Image>,
+    /// Near/far depth bounds of this view when the format gives them (LLFF).
+    pub depth_bounds: Option<(f64, f64)>,
+}
+
+/// A coloured point cloud (e.g. COLMAP `points3D`), used to initialise Gaussians.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PointCloud {
+    pub positions: Vec<[f32; 3]>,
+    /// RGB in `[0, 1]`, one per position.
+    pub colors: Vec<[f32; 3]>,
+}
+
+impl PointCloud {
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+}
+
+/// Views with a train/test split.
+#[derive(Clone, Debug)]
+pub struct Dataset {
+    /// Scene name (folder name), for reports.
+    pub name: String,
+    pub views: Vec<View>,
+    /// Indices into `views` used for training.
+    pub train: Vec<usize>,
+    /// Indices into `views` held out for evaluation.
+    pub test: Vec<usize>,
+    /// Sparse points from the capture's structure-from-motion, when available.
+    pub points: Option<PointCloud>,
+    /// Background colour the RGBA images were composited over (black for opaque photos).
+    pub background: [f32; 3],
+}
+
+impl Dataset {
+    pub fn train_views(&self) -> impl Iterator<Item = &View> {
+        self.train.iter().map(|&i| &self.views[i])
+    }
+
+    pub fn test_views(&self) -> impl Iterator<Item = &View> {
+        self.test.iter().map(|&i| &self.views[i])
+    }
+
+    /// Centre and radius of the training cameras (the "scene extent" of 3DGS: 1.1 × the largest
+    /// distance from the mean camera centre). Learning rates of positions scale with it.
+    pub fn camera_extent(&self) -> (Vector3<f64>, f64) {
+        camera_extent(self.train_views().map(|v| &v.camera))
+    }
+}
+
+/// Centre and radius of a set of cameras, as 3DGS's `getNerfppNorm`: the radius is 1.1 × the
+/// largest distance of a camera centre from their mean (never below a small positive value).
+pub fn camera_extent<'a>(cameras: impl Iterator<Item = &'a Camera>) -> (Vector3<f64>, f64) {
+    let centers: Vec<Vector3<f64>> = cameras.map(|c| c.center()).collect();
+    if centers.is_empty() {
+        return (Vector3::zeros(), 1.0);
+    }
+    let mean = centers.iter().sum::<Vector3<f64>>() / centers.len() as f64;
+    let max = centers
+        .iter()
+        .map(|c| (c - mean).norm())
+        .fold(0.0f64, f64::max);
+    (mean, (max * 1.1).max(1e-6))
+}

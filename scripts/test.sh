@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# The project's one test command (README quick start; `.ci/run` calls it).
+# Installs what the tests need, then runs every test of the workspace in the release profile
+# (the same profile as the binary, so the dependency tree compiles once).
+# With FEWVIEW_DATA set (CI sets it to ../shared/data), the data tests run too.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+for setup in scripts/setup-*.sh; do
+  [ -e "$setup" ] && bash "$setup"
+done
+
+extra=()
+if [ -n "${FEWVIEW_DATA:-}" ]; then
+  FEWVIEW_DATA=$(cd "$FEWVIEW_DATA" && pwd)
+  export FEWVIEW_DATA
+  extra+=(--include-ignored)
+  echo "data tests: on (FEWVIEW_DATA=$FEWVIEW_DATA)"
+else
+  echo "data tests: off (set FEWVIEW_DATA to ../shared/data to run them)"
+fi
+
+cargo test --release --workspace -- "${extra[@]}" "$@"
