@@ -1,1 +1,7 @@
-//! 3D Gaussian splatting: model, rasterizer, training.
+//! 3D Gaussian splatting (Kerbl et al. 2023) on the CPU: the Gaussian model, a differentiable
+//! tile rasterizer exposed as a Burn custom autodiff op, SH colour, the Inria PLY format and
+//! sparse-view training.
+
+pub mod raster;
+pub mod real;
+pub mod sh;
