@@ -2,6 +2,8 @@
 //! tile rasterizer exposed as a Burn custom autodiff op, SH colour, the Inria PLY format and
 //! sparse-view training.
 
+pub mod bench;
+pub mod cputime;
 pub mod raster;
 pub mod real;
 pub mod sh;

@@ -9,10 +9,8 @@ pub trait Real: Float + Default + Send + Sync + std::fmt::Debug + std::iter::Sum
     /// (relative error ≈ 2 ulp); for `f64` the exact library function.
     fn exp_blend(self) -> Self;
 
-    #[inline(always)]
-    fn c(x: f64) -> Self {
-        Self::from(x).expect("representable constant")
-    }
+    /// A constant (or any `f64`) in this precision; a plain `as` cast, so it folds at compile time.
+    fn c(x: f64) -> Self;
 
     fn to_f64_lossy(self) -> f64 {
         self.to_f64().unwrap_or(f64::NAN)
@@ -21,12 +19,22 @@ pub trait Real: Float + Default + Send + Sync + std::fmt::Debug + std::iter::Sum
 
 impl Real for f32 {
     #[inline(always)]
+    fn c(x: f64) -> Self {
+        x as f32
+    }
+
+    #[inline(always)]
     fn exp_blend(self) -> Self {
         exp_f32(self)
     }
 }
 
 impl Real for f64 {
+    #[inline(always)]
+    fn c(x: f64) -> Self {
+        x
+    }
+
     #[inline(always)]
     fn exp_blend(self) -> Self {
         self.exp()
@@ -49,11 +57,17 @@ pub fn exp_f32(x: f32) -> f32 {
     let x = x.clamp(-87.0, 88.0);
     let n = (x * LOG2E + ROUND) - ROUND;
     let r = x - n * LN2_HI - n * LN2_LO;
-    let p = 1.0
-        + r * (1.0
-            + r * (0.5
-                + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0))))));
-    let scale = f32::from_bits(((n as i32 + 127) << 23) as u32);
+    // Estrin's scheme: the same polynomial with a short dependency chain.
+    let r2 = r * r;
+    let r4 = r2 * r2;
+    let p01 = 1.0 + r;
+    let p23 = 0.5 + r * (1.0 / 6.0);
+    let p45 = 1.0 / 24.0 + r * (1.0 / 120.0);
+    let p = p01 + r2 * p23 + r4 * (p45 + r2 * (1.0 / 720.0));
+    // 2^n from the exponent bits, without a float→int conversion (which would not vectorise):
+    // n + 127 + 1.5·2^23 holds n + 127 in its low mantissa bits; shifting by 23 moves them into
+    // the exponent field and drops the rest.
+    let scale = f32::from_bits((n + (ROUND + 127.0)).to_bits() << 23);
     p * scale
 }
 

@@ -14,25 +14,29 @@ use crate::real::Real;
 
 pub const TILE_PIXELS: usize = TILE * TILE;
 
-/// Per-pixel blending state of one tile, tile-major (row by row).
+/// A per-pixel quantity of one tile, row by row (fixed sizes, so the row loops vectorise without
+/// bounds checks).
+pub type TileRows<T> = [[T; TILE]; TILE];
+
+/// Per-pixel blending state of one tile.
 #[derive(Clone, Debug)]
 pub struct TileState<F> {
-    pub color: [[F; TILE_PIXELS]; 3],
-    pub depth: [F; TILE_PIXELS],
+    pub color: [TileRows<F>; 3],
+    pub depth: TileRows<F>,
     /// Transmittance after the last blended splat.
-    pub transmittance: [F; TILE_PIXELS],
+    pub transmittance: TileRows<F>,
     /// Number of list entries processed before the pixel stopped (the backward pass visits
     /// entries `0..last`).
-    pub last: [u32; TILE_PIXELS],
+    pub last: TileRows<u32>,
 }
 
 impl<F: Real> Default for TileState<F> {
     fn default() -> Self {
         Self {
-            color: [[F::zero(); TILE_PIXELS]; 3],
-            depth: [F::zero(); TILE_PIXELS],
-            transmittance: [F::one(); TILE_PIXELS],
-            last: [0; TILE_PIXELS],
+            color: [[[F::zero(); TILE]; TILE]; 3],
+            depth: [[F::zero(); TILE]; TILE],
+            transmittance: [[F::one(); TILE]; TILE],
+            last: [[0; TILE]; TILE],
         }
     }
 }
@@ -47,13 +51,19 @@ pub struct TileGeometry {
     pub height: usize,
 }
 
+impl TileGeometry {
+    /// Pixel-centre x coordinates of the tile's columns.
+    #[inline(always)]
+    fn column_centres<F: Real>(&self) -> [F; TILE] {
+        std::array::from_fn(|c| F::c((self.x0 + c) as f64 + 0.5))
+    }
+}
+
 /// Row range of the tile a splat can reach.
 #[inline(always)]
 fn tile_rows<F>(s: &Splat<F>, geo: &TileGeometry) -> (usize, usize) {
     let r0 = (s.rows[0] as usize).max(geo.y0) - geo.y0;
-    let r1 = (s.rows[1] as usize)
-        .min(geo.y0 + geo.height)
-        .saturating_sub(geo.y0);
+    let r1 = (s.rows[1] as usize).min(geo.y0 + geo.height).saturating_sub(geo.y0);
     (r0, r1.max(r0))
 }
 
@@ -67,6 +77,20 @@ fn splat_alpha<F: Real>(s: &Splat<F>, dx: F, dy: F) -> (F, F, F) {
     (power, g, alpha)
 }
 
+/// Columns processed together: one AVX vector of `f32`.
+pub const BLOCK: usize = 8;
+
+/// Column blocks `[b0, b1)` of the tile a splat can reach.
+#[inline(always)]
+fn tile_blocks<F>(s: &Splat<F>, geo: &TileGeometry) -> (usize, usize) {
+    let c0 = (s.cols[0] as usize).max(geo.x0) - geo.x0;
+    let c1 = (s.cols[1] as usize).min(geo.x0 + geo.width).saturating_sub(geo.x0);
+    if c1 <= c0 {
+        return (0, 0);
+    }
+    (c0 / BLOCK, (c1 - 1) / BLOCK + 1)
+}
+
 /// Blends `list` (indices into `splats`, front to back) into `state`. Returns the number of
 /// splat–pixel pairs evaluated.
 #[inline(always)]
@@ -76,54 +100,59 @@ pub fn forward_tile<F: Real>(
     splats: &[Splat<F>],
     state: &mut TileState<F>,
 ) -> u64 {
-    let mut alive = [false; TILE_PIXELS];
-    let mut n_alive = 0usize;
-    for r in 0..geo.height {
-        for c in 0..geo.width {
-            alive[r * TILE + c] = true;
-            n_alive += 1;
+    // 1 for pixels still blending, 0 once stopped or outside the image (a float mask keeps the
+    // loop in one vector width).
+    let mut alive = [[F::zero(); TILE]; TILE];
+    for row in alive.iter_mut().take(geo.height) {
+        for a in row.iter_mut().take(geo.width) {
+            *a = F::one();
         }
     }
+    let mut n_alive = geo.width * geo.height;
     let (amin, tmin) = (F::c(ALPHA_MIN), F::c(T_MIN));
-    let half = F::c(0.5);
+    let zero = F::zero();
+    let px = geo.column_centres::<F>();
     let mut pairs = 0u64;
     for (j, &si) in list.iter().enumerate() {
         let s = &splats[si as usize];
         let (r0, r1) = tile_rows(s, geo);
+        let (b0, b1) = tile_blocks(s, geo);
         let rank = j as u32 + 1;
-        let mut stopped = 0usize;
+        let mut stopped = 0u32;
         for r in r0..r1 {
-            let dy = F::c((geo.y0 + r) as f64) + half - s.mean[1];
-            let base = r * TILE;
-            let row = base..base + TILE;
-            let t = &mut state.transmittance[row.clone()];
-            let [c0, c1, c2] = &mut state.color;
-            let cr = &mut c0[row.clone()];
-            let cg = &mut c1[row.clone()];
-            let cb = &mut c2[row.clone()];
-            let dd = &mut state.depth[row.clone()];
-            let last = &mut state.last[row.clone()];
-            let al = &mut alive[row];
-            for c in 0..TILE {
-                let dx = F::c((geo.x0 + c) as f64) + half - s.mean[0];
-                let (power, _, alpha) = splat_alpha(s, dx, dy);
-                let valid = al[c] && power <= F::zero() && alpha >= amin;
-                let test_t = t[c] * (F::one() - alpha);
-                let stop = valid && test_t < tmin;
-                let contrib = valid && !stop;
-                let w = if contrib { alpha * t[c] } else { F::zero() };
-                cr[c] = cr[c] + w * s.color[0];
-                cg[c] = cg[c] + w * s.color[1];
-                cb[c] = cb[c] + w * s.color[2];
-                dd[c] = dd[c] + w * s.depth;
-                t[c] = if contrib { test_t } else { t[c] };
-                last[c] = if contrib { rank } else { last[c] };
-                al[c] = al[c] && !stop;
-                stopped += stop as usize;
+            let dy = F::c((geo.y0 + r) as f64 + 0.5) - s.mean[1];
+            for b in b0..b1 {
+                let cols = b * BLOCK..(b + 1) * BLOCK;
+                let t: &mut [F; BLOCK] = (&mut state.transmittance[r][cols.clone()]).try_into().unwrap();
+                let [c0, c1, c2] = &mut state.color;
+                let cr: &mut [F; BLOCK] = (&mut c0[r][cols.clone()]).try_into().unwrap();
+                let cg: &mut [F; BLOCK] = (&mut c1[r][cols.clone()]).try_into().unwrap();
+                let cb: &mut [F; BLOCK] = (&mut c2[r][cols.clone()]).try_into().unwrap();
+                let dd: &mut [F; BLOCK] = (&mut state.depth[r][cols.clone()]).try_into().unwrap();
+                let last: &mut [u32; BLOCK] = (&mut state.last[r][cols.clone()]).try_into().unwrap();
+                let al: &mut [F; BLOCK] = (&mut alive[r][cols.clone()]).try_into().unwrap();
+                let x: &[F; BLOCK] = (&px[cols]).try_into().unwrap();
+                for c in 0..BLOCK {
+                    let dx = x[c] - s.mean[0];
+                    let (power, _, alpha) = splat_alpha(s, dx, dy);
+                    let valid = (al[c] > zero) & (power <= zero) & (alpha >= amin);
+                    let test_t = t[c] * (F::one() - alpha);
+                    let stop = valid & (test_t < tmin);
+                    let contrib = valid & !stop;
+                    let w = if contrib { alpha * t[c] } else { zero };
+                    cr[c] = cr[c] + w * s.color[0];
+                    cg[c] = cg[c] + w * s.color[1];
+                    cb[c] = cb[c] + w * s.color[2];
+                    dd[c] = dd[c] + w * s.depth;
+                    t[c] = if contrib { test_t } else { t[c] };
+                    last[c] = if contrib { rank } else { last[c] };
+                    al[c] = if stop { zero } else { al[c] };
+                    stopped += stop as u32;
+                }
             }
         }
-        pairs += ((r1 - r0) * TILE) as u64;
-        n_alive -= stopped;
+        pairs += ((r1 - r0) * (b1 - b0) * BLOCK) as u64;
+        n_alive -= stopped as usize;
         if n_alive == 0 {
             break;
         }
@@ -131,27 +160,32 @@ pub fn forward_tile<F: Real>(
     pairs
 }
 
-/// Upstream gradient of one tile's pixels (tile-major): colour, depth, alpha.
+/// Upstream gradient of one tile's pixels: colour, depth, alpha.
 #[derive(Clone, Debug)]
 pub struct TileGrad<F> {
-    pub color: [[F; TILE_PIXELS]; 3],
-    pub depth: [F; TILE_PIXELS],
-    pub alpha: [F; TILE_PIXELS],
+    pub color: [TileRows<F>; 3],
+    pub depth: TileRows<F>,
+    pub alpha: TileRows<F>,
 }
 
 impl<F: Real> Default for TileGrad<F> {
     fn default() -> Self {
         Self {
-            color: [[F::zero(); TILE_PIXELS]; 3],
-            depth: [F::zero(); TILE_PIXELS],
-            alpha: [F::zero(); TILE_PIXELS],
+            color: [[[F::zero(); TILE]; TILE]; 3],
+            depth: [[F::zero(); TILE]; TILE],
+            alpha: [[F::zero(); TILE]; TILE],
         }
     }
 }
 
 /// Backward of [`forward_tile`]: writes `SplatGrad::LEN` values per list entry into `out`
 /// (entry `j` at `out[j * LEN..]`), the gradient of the loss with respect to that splat's
-/// blending inputs summed over this tile's pixels.
+/// blending inputs summed over this tile's pixels. Returns the number of splat–pixel pairs
+/// evaluated.
+///
+/// Walks each pixel's list back to front, recovering `Tᵢ = Tᵢ₊₁ / (1 − αᵢ)` and the colour
+/// behind splat `i`, `Aᵢ = αᵢ₊₁ cᵢ₊₁ + (1 − αᵢ₊₁) Aᵢ₊₁` (starting from the background), so
+/// `∂C/∂αᵢ = Tᵢ (cᵢ − Aᵢ)`; depth (background 0) and alpha (colour 1, background 0) alike.
 #[inline(always)]
 pub fn backward_tile<F: Real>(
     geo: &TileGeometry,
@@ -161,86 +195,71 @@ pub fn backward_tile<F: Real>(
     background: [F; 3],
     grad: &TileGrad<F>,
     out: &mut [F],
-) {
+) -> u64 {
     const L: usize = SplatGrad::<f32>::LEN;
     let zero = F::zero();
     let one = F::one();
     let half = F::c(0.5);
     let (amin, amax) = (F::c(ALPHA_MIN), F::c(ALPHA_MAX));
+    let px = geo.column_centres::<F>();
     let mut t = state.transmittance;
-    let mut acc = [
-        [background[0]; TILE_PIXELS],
-        [background[1]; TILE_PIXELS],
-        [background[2]; TILE_PIXELS],
-    ];
-    let mut acc_d = [zero; TILE_PIXELS];
-    let mut acc_a = [zero; TILE_PIXELS];
-    let max_last = state.last.iter().copied().max().unwrap_or(0) as usize;
+    let mut acc = background.map(|b| [[b; TILE]; TILE]);
+    let mut acc_d = [[zero; TILE]; TILE];
+    let mut acc_a = [[zero; TILE]; TILE];
+    let max_last = state.last.iter().flatten().copied().max().unwrap_or(0) as usize;
     out.iter_mut().for_each(|v| *v = zero);
+    let mut pairs = 0u64;
     for j in (0..max_last.min(list.len())).rev() {
         let s = &splats[list[j] as usize];
         let (r0, r1) = tile_rows(s, geo);
         let rank = j as u32;
+        pairs += ((r1 - r0) * TILE) as u64;
         let mut lane = [[zero; TILE]; L];
         for r in r0..r1 {
-            let dy = F::c((geo.y0 + r) as f64) + half - s.mean[1];
-            let base = r * TILE;
+            let dy = F::c((geo.y0 + r) as f64 + 0.5) - s.mean[1];
+            let last = &state.last[r];
+            let (gr, gg, gb) = (&grad.color[0][r], &grad.color[1][r], &grad.color[2][r]);
+            let (gd, ga) = (&grad.depth[r], &grad.alpha[r]);
+            let t = &mut t[r];
+            let [a0, a1, a2] = &mut acc;
+            let (ar, ag, ab) = (&mut a0[r], &mut a1[r], &mut a2[r]);
+            let ad = &mut acc_d[r];
+            let aa = &mut acc_a[r];
             for c in 0..TILE {
-                let p = base + c;
-                let dx = F::c((geo.x0 + c) as f64) + half - s.mean[0];
+                let dx = px[c] - s.mean[0];
                 let (power, g, alpha) = splat_alpha(s, dx, dy);
-                let valid = rank < state.last[p] && power <= zero && alpha >= amin;
+                let valid = (rank < last[c]) & (power <= zero) & (alpha >= amin);
                 let one_minus = one - alpha;
-                let t_j = t[p] / one_minus;
-                let w = alpha * t_j;
-                let (gr, gg, gb) = (grad.color[0][p], grad.color[1][p], grad.color[2][p]);
-                let (gd, ga) = (grad.depth[p], grad.alpha[p]);
+                let t_j = t[c] / one_minus;
+                let w = if valid { alpha * t_j } else { zero };
                 let dl_dalpha = t_j
-                    * (gr * (s.color[0] - acc[0][p])
-                        + gg * (s.color[1] - acc[1][p])
-                        + gb * (s.color[2] - acc[2][p])
-                        + gd * (s.depth - acc_d[p])
-                        + ga * (one - acc_a[p]));
-                let sel = |v: F| if valid { v } else { zero };
-                lane[6][c] = lane[6][c] + sel(w * gr);
-                lane[7][c] = lane[7][c] + sel(w * gg);
-                lane[8][c] = lane[8][c] + sel(w * gb);
-                lane[9][c] = lane[9][c] + sel(w * gd);
+                    * (gr[c] * (s.color[0] - ar[c])
+                        + gg[c] * (s.color[1] - ag[c])
+                        + gb[c] * (s.color[2] - ab[c])
+                        + gd[c] * (s.depth - ad[c])
+                        + ga[c] * (one - aa[c]));
+                lane[6][c] = lane[6][c] + w * gr[c];
+                lane[7][c] = lane[7][c] + w * gg[c];
+                lane[8][c] = lane[8][c] + w * gb[c];
+                lane[9][c] = lane[9][c] + w * gd[c];
                 // α = o·g unless clamped at 0.99, where it no longer depends on o or the shape.
-                let free = valid && s.opacity * g < amax;
-                let dpow = if free { dl_dalpha * alpha } else { zero };
-                lane[5][c] = lane[5][c] + if free { dl_dalpha * g } else { zero };
+                let free = valid & (s.opacity * g < amax);
+                let dl_dalpha = if free { dl_dalpha } else { zero };
+                let dpow = dl_dalpha * alpha;
+                lane[5][c] = lane[5][c] + dl_dalpha * g;
                 lane[0][c] = lane[0][c] + dpow * (s.conic[0] * dx + s.conic[1] * dy);
                 lane[1][c] = lane[1][c] + dpow * (s.conic[2] * dy + s.conic[1] * dx);
                 lane[2][c] = lane[2][c] - half * dpow * dx * dx;
                 lane[3][c] = lane[3][c] - dpow * dx * dy;
                 lane[4][c] = lane[4][c] - half * dpow * dy * dy;
-                acc[0][p] = if valid {
-                    alpha * s.color[0] + one_minus * acc[0][p]
-                } else {
-                    acc[0][p]
-                };
-                acc[1][p] = if valid {
-                    alpha * s.color[1] + one_minus * acc[1][p]
-                } else {
-                    acc[1][p]
-                };
-                acc[2][p] = if valid {
-                    alpha * s.color[2] + one_minus * acc[2][p]
-                } else {
-                    acc[2][p]
-                };
-                acc_d[p] = if valid {
-                    alpha * s.depth + one_minus * acc_d[p]
-                } else {
-                    acc_d[p]
-                };
-                acc_a[p] = if valid {
-                    alpha + one_minus * acc_a[p]
-                } else {
-                    acc_a[p]
-                };
-                t[p] = if valid { t_j } else { t[p] };
+                let keep = if valid { one_minus } else { one };
+                let add = if valid { alpha } else { zero };
+                ar[c] = add * s.color[0] + keep * ar[c];
+                ag[c] = add * s.color[1] + keep * ag[c];
+                ab[c] = add * s.color[2] + keep * ab[c];
+                ad[c] = add * s.depth + keep * ad[c];
+                aa[c] = add + keep * aa[c];
+                t[c] = if valid { t_j } else { t[c] };
             }
         }
         let dst = &mut out[j * L..(j + 1) * L];
@@ -248,4 +267,5 @@ pub fn backward_tile<F: Real>(
             *v = lane[k].iter().copied().fold(zero, |a, b| a + b);
         }
     }
+    pairs
 }

@@ -65,6 +65,8 @@ pub struct ParamGradients<F> {
     pub opacity_logits: Vec<F>,
     pub sh: Vec<F>,
     pub means2d: Vec<F>,
+    /// Splat–pixel pairs evaluated by the blending backward.
+    pub pairs: u64,
 }
 
 fn tile_geometry(cam: &RenderCamera, t: usize, tiles_x: usize) -> TileGeometry {
@@ -114,7 +116,7 @@ fn backward_tile_best<F: Real>(
     background: [F; 3],
     grad: &TileGrad<F>,
     out: &mut [F],
-) {
+) -> u64 {
     #[cfg(target_arch = "x86_64")]
     {
         #[target_feature(enable = "avx2")]
@@ -126,7 +128,7 @@ fn backward_tile_best<F: Real>(
             background: [F; 3],
             grad: &TileGrad<F>,
             out: &mut [F],
-        ) {
+        ) -> u64 {
             backward_tile(geo, list, splats, state, background, grad, out)
         }
         if std::arch::is_x86_feature_detected!("avx2") {
@@ -180,13 +182,12 @@ pub fn forward<F: Real>(
         let geo = tile_geometry(camera, t, tiles_x);
         for r in 0..geo.height {
             for c in 0..geo.width {
-                let k = r * TILE + c;
                 let o = ((geo.y0 + r) * w + geo.x0 + c) * OUT_CHANNELS;
-                let tr = state.transmittance[k];
+                let tr = state.transmittance[r][c];
                 for ch in 0..3 {
-                    data[o + ch] = state.color[ch][k] + tr * bg[ch];
+                    data[o + ch] = state.color[ch][r][c] + tr * bg[ch];
                 }
-                data[o + 3] = state.depth[k];
+                data[o + 3] = state.depth[r][c];
                 data[o + 4] = F::one() - tr;
             }
         }
@@ -236,21 +237,20 @@ pub fn backward<F: Real>(
         pieces.push(piece);
         rest = tail;
     }
-    pieces.into_par_iter().enumerate().for_each(|(t, piece)| {
+    let pairs: u64 = pieces.into_par_iter().enumerate().map(|(t, piece)| {
         if piece.is_empty() {
-            return;
+            return 0;
         }
         let geo = tile_geometry(camera, t, tiles_x);
         let mut grad = TileGrad::<F>::default();
         for r in 0..geo.height {
             for c in 0..geo.width {
-                let k = r * TILE + c;
                 let o = ((geo.y0 + r) * w + geo.x0 + c) * OUT_CHANNELS;
                 for ch in 0..3 {
-                    grad.color[ch][k] = grad_out[o + ch];
+                    grad.color[ch][r][c] = grad_out[o + ch];
                 }
-                grad.depth[k] = grad_out[o + 3];
-                grad.alpha[k] = grad_out[o + 4];
+                grad.depth[r][c] = grad_out[o + 3];
+                grad.alpha[r][c] = grad_out[o + 4];
             }
         }
         backward_tile_best(
@@ -261,8 +261,8 @@ pub fn backward<F: Real>(
             bg,
             &grad,
             piece,
-        );
-    });
+        )
+    }).sum();
 
     // 2. Per splat: sum its pairs in a fixed order (deterministic results).
     let mut splat_grads = vec![SplatGrad::<F>::default(); ctx.splats.len()];
@@ -313,6 +313,7 @@ pub fn backward<F: Real>(
         opacity_logits: vec![F::zero(); n],
         sh: vec![F::zero(); n * k3],
         means2d: vec![F::zero(); n * 2],
+        pairs,
     };
     let (half_w, half_h) = (
         F::c(camera.width as f64 * 0.5),
