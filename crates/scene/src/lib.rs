@@ -9,11 +9,19 @@
 
 pub mod atomic;
 pub mod camera;
+pub mod colmap;
 pub mod dataset;
+pub mod dtu;
 pub mod error;
 pub mod image;
+pub mod llff;
+pub mod load;
+mod numpy;
+pub mod split;
+pub mod transforms;
 
 pub use camera::{Camera, Intrinsics, Se3, camera_path};
 pub use dataset::{Dataset, PointCloud, View};
 pub use error::SceneError;
 pub use image::Image;
+pub use load::{DatasetFormat, LoadOptions, detect_format, load_dataset};
