@@ -6,6 +6,11 @@
 //! `(W/2, H/2)` is the exact image centre. Every loader converts to this at the border.
 //!
 //! Images are `f32` sRGB in `[0, 1]`, stored H×W×C row-major.
+//!
+//! **Datasets**: [`load_dataset`] detects and loads LLFF ([`llff`]), NeRF-synthetic and
+//! nerfstudio `transforms` files ([`transforms`]), IDR/NeuS DTU ([`dtu`]) and COLMAP models
+//! ([`colmap`]), with each format's standard sparse-view split ([`split`]) unless
+//! [`LoadOptions`] names the views.
 
 pub mod atomic;
 pub mod camera;

@@ -15,7 +15,7 @@ use nalgebra::{Matrix3, Matrix4, Vector3};
 use rayon::prelude::*;
 
 use crate::camera::{Camera, Intrinsics, Se3};
-use crate::dataset::{Dataset, View};
+use crate::dataset::{Dataset, PointCloud, View};
 use crate::error::{Result, SceneError};
 use crate::load::{self, LoadOptions};
 use crate::numpy;
@@ -174,8 +174,36 @@ fn image_folder(root: &Path, factor: u32) -> Result<(PathBuf, u32)> {
     ))
 }
 
+/// The COLMAP points the poses were made from, when the capture still has them
+/// (`sparse/0/points3D.{bin,txt}`). LLFF's `imgs2poses` only permutes COLMAP's camera axes, so
+/// the poses share COLMAP's world frame and the points need only the normalisation
+/// (`to_source⁻¹`).
+fn sfm_points(root: &Path, to_source: Option<&Matrix4<f64>>) -> Result<Option<PointCloud>> {
+    let Some(points) = crate::colmap::read_points_in(&root.join("sparse").join("0"))? else {
+        return Ok(None);
+    };
+    let to_scene = to_source
+        .and_then(|m| m.try_inverse())
+        .unwrap_or_else(Matrix4::identity);
+    let cloud = PointCloud {
+        positions: points
+            .iter()
+            .map(|p| {
+                let x = to_scene.transform_point(&Vector3::from(p.xyz).into());
+                [x.x as f32, x.y as f32, x.z as f32]
+            })
+            .collect(),
+        colors: points
+            .iter()
+            .map(|p| p.rgb.map(|c| c as f32 / 255.0))
+            .collect(),
+    };
+    Ok(Some(cloud))
+}
+
 /// Loads an LLFF scene (see the module docs). Views are all rows; the split is RegNeRF's
-/// ([`split::llff_split`]); `depth_bounds` are the (normalised) near/far bounds.
+/// ([`split::llff_split`]); `depth_bounds` are the (normalised) near/far bounds; `points` are the
+/// capture's COLMAP points when `sparse/0/points3D` is still there.
 pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let poses_path = root.join("poses_bounds.npy");
     let rows = read_poses_bounds(&poses_path)?;
@@ -202,7 +230,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     };
 
     let background = opts.background.unwrap_or([0.0; 3]);
-    let extra = opts.llff_factor / folder_factor * opts.downscale;
+    let extra = (opts.llff_factor / folder_factor).saturating_mul(opts.downscale);
     let views = files
         .par_iter()
         .enumerate()
@@ -260,7 +288,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
         views,
         train,
         test,
-        points: None,
+        points: sfm_points(root, to_source.as_ref())?,
         background,
         to_source_world: to_source,
     })
@@ -386,6 +414,24 @@ mod tests {
             let (u1, v1, _) = b.camera.project(&p_norm).unwrap();
             assert!((u0 - u1).abs() < 1e-9 && (v0 - v1).abs() < 1e-9);
         }
+        // COLMAP points share the stored frame: they come out normalised like the cameras.
+        assert!(norm.points.is_none());
+        let sparse = dir.path().join("sparse/0");
+        std::fs::create_dir_all(&sparse).unwrap();
+        std::fs::write(
+            sparse.join("points3D.txt"),
+            "# id x y z r g b error track\n1 0.2 -0.1 0.3 255 0 51 0.5 1 0\n",
+        )
+        .unwrap();
+        let with_points = load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
+        let cloud = with_points.points.unwrap();
+        let p = Vector3::new(0.2, -0.1, 0.3);
+        let want = m.try_inverse().unwrap().transform_point(&p.into());
+        let got = cloud.positions[0];
+        assert!(
+            (Vector3::new(got[0] as f64, got[1] as f64, got[2] as f64) - want.coords).norm() < 1e-6
+        );
+        assert_eq!(cloud.colors[0], [1.0, 0.0, 0.2]);
         assert!(
             (norm
                 .views
@@ -488,6 +534,15 @@ mod tests {
             e.contains("train view 5 is out of range: there are 3 views"),
             "{e}"
         );
+        let empty = LoadOptions {
+            test_views: Some(vec![]),
+            n_train: Some(1),
+            ..Default::default()
+        };
+        let e = load::load_dataset(dir.path(), &empty)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("the test split is empty"), "{e}");
         // Corrupt image.
         std::fs::write(dir.path().join("images_8/image001.png"), b"garbage").unwrap();
         let e = load::load_dataset(dir.path(), &opts)

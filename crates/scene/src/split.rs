@@ -137,6 +137,23 @@ pub fn dtu_train_views(n: usize, source: &Path) -> Result<Vec<usize>> {
     Ok(DTU_TRAIN_ORDER[..n].to_vec())
 }
 
+/// Parses a view list as given on a command line: comma- or space-separated indices
+/// (`"22,23,24"`, `"25 22 28"`).
+pub fn parse_view_list(s: &str) -> std::result::Result<Vec<usize>, String> {
+    let views = s
+        .split(|c: char| c == ',' || c.is_whitespace())
+        .filter(|t| !t.is_empty())
+        .map(|t| {
+            t.parse::<usize>()
+                .map_err(|_| format!("view index {t:?} is not a non-negative integer"))
+        })
+        .collect::<std::result::Result<Vec<_>, _>>()?;
+    if views.is_empty() {
+        return Err("the view list is empty".to_owned());
+    }
+    Ok(views)
+}
+
 /// Checks a split against the number of views: non-empty, in range, no index twice. `what`
 /// names the split ("train", "test") in the message.
 pub fn validate_split(views: &[usize], n_views: usize, what: &str, source: &Path) -> Result<()> {
@@ -218,6 +235,14 @@ mod tests {
         for v in DTU_TRAIN_ORDER {
             assert!(!DTU_TEST_VIEWS.contains(&v));
         }
+    }
+
+    #[test]
+    fn view_lists_parse() {
+        assert_eq!(parse_view_list("22,23,24").unwrap(), vec![22, 23, 24]);
+        assert_eq!(parse_view_list(" 25 22, 28 ").unwrap(), vec![25, 22, 28]);
+        assert!(parse_view_list("1,-2").unwrap_err().contains("\"-2\""));
+        assert!(parse_view_list(" , ").unwrap_err().contains("empty"));
     }
 
     #[test]

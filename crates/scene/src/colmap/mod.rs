@@ -67,6 +67,17 @@ impl ColmapCamera {
     /// Pinhole intrinsics, or why the camera has none (see the module docs).
     pub fn intrinsics(&self) -> std::result::Result<Intrinsics, String> {
         let p = &self.params;
+        match model_param_count(&self.model) {
+            Some(n) if n == p.len() => {}
+            Some(n) => {
+                return Err(format!(
+                    "{} needs {n} parameters, has {}",
+                    self.model,
+                    p.len()
+                ));
+            }
+            None => return Err(format!("unknown camera model {}", self.model)),
+        }
         // (fx, fy, cx, cy) and the distortion coefficients of each accepted model.
         let (fx, fy, cx, cy, distortion) = match self.model.as_str() {
             "SIMPLE_PINHOLE" => (p[0], p[0], p[1], p[2], &p[3..]),
@@ -226,6 +237,19 @@ pub fn read_model(dir: &Path) -> Result<ColmapModel> {
         ));
     }
     Ok(model)
+}
+
+/// The points of the model in `dir` alone (`points3D.bin`, else `points3D.txt`), `None` when
+/// neither exists.
+pub fn read_points_in(dir: &Path) -> Result<Option<Vec<ColmapPoint>>> {
+    let (bin, txt) = (dir.join("points3D.bin"), dir.join("points3D.txt"));
+    if bin.is_file() {
+        binary::read_points(&bin).map(Some)
+    } else if txt.is_file() {
+        text::read_points(&txt).map(Some)
+    } else {
+        Ok(None)
+    }
 }
 
 /// Loads a COLMAP scene: the model (see [`find_model_dir`]), photos from `images/` by name.
