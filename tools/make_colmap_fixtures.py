@@ -12,7 +12,7 @@ Output (committed): crates/scene/tests/fixtures/colmap/
 The Rust COLMAP readers must reproduce reference.json from both model folders.
 
 Rerun (from the repository root):
-    python3 -m venv tools/.venv && tools/.venv/bin/pip install numpy pycolmap==4.2.1
+    python3 -m venv tools/.venv && tools/.venv/bin/pip install numpy==2.4.6 pycolmap==4.2.1
     tools/.venv/bin/python tools/make_colmap_fixtures.py
 """
 

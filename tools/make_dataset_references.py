@@ -15,7 +15,7 @@ Writes crates/scene/tests/fixtures/references.json with:
          frame r_26's OpenGL camera (u = f*x/(-z) + W/2, v = -f*y/(-z) + H/2).
 
 Rerun (from the repository root, with the data folder of the data README):
-    python3 -m venv tools/.venv && tools/.venv/bin/pip install numpy opencv-python-headless pillow
+    python3 -m venv tools/.venv && tools/.venv/bin/pip install numpy==2.4.6 opencv-python-headless==5.0.0.93 pillow==13.0.0
     FEWVIEW_DATA=/work/shared/data tools/.venv/bin/python tools/make_dataset_references.py
 """
 

@@ -13,6 +13,7 @@
 //! [`LoadOptions`] names the views.
 
 pub mod atomic;
+pub mod axes;
 pub mod camera;
 pub mod colmap;
 pub mod dataset;

@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Matrix3, Matrix4, Vector3};
 use rayon::prelude::*;
 
+use crate::axes::opengl_to_opencv;
 use crate::camera::{Camera, Intrinsics, Se3};
 use crate::dataset::{Dataset, PointCloud, View};
 use crate::error::{Result, SceneError};
@@ -139,15 +140,6 @@ pub fn normalize(
         .fixed_view_mut::<3, 3>(0, 0)
         .copy_from(&(Matrix3::identity() / s));
     (recentered, bounds, unscale * avg.to_matrix4())
-}
-
-/// OpenGL camera axes (right, up, back) → OpenCV (right, down, forward): negate y and z.
-pub fn opengl_to_opencv(camera_to_world_gl: &Se3) -> Se3 {
-    let flip = Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, -1.0));
-    Se3::new(
-        camera_to_world_gl.rotation * flip,
-        camera_to_world_gl.translation,
-    )
 }
 
 /// The image folder for `factor` and the extra integer downscale it needs: `images_{factor}`

@@ -26,10 +26,10 @@ use nalgebra::{Matrix3, Matrix4};
 use rayon::prelude::*;
 use serde::Deserialize;
 
+use crate::axes::opengl_to_opencv;
 use crate::camera::{Camera, Intrinsics, Se3};
 use crate::dataset::{Dataset, View};
 use crate::error::{Result, SceneError};
-use crate::llff::opengl_to_opencv;
 use crate::load::{self, LoadOptions};
 use crate::split;
 
