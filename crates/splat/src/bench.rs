@@ -1,8 +1,6 @@
 //! Rasterizer throughput figures for `fewview bench`, with a plain single-threaded blend loop
 //! measured in the same run as the yardstick.
 
-use std::time::Instant;
-
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;
@@ -11,6 +9,7 @@ use serde::Serialize;
 use crate::raster::project::Splat;
 use crate::raster::render::{OUT_CHANNELS, backward, forward};
 use crate::raster::{ALPHA_MAX, ALPHA_MIN, GaussianRefs, RenderCamera, RenderSettings, T_MIN, TILE};
+use crate::cputime::measure;
 use crate::sh::SH_C0;
 
 /// A synthetic scene shaped like a trained forward-facing capture: Gaussians spread through the
@@ -91,31 +90,39 @@ pub struct RasterBench {
     pub width: usize,
     pub height: usize,
     pub threads: usize,
+    /// Median wall-clock seconds of one render / one backward pass.
     pub forward_seconds: f64,
     pub backward_seconds: f64,
+    /// Median CPU seconds (summed over threads) of the same.
+    pub forward_cpu_seconds: f64,
+    pub backward_cpu_seconds: f64,
     pub forward_pairs: u64,
     pub backward_pairs: u64,
-    /// Splat–pixel pairs per second per core (pairs / seconds / threads).
+    /// Splat–pixel pairs per CPU-second (per core).
     pub forward_pairs_per_sec_per_core: f64,
     pub backward_pairs_per_sec_per_core: f64,
     /// The yardstick: a plain single-threaded per-pixel blend loop (library `exp`, scalar) over
-    /// the same tile lists, pairs per second on one core.
+    /// the same tile lists, pairs per CPU-second on one core.
     pub reference_pairs_per_sec: f64,
     pub reference_seconds: f64,
     pub forward_vs_reference: f64,
 }
 
-/// Median of `runs` timings of `f`.
-fn median_seconds(runs: usize, mut f: impl FnMut()) -> f64 {
-    let mut t: Vec<f64> = (0..runs)
-        .map(|_| {
-            let start = Instant::now();
-            f();
-            start.elapsed().as_secs_f64()
-        })
-        .collect();
-    t.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    t[t.len() / 2]
+/// Median wall and CPU seconds of `runs` calls of `f` (CPU time summed over threads: the
+/// core-seconds used, robust to other load on the machine).
+pub fn median_seconds(runs: usize, mut f: impl FnMut()) -> (f64, f64) {
+    let mut wall = Vec::with_capacity(runs);
+    let mut cpu = Vec::with_capacity(runs);
+    for _ in 0..runs.max(1) {
+        let ((), w, c) = measure(&mut f);
+        wall.push(w);
+        cpu.push(c);
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(|a, b| a.total_cmp(b));
+        v[v.len() / 2]
+    };
+    (median(wall), median(cpu))
 }
 
 /// Plain blend over the tile lists: pixel-outer, splat-inner, library `exp`, early break. Returns
@@ -171,7 +178,7 @@ pub fn raster_bench(n: usize, width: usize, height: usize, runs: usize) -> Raste
     let g = scene.refs();
     let threads = rayon::current_num_threads();
     let (out, ctx) = forward(&g, &scene.camera, &settings);
-    let forward_seconds = median_seconds(runs, || {
+    let (forward_seconds, forward_cpu_seconds) = median_seconds(runs, || {
         std::hint::black_box(forward(&g, &scene.camera, &settings));
     });
     let grad_out: Vec<f32> = (0..out.data.len())
@@ -179,17 +186,17 @@ pub fn raster_bench(n: usize, width: usize, height: usize, runs: usize) -> Raste
         .map(|i| if i % OUT_CHANNELS < 3 { 1e-3 } else { 0.0 })
         .collect();
     let grads = backward(&g, &ctx, &grad_out);
-    let backward_seconds = median_seconds(runs, || {
+    let (backward_seconds, backward_cpu_seconds) = median_seconds(runs, || {
         std::hint::black_box(backward(&g, &ctx, &grad_out));
     });
     let mut ref_pairs = 0;
-    let reference_seconds = median_seconds(runs.min(3), || {
+    let (reference_seconds, reference_cpu_seconds) = median_seconds(runs.min(3), || {
         let (sum, pairs) = reference_blend(&ctx.splats, &ctx.bins, width, height);
         std::hint::black_box(sum);
         ref_pairs = pairs;
     });
-    let per_core = |pairs: u64, secs: f64| pairs as f64 / secs / threads as f64;
-    let reference_pairs_per_sec = ref_pairs as f64 / reference_seconds;
+    let per_core = |pairs: u64, cpu_secs: f64| pairs as f64 / cpu_secs;
+    let reference_pairs_per_sec = ref_pairs as f64 / reference_cpu_seconds;
     RasterBench {
         gaussians: n,
         width,
@@ -197,12 +204,14 @@ pub fn raster_bench(n: usize, width: usize, height: usize, runs: usize) -> Raste
         threads,
         forward_seconds,
         backward_seconds,
+        forward_cpu_seconds,
+        backward_cpu_seconds,
         forward_pairs: out.pairs,
         backward_pairs: grads.pairs,
-        forward_pairs_per_sec_per_core: per_core(out.pairs, forward_seconds),
-        backward_pairs_per_sec_per_core: per_core(grads.pairs, backward_seconds),
+        forward_pairs_per_sec_per_core: per_core(out.pairs, forward_cpu_seconds),
+        backward_pairs_per_sec_per_core: per_core(grads.pairs, backward_cpu_seconds),
         reference_pairs_per_sec,
         reference_seconds,
-        forward_vs_reference: per_core(out.pairs, forward_seconds) / reference_pairs_per_sec,
+        forward_vs_reference: per_core(out.pairs, forward_cpu_seconds) / reference_pairs_per_sec,
     }
 }
