@@ -6,10 +6,12 @@ use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::cputime::measure;
 use crate::raster::project::Splat;
 use crate::raster::render::{OUT_CHANNELS, backward, forward};
-use crate::raster::{ALPHA_MAX, ALPHA_MIN, GaussianRefs, RenderCamera, RenderSettings, T_MIN, TILE};
-use crate::cputime::measure;
+use crate::raster::{
+    ALPHA_MAX, ALPHA_MIN, GaussianRefs, RenderCamera, RenderSettings, T_MIN, TILE,
+};
 use crate::sh::SH_C0;
 
 /// A synthetic scene shaped like a trained forward-facing capture: Gaussians spread through the
@@ -50,11 +52,13 @@ impl SyntheticScene {
             let z = 2.0 + 8.0 * rng.random::<f64>();
             let u = (rng.random::<f64>() - 0.5) * width as f64 * 1.1;
             let v = (rng.random::<f64>() - 0.5) * height as f64 * 1.1;
-            s.means.extend([(u * z / focal) as f32, (v * z / focal) as f32, z as f32]);
+            s.means
+                .extend([(u * z / focal) as f32, (v * z / focal) as f32, z as f32]);
             let sigma_px = (0.5f64.ln() + (12.0f64).ln() * rng.random::<f64>()).exp();
             let base = (sigma_px * z / focal).ln();
             for _ in 0..3 {
-                s.log_scales.push((base + 0.5 * (rng.random::<f64>() - 0.5)) as f32);
+                s.log_scales
+                    .push((base + 0.5 * (rng.random::<f64>() - 0.5)) as f32);
             }
             let q: [f32; 4] = std::array::from_fn(|_| rng.random::<f32>() - 0.5);
             s.quats.extend(q);
@@ -147,7 +151,8 @@ fn reference_blend(
                     let s = &splats[si as usize];
                     pairs += 1;
                     let (dx, dy) = (px - s.mean[0], py - s.mean[1]);
-                    let power = -0.5 * (s.conic[0] * dx * dx + s.conic[2] * dy * dy) - s.conic[1] * dx * dy;
+                    let power =
+                        -0.5 * (s.conic[0] * dx * dx + s.conic[2] * dy * dy) - s.conic[1] * dx * dy;
                     if power > 0.0 {
                         continue;
                     }

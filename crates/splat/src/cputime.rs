@@ -21,5 +21,9 @@ pub fn measure<T>(f: impl FnOnce() -> T) -> (T, f64, f64) {
     let wall = std::time::Instant::now();
     let cpu = process_cpu_seconds();
     let out = f();
-    (out, wall.elapsed().as_secs_f64(), process_cpu_seconds() - cpu)
+    (
+        out,
+        wall.elapsed().as_secs_f64(),
+        process_cpu_seconds() - cpu,
+    )
 }

@@ -4,6 +4,7 @@
 
 pub mod bench;
 pub mod cputime;
+pub mod op;
 pub mod raster;
 pub mod real;
 pub mod sh;

@@ -63,7 +63,9 @@ impl TileGeometry {
 #[inline(always)]
 fn tile_rows<F>(s: &Splat<F>, geo: &TileGeometry) -> (usize, usize) {
     let r0 = (s.rows[0] as usize).max(geo.y0) - geo.y0;
-    let r1 = (s.rows[1] as usize).min(geo.y0 + geo.height).saturating_sub(geo.y0);
+    let r1 = (s.rows[1] as usize)
+        .min(geo.y0 + geo.height)
+        .saturating_sub(geo.y0);
     (r0, r1.max(r0))
 }
 
@@ -84,7 +86,9 @@ pub const BLOCK: usize = 8;
 #[inline(always)]
 fn tile_blocks<F>(s: &Splat<F>, geo: &TileGeometry) -> (usize, usize) {
     let c0 = (s.cols[0] as usize).max(geo.x0) - geo.x0;
-    let c1 = (s.cols[1] as usize).min(geo.x0 + geo.width).saturating_sub(geo.x0);
+    let c1 = (s.cols[1] as usize)
+        .min(geo.x0 + geo.width)
+        .saturating_sub(geo.x0);
     if c1 <= c0 {
         return (0, 0);
     }
@@ -123,13 +127,16 @@ pub fn forward_tile<F: Real>(
             let dy = F::c((geo.y0 + r) as f64 + 0.5) - s.mean[1];
             for b in b0..b1 {
                 let cols = b * BLOCK..(b + 1) * BLOCK;
-                let t: &mut [F; BLOCK] = (&mut state.transmittance[r][cols.clone()]).try_into().unwrap();
+                let t: &mut [F; BLOCK] = (&mut state.transmittance[r][cols.clone()])
+                    .try_into()
+                    .unwrap();
                 let [c0, c1, c2] = &mut state.color;
                 let cr: &mut [F; BLOCK] = (&mut c0[r][cols.clone()]).try_into().unwrap();
                 let cg: &mut [F; BLOCK] = (&mut c1[r][cols.clone()]).try_into().unwrap();
                 let cb: &mut [F; BLOCK] = (&mut c2[r][cols.clone()]).try_into().unwrap();
                 let dd: &mut [F; BLOCK] = (&mut state.depth[r][cols.clone()]).try_into().unwrap();
-                let last: &mut [u32; BLOCK] = (&mut state.last[r][cols.clone()]).try_into().unwrap();
+                let last: &mut [u32; BLOCK] =
+                    (&mut state.last[r][cols.clone()]).try_into().unwrap();
                 let al: &mut [F; BLOCK] = (&mut alive[r][cols.clone()]).try_into().unwrap();
                 let x: &[F; BLOCK] = (&px[cols]).try_into().unwrap();
                 for c in 0..BLOCK {

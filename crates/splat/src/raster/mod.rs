@@ -186,4 +186,4 @@ pub fn sh_degree_of(k: usize) -> usize {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -237,32 +237,36 @@ pub fn backward<F: Real>(
         pieces.push(piece);
         rest = tail;
     }
-    let pairs: u64 = pieces.into_par_iter().enumerate().map(|(t, piece)| {
-        if piece.is_empty() {
-            return 0;
-        }
-        let geo = tile_geometry(camera, t, tiles_x);
-        let mut grad = TileGrad::<F>::default();
-        for r in 0..geo.height {
-            for c in 0..geo.width {
-                let o = ((geo.y0 + r) * w + geo.x0 + c) * OUT_CHANNELS;
-                for ch in 0..3 {
-                    grad.color[ch][r][c] = grad_out[o + ch];
-                }
-                grad.depth[r][c] = grad_out[o + 3];
-                grad.alpha[r][c] = grad_out[o + 4];
+    let pairs: u64 = pieces
+        .into_par_iter()
+        .enumerate()
+        .map(|(t, piece)| {
+            if piece.is_empty() {
+                return 0;
             }
-        }
-        backward_tile_best(
-            &geo,
-            bins.tile_entries(t),
-            &ctx.splats,
-            &ctx.tiles[t],
-            bg,
-            &grad,
-            piece,
-        )
-    }).sum();
+            let geo = tile_geometry(camera, t, tiles_x);
+            let mut grad = TileGrad::<F>::default();
+            for r in 0..geo.height {
+                for c in 0..geo.width {
+                    let o = ((geo.y0 + r) * w + geo.x0 + c) * OUT_CHANNELS;
+                    for ch in 0..3 {
+                        grad.color[ch][r][c] = grad_out[o + ch];
+                    }
+                    grad.depth[r][c] = grad_out[o + 3];
+                    grad.alpha[r][c] = grad_out[o + 4];
+                }
+            }
+            backward_tile_best(
+                &geo,
+                bins.tile_entries(t),
+                &ctx.splats,
+                &ctx.tiles[t],
+                bg,
+                &grad,
+                piece,
+            )
+        })
+        .sum();
 
     // 2. Per splat: sum its pairs in a fixed order (deterministic results).
     let mut splat_grads = vec![SplatGrad::<F>::default(); ctx.splats.len()];

@@ -66,7 +66,10 @@ pub fn bin<F: Real>(splats: &[Splat<F>], tiles_x: usize, tiles_y: usize) -> Tile
             (tile_span(sp.cols), tile_span(sp.rows))
         })
         .collect();
-    let chunk = order.len().div_ceil(rayon::current_num_threads() * 4).max(1024);
+    let chunk = order
+        .len()
+        .div_ceil(rayon::current_num_threads() * 4)
+        .max(1024);
 
     // Pass 1: tile counts per chunk.
     let chunk_counts: Vec<Vec<u32>> = spans
@@ -174,7 +177,9 @@ mod tests {
         let mut splats = Vec::new();
         let mut state = 12345u64;
         let mut next = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (state >> 33) as u32
         };
         for _ in 0..5000 {
@@ -200,7 +205,11 @@ mod tests {
                 })
                 .collect();
             want.sort_by(|&a, &b| {
-                splats[a as usize].depth.partial_cmp(&splats[b as usize].depth).unwrap().then(a.cmp(&b))
+                splats[a as usize]
+                    .depth
+                    .partial_cmp(&splats[b as usize].depth)
+                    .unwrap()
+                    .then(a.cmp(&b))
             });
             assert_eq!(bins.tile_entries(t), want.as_slice(), "tile {t}");
         }
