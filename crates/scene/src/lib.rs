@@ -12,6 +12,7 @@ pub mod camera;
 pub mod dataset;
 pub mod error;
 pub mod image;
+pub mod video;
 
 pub use camera::{Camera, Intrinsics, Se3, camera_path};
 pub use dataset::{Dataset, PointCloud, View};
