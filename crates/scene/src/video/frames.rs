@@ -3,7 +3,9 @@
 //! Written as `frame_00000.png`, `frame_00001.png`, ... (8-bit RGB PNG) plus `video.json`
 //! holding the frame rate, since images carry none. Read back: every `.png`/`.jpg`/`.jpeg` in
 //! the folder in natural order (`f2` before `f10`), the frame rate from `video.json` when it is
-//! there and otherwise 25 fps, the default of FFmpeg's image-sequence reader.
+//! there and otherwise 25 fps, the default of FFmpeg's image-sequence reader. A `video.json`
+//! whose frame count disagrees with the folder (frames added or deleted by hand) is an error
+//! rather than a silently wrong timing.
 
 use std::cmp::Ordering;
 use std::path::{Path, PathBuf};
@@ -195,6 +197,16 @@ pub(crate) fn read_frames(dir: &Path, background: [f32; 3]) -> Result<(Vec<Image
             let sidecar: Sidecar = serde_json::from_slice(&bytes).map_err(|e| {
                 SceneError::format(&sidecar_path, format!("corrupt frame-rate sidecar: {e}"))
             })?;
+            if sidecar.frames != frames.len() {
+                return Err(SceneError::invalid(
+                    &sidecar_path,
+                    format!(
+                        "records {} frames but the folder holds {} PNG/JPEG frames",
+                        sidecar.frames,
+                        frames.len()
+                    ),
+                ));
+            }
             if !(sidecar.fps.is_finite() && sidecar.fps > 0.0) {
                 return Err(SceneError::invalid(
                     &sidecar_path,

@@ -48,11 +48,12 @@ pub enum Container {
 }
 
 impl Container {
-    /// The container for `path`: an existing folder, a path ending in `/` or one without an
-    /// extension is a frame folder; otherwise the (case-insensitive) extension decides.
+    /// The container `path` names: a path ending in `/` or without an extension is a frame
+    /// folder; otherwise the (case-insensitive) extension decides. Looks only at the name
+    /// ([`read_video`] also takes any existing folder as a frame folder).
     pub fn for_path(path: &Path) -> Result<Self> {
         let text = path.as_os_str().to_string_lossy();
-        if path.is_dir() || text.ends_with('/') || text.ends_with(std::path::MAIN_SEPARATOR) {
+        if text.ends_with('/') || text.ends_with(std::path::MAIN_SEPARATOR) {
             return Ok(Container::FrameFolder);
         }
         match path
@@ -83,9 +84,10 @@ pub enum H264Quality {
     Bitrate { bits_per_second: u32 },
 }
 
-/// Default quantiser. On the smooth synthetic animation of the round-trip test (128×96,
-/// 24 fps) it gives ≥ 37 dB PSNR per frame, within ~3 dB of the 4:2:0 chroma-subsampling
-/// ceiling, at about 0.1 bit per pixel.
+/// Default quantiser. On the smooth synthetic animation of the round-trip test it gives
+/// ≥ 38.3 dB PSNR on every frame at 0.35 bit/pixel (128×96, 24 frames) and ≥ 43.9 dB at
+/// 0.11 bit/pixel (512×512, 60 frames), within ~2.5 dB of what 4:2:0 chroma subsampling alone
+/// allows; QP 12 / 24 / 30 give ≥ 39.6 / 36.5 / 33.9 dB at 0.57 / 0.22 / 0.15 bit/pixel.
 pub const DEFAULT_QP: u8 = 18;
 
 impl Default for H264Quality {
@@ -223,10 +225,16 @@ pub fn read_video(path: &Path) -> Result<(Vec<Image>, f32)> {
     read_video_with(path, &ReadOptions::default())
 }
 
-/// Reads the video at `path` (`.mp4`, `.gif`, or a folder of PNG/JPEG frames) as RGB frames
-/// and its frame rate (frames per second).
+/// Reads the video at `path` (`.mp4`, `.gif`, or a folder of PNG/JPEG frames, which may be
+/// any existing folder) as RGB frames and its frame rate in frames per second (for a
+/// variable-frame-rate file, its mean rate).
 pub fn read_video_with(path: &Path, opts: &ReadOptions) -> Result<(Vec<Image>, f32)> {
-    match Container::for_path(path)? {
+    let container = if path.is_dir() {
+        Container::FrameFolder
+    } else {
+        Container::for_path(path)?
+    };
+    match container {
         Container::Mp4 => mp4_h264::read_mp4(path),
         Container::Gif => gif::read_gif(path, opts.background),
         Container::FrameFolder => frames::read_frames(path, opts.background),

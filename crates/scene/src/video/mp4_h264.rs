@@ -2,10 +2,10 @@
 //! source bundled in the `openh264` crate), muxing/demuxing with the `mp4` crate, and the
 //! R'G'B' ↔ Y'CbCr conversion of [`super::color`].
 //!
-//! What we write: H.264 (OpenH264's default Constrained Baseline/Main-free profile, no B-frames,
-//! so decode order is display order and no `ctts`/edit list is needed), yuv420p, BT.709
-//! limited range signalled in the SPS VUI (colour primaries, transfer and matrix all BT.709),
-//! an IDR every [`VideoOptions::keyframe_interval`] frames for seeking, constant frame duration
+//! What we write: H.264 Constrained Baseline (plays everywhere; no B-frames, so decode order is
+//! display order and no `ctts`/edit list is needed) at the lowest sufficient level from 3.0
+//! up ([`h264_level`]), yuv420p, BT.709 limited range signalled in the SPS VUI (colour
+//! primaries, transfer and matrix all BT.709), an IDR every [`VideoOptions::keyframe_interval`] frames for seeking, constant frame duration
 //! `1000 / round(1000 · fps)` s. Parameter sets live in the `avcC` box (ISO/IEC 14496-15), and
 //! are also repeated in-band before each IDR, as OpenH264 emits them (allowed for `avc1`).
 //!
@@ -19,7 +19,7 @@ use std::path::Path;
 use openh264::OpenH264API;
 use openh264::decoder::{Decoder, DecoderConfig, Flush};
 use openh264::encoder::{
-    BitRate, Encoder, EncoderConfig, FrameRate, FrameType, IntraFramePeriod, QpRange,
+    BitRate, Encoder, EncoderConfig, FrameRate, FrameType, IntraFramePeriod, Level, QpRange,
     RateControlMode, VuiConfig,
 };
 use openh264::formats::{YUVBuffer, YUVSource};
@@ -102,8 +102,52 @@ struct EncodedStream {
     height: usize,
 }
 
-fn encoder_config(fps: f32, opts: &VideoOptions) -> EncoderConfig {
-    let config = EncoderConfig::new()
+/// An H.264 level (ITU-T H.264 Annex A) and its bitrate ceiling.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct H264Level {
+    level: Level,
+    /// MaxBR × cpbBrNalFactor, bit/s.
+    max_nal_bitrate: u32,
+}
+
+/// The lowest H.264 level from 3.0 up whose limits (ITU-T H.264 Table A-1: MaxFS frame size
+/// and MaxMBPS macroblock rate, and Annex A.3.1's `width, height ≤ √(8 · MaxFS)` macroblocks)
+/// admit `width × height` at `fps`. OpenH264 otherwise writes level 5.0 whatever the size,
+/// which some hardware decoders refuse; 3.0 is the floor every player supports. `None` when
+/// even level 5.2 is exceeded (the caller then leaves the choice to OpenH264).
+pub(crate) fn h264_level(width: usize, height: usize, fps: f32) -> Option<H264Level> {
+    // (level, MaxMBPS, MaxFS, MaxBR in 1000 bit/s for Baseline/Main/Extended)
+    const LEVELS: [(Level, f64, f64, u32); 9] = [
+        (Level::Level_3_0, 40_500.0, 1_620.0, 10_000),
+        (Level::Level_3_1, 108_000.0, 3_600.0, 14_000),
+        (Level::Level_3_2, 216_000.0, 5_120.0, 20_000),
+        (Level::Level_4_0, 245_760.0, 8_192.0, 20_000),
+        (Level::Level_4_1, 245_760.0, 8_192.0, 50_000),
+        (Level::Level_4_2, 522_240.0, 8_704.0, 50_000),
+        (Level::Level_5_0, 589_824.0, 22_080.0, 135_000),
+        (Level::Level_5_1, 983_040.0, 36_864.0, 240_000),
+        (Level::Level_5_2, 2_073_600.0, 36_864.0, 240_000),
+    ];
+    let (mbs_w, mbs_h) = (width.div_ceil(16) as f64, height.div_ceil(16) as f64);
+    let frame_mbs = mbs_w * mbs_h;
+    LEVELS
+        .iter()
+        .find(|(_, max_mbps, max_fs, _)| {
+            let side = (8.0 * max_fs).sqrt();
+            frame_mbs <= *max_fs
+                && mbs_w <= side
+                && mbs_h <= side
+                && frame_mbs * fps as f64 <= *max_mbps
+        })
+        .map(|&(level, _, _, max_br)| H264Level {
+            level,
+            // Table A-1 counts MaxBR in units of cpbBrNalFactor = 1200 bit/s at the NAL level.
+            max_nal_bitrate: max_br * 1200,
+        })
+}
+
+fn encoder_config(width: usize, height: usize, fps: f32, opts: &VideoOptions) -> EncoderConfig {
+    let mut config = EncoderConfig::new()
         .max_frame_rate(FrameRate::from_hz(fps))
         // Dropping frames would change the frame count and the timing.
         .skip_frames(false)
@@ -114,15 +158,21 @@ fn encoder_config(fps: f32, opts: &VideoOptions) -> EncoderConfig {
         // Background detection (meant for video calls) leaves macroblocks it deems static
         // un-updated; on renders it cost up to 8 dB on individual frames in our tests.
         .background_detection(false);
+    let level = h264_level(width, height, fps);
+    if let Some(level) = level {
+        config = config.level(level.level);
+    }
     match opts.quality {
         H264Quality::ConstantQp(qp) => {
             let qp = qp.min(51);
-            // A one-point QP range pins the quantiser; the bitrate target is then moot, so it
-            // is set high enough never to trigger OpenH264's rate-control overrides.
+            // A one-point QP range pins the quantiser, so the bitrate target steers nothing;
+            // it is set to the level's ceiling because OpenH264 raises the level to fit any
+            // larger target. (No HRD parameters are written, so players enforce no bitrate.)
+            let ceiling = level.map_or(100_000_000, |l| l.max_nal_bitrate);
             config
                 .rate_control_mode(RateControlMode::Quality)
                 .qp(QpRange::new(qp, qp))
-                .bitrate(BitRate::from_bps(100_000_000))
+                .bitrate(BitRate::from_bps(ceiling))
         }
         H264Quality::Bitrate { bits_per_second } => config
             .rate_control_mode(RateControlMode::Bitrate)
@@ -170,7 +220,7 @@ fn encode(path: &Path, frames: &[Image], fps: f32, opts: &VideoOptions) -> Resul
         )
     };
     let mut encoder =
-        Encoder::with_api_config(OpenH264API::from_source(), encoder_config(fps, opts))
+        Encoder::with_api_config(OpenH264API::from_source(), encoder_config(w, h, fps, opts))
             .map_err(|e| fail("to start", e))?;
     silence(&mut encoder);
     let mut stream = EncodedStream {
@@ -587,6 +637,24 @@ mod tests {
         assert_eq!(padded.pixel(3, 1), &[0.7, 0.8, 0.9]);
         assert_eq!(padded.pixel(1, 1), &[0.4, 0.5, 0.6]);
         assert_eq!(timescale(29.97), 29970);
+    }
+
+    /// Levels of common formats, as Table A-1 assigns them.
+    #[test]
+    fn levels_follow_table_a1() {
+        let name = |w, h, fps| h264_level(w, h, fps).map(|l| format!("{:?}", l.level));
+        assert_eq!(name(128, 96, 24.0), Some("Level_3_0".into()));
+        assert_eq!(name(720, 576, 25.0), Some("Level_3_0".into())); // 1620 MBs at 40 500 MB/s
+        assert_eq!(name(1280, 720, 30.0), Some("Level_3_1".into()));
+        assert_eq!(name(1280, 720, 60.0), Some("Level_3_2".into()));
+        assert_eq!(name(1920, 1080, 30.0), Some("Level_4_0".into()));
+        assert_eq!(name(1920, 1080, 60.0), Some("Level_4_2".into()));
+        assert_eq!(name(3840, 2160, 30.0), Some("Level_5_1".into()));
+        assert_eq!(name(3840, 2160, 120.0), None);
+        // A 204-macroblock-wide strip fits level 3.0's MaxFS but not its √(8 · MaxFS) = 113.8
+        // macroblocks, nor 3.2's 202.4; level 4.0 (256) admits it.
+        assert_eq!(name(3264, 16, 30.0), Some("Level_4_0".into()));
+        assert_eq!(name(3232, 16, 30.0), Some("Level_3_2".into()));
         assert_eq!(timescale(24.0), 24000);
     }
 }

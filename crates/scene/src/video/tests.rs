@@ -268,7 +268,7 @@ fn ffmpeg_reads_our_mp4() {
         "-select_streams",
         "v:0",
         "-show_entries",
-        "stream=codec_name,pix_fmt,width,height,nb_read_frames,r_frame_rate,avg_frame_rate,color_space,color_range",
+        "stream=codec_name,profile,level,pix_fmt,width,height,nb_read_frames,r_frame_rate,avg_frame_rate,color_space,color_range",
         "-of",
         "json",
     ]).arg(&path));
@@ -276,6 +276,8 @@ fn ffmpeg_reads_our_mp4() {
     let stream = &probe["streams"][0];
     assert_eq!(stream["codec_name"], "h264", "{probe}");
     assert_eq!(stream["pix_fmt"], "yuv420p", "{probe}");
+    assert_eq!(stream["profile"], "Constrained Baseline", "{probe}");
+    assert_eq!(stream["level"], 30, "{probe}");
     assert_eq!(
         (stream["width"].as_u64(), stream["height"].as_u64()),
         (Some(128), Some(96))
@@ -498,6 +500,13 @@ fn frame_folder_round_trip_is_exact_at_8_bits() {
     .unwrap();
     assert_eq!(read_video(&path).unwrap().0.len(), 3);
     assert!(!path.join("frame_00011.png").exists());
+    // A frame deleted by hand no longer matches video.json: an error, not a wrong timing.
+    std::fs::remove_file(path.join("frame_00002.png")).unwrap();
+    let err = read_video(&path).map(|_| ()).unwrap_err().to_string();
+    assert!(
+        err.contains("video.json") && err.contains("records 3 frames"),
+        "{err}"
+    );
     // A folder holding other files is never replaced.
     std::fs::write(path.join("notes.txt"), b"mine").unwrap();
     let err = write_video(&path, &frames, 12.5, &VideoOptions::default())
@@ -522,8 +531,15 @@ fn foreign_frame_folders_sort_naturally_and_composite_alpha() {
         img.save_png(&folder.join(format!("img{k}.png"))).unwrap();
     }
     std::fs::write(folder.join("readme.txt"), b"not a frame").unwrap();
+    image::RgbImage::from_pixel(4, 2, image::Rgb([200, 100, 50]))
+        .save(folder.join("img10b.JPG"))
+        .unwrap();
     let (frames, fps) = read_video(&folder).unwrap();
-    assert_eq!((frames.len(), fps), (11, DEFAULT_FOLDER_FPS));
+    assert_eq!((frames.len(), fps), (12, DEFAULT_FOLDER_FPS));
+    let jpeg = frames[11].to_u8();
+    for (got, want) in jpeg[..3].iter().zip([200u8, 100, 50]) {
+        assert!(got.abs_diff(want) <= 3, "JPEG frame {:?}", &jpeg[..3]);
+    }
     for (k, f) in frames.iter().take(10).enumerate() {
         assert_eq!(f.to_u8()[0] as usize, k);
     }
