@@ -79,30 +79,37 @@ pub(crate) fn write_frames(dir: &Path, frames: &[Image], fps: f32) -> Result<()>
     .expect("plain struct serialises");
     crate::atomic::write_bytes(&staging.path().join(SIDECAR), &sidecar)?;
 
+    // `tempdir` creates 0700; a finished video folder should be as readable as `mkdir` makes it.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(staging.path(), std::fs::Permissions::from_mode(0o755))
+            .map_err(|e| SceneError::io(dir, e))?;
+    }
     let staged = staging.keep();
-    let old = if dir.exists() {
-        let old = tempfile::Builder::new()
-            .prefix(".frames-old-")
-            .tempdir_in(&parent)
-            .map_err(|e| SceneError::io(dir, e))?
-            .keep();
-        // Rename onto the (empty) placeholder: POSIX allows replacing an empty directory.
-        std::fs::rename(dir, &old).map_err(|e| SceneError::io(dir, e))?;
-        Some(old)
-    } else {
-        None
-    };
-    if let Err(e) = std::fs::rename(&staged, dir) {
-        if let Some(old) = &old {
-            let _ = std::fs::rename(old, dir);
-        }
+    swap_in(&staged, dir, &parent).map_err(|e| {
         let _ = std::fs::remove_dir_all(&staged);
-        return Err(SceneError::io(dir, e));
+        SceneError::io(dir, e)
+    })
+}
+
+/// Moves the finished folder `staged` to `dir`, replacing an existing `dir` (already checked
+/// to hold only our files) by two renames, so `dir` is never half-written.
+fn swap_in(staged: &Path, dir: &Path, parent: &Path) -> std::io::Result<()> {
+    if !dir.exists() {
+        return std::fs::rename(staged, dir);
     }
-    if let Some(old) = old {
-        std::fs::remove_dir_all(&old).map_err(|e| SceneError::io(&old, e))?;
+    let old = tempfile::Builder::new()
+        .prefix(".frames-old-")
+        .tempdir_in(parent)?;
+    // Rename onto the empty placeholder: POSIX lets a directory replace an empty one.
+    std::fs::rename(dir, old.path())?;
+    if let Err(e) = std::fs::rename(staged, dir) {
+        let _ = std::fs::rename(old.path(), dir);
+        return Err(e);
     }
-    Ok(())
+    // Dropping `old` deletes the previous frames.
+    old.close()
 }
 
 /// Compares file names the way people number frames: digit runs by value, the rest by byte.

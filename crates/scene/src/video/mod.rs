@@ -80,7 +80,9 @@ pub enum H264Quality {
     /// act as 12) to 51 (smallest file); every frame gets the same quantisation whatever its
     /// content. H.264's quantiser step doubles every 6 points.
     ConstantQp(u8),
-    /// A target average bitrate; quality then varies with content.
+    /// A target average bitrate; quality then varies with content. Frames are never dropped to
+    /// meet it (the frame count must survive), so a target too low for the content is
+    /// overshot rather than met.
     Bitrate { bits_per_second: u32 },
 }
 

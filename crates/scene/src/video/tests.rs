@@ -484,6 +484,12 @@ fn frame_folder_round_trip_is_exact_at_8_bits() {
         .collect();
     write_video(&path, &frames, 12.5, &VideoOptions::default()).unwrap();
     assert!(path.join("frame_00011.png").is_file());
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(&path).unwrap().permissions().mode();
+        assert_eq!(mode & 0o777, 0o755, "frame folder mode {mode:o}");
+    }
     let (back, fps) = read_video(&path).unwrap();
     assert_eq!((back.len(), fps), (12, 12.5));
     for (a, b) in frames.iter().zip(&back) {
@@ -666,5 +672,40 @@ fn grey_frames_are_written_as_rgb() {
         for &v in f.pixel(8, 8) {
             assert!((v - 0.25 * k as f32).abs() < 0.02, "{k}: {v}");
         }
+    }
+}
+
+/// Seekable IDR frames where `keyframe_interval` asks, as FFmpeg's prober sees them.
+#[test]
+fn mp4_keyframes_follow_the_interval() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = animation(64, 48, 130);
+    for (interval, expected) in [(60, vec![0, 60, 120]), (25, vec![0, 25, 50, 75, 100, 125])] {
+        let path = dir.path().join(format!("kf{interval}.mp4"));
+        let opts = VideoOptions {
+            keyframe_interval: interval,
+            ..VideoOptions::default()
+        };
+        write_video(&path, &frames, 30.0, &opts).unwrap();
+        let csv = run_ok(
+            ffmpeg_tool("ffprobe")
+                .args([
+                    "-select_streams",
+                    "v:0",
+                    "-show_entries",
+                    "packet=flags",
+                    "-of",
+                    "csv",
+                ])
+                .arg(&path),
+        );
+        let keys: Vec<usize> = String::from_utf8(csv)
+            .unwrap()
+            .lines()
+            .enumerate()
+            .filter(|(_, line)| line.contains(",K"))
+            .map(|(i, _)| i)
+            .collect();
+        assert_eq!(keys, expected, "keyframe_interval {interval}");
     }
 }
