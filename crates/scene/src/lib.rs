@@ -25,6 +25,7 @@ pub mod load;
 mod numpy;
 pub mod split;
 pub mod transforms;
+pub mod video;
 
 pub use camera::{Camera, Intrinsics, Se3, camera_path};
 pub use dataset::{Dataset, PointCloud, View};
