@@ -4,7 +4,11 @@
 
 pub mod bench;
 pub mod cputime;
+pub mod loss;
+pub mod model;
 pub mod op;
+pub mod ply;
 pub mod raster;
 pub mod real;
 pub mod sh;
+pub mod train;
