@@ -4,6 +4,8 @@
 
 pub mod bench;
 pub mod cputime;
+pub mod eval;
+pub mod init;
 pub mod loss;
 pub mod model;
 pub mod op;

@@ -10,7 +10,7 @@
 
 use super::project::{Splat, SplatGrad};
 use super::{ALPHA_MAX, ALPHA_MIN, T_MIN, TILE};
-use crate::real::Real;
+use crate::real::{MulAdd, Real};
 
 pub const TILE_PIXELS: usize = TILE * TILE;
 
@@ -69,12 +69,30 @@ fn tile_rows<F>(s: &Splat<F>, geo: &TileGeometry) -> (usize, usize) {
     (r0, r1.max(r0))
 }
 
-/// `(power, e^power, α)` of one splat at one pixel offset.
+/// Per-row constants of a splat's exponent: `power = dx·(h_a·dx + k1) + k0` with
+/// `h_a = −a/2`, `k1 = −b·dy`, `k0 = −c·dy²/2`, i.e. `−½(a dx² + c dy²) − b dx dy`.
+#[derive(Clone, Copy)]
+struct RowTerms<F> {
+    ha: F,
+    k1: F,
+    k0: F,
+}
+
 #[inline(always)]
-fn splat_alpha<F: Real>(s: &Splat<F>, dx: F, dy: F) -> (F, F, F) {
+fn row_terms<F: Real>(s: &Splat<F>, dy: F) -> RowTerms<F> {
     let half = F::c(0.5);
-    let power = -half * (s.conic[0] * dx * dx + s.conic[2] * dy * dy) - s.conic[1] * dx * dy;
-    let g = power.exp_blend();
+    RowTerms {
+        ha: -half * s.conic[0],
+        k1: -s.conic[1] * dy,
+        k0: -half * s.conic[2] * dy * dy,
+    }
+}
+
+/// `(power, e^power, α)` of one splat at horizontal offset `dx` on a row.
+#[inline(always)]
+fn splat_alpha<F: Real, M: MulAdd>(s: &Splat<F>, row: RowTerms<F>, dx: F) -> (F, F, F) {
+    let power = M::madd(dx, M::madd(row.ha, dx, row.k1), row.k0);
+    let g = power.exp_blend::<M>();
     let alpha = (s.opacity * g).min(F::c(ALPHA_MAX));
     (power, g, alpha)
 }
@@ -98,7 +116,7 @@ fn tile_blocks<F>(s: &Splat<F>, geo: &TileGeometry) -> (usize, usize) {
 /// Blends `list` (indices into `splats`, front to back) into `state`. Returns the number of
 /// splat–pixel pairs evaluated.
 #[inline(always)]
-pub fn forward_tile<F: Real>(
+pub fn forward_tile<F: Real, M: MulAdd>(
     geo: &TileGeometry,
     list: &[u32],
     splats: &[Splat<F>],
@@ -125,6 +143,7 @@ pub fn forward_tile<F: Real>(
         let mut stopped = 0u32;
         for r in r0..r1 {
             let dy = F::c((geo.y0 + r) as f64 + 0.5) - s.mean[1];
+            let row = row_terms(s, dy);
             for b in b0..b1 {
                 let cols = b * BLOCK..(b + 1) * BLOCK;
                 let t: &mut [F; BLOCK] = (&mut state.transmittance[r][cols.clone()])
@@ -141,16 +160,16 @@ pub fn forward_tile<F: Real>(
                 let x: &[F; BLOCK] = (&px[cols]).try_into().unwrap();
                 for c in 0..BLOCK {
                     let dx = x[c] - s.mean[0];
-                    let (power, _, alpha) = splat_alpha(s, dx, dy);
+                    let (power, _, alpha) = splat_alpha::<F, M>(s, row, dx);
                     let valid = (al[c] > zero) & (power <= zero) & (alpha >= amin);
                     let test_t = t[c] * (F::one() - alpha);
                     let stop = valid & (test_t < tmin);
                     let contrib = valid & !stop;
                     let w = if contrib { alpha * t[c] } else { zero };
-                    cr[c] = cr[c] + w * s.color[0];
-                    cg[c] = cg[c] + w * s.color[1];
-                    cb[c] = cb[c] + w * s.color[2];
-                    dd[c] = dd[c] + w * s.depth;
+                    cr[c] = M::madd(w, s.color[0], cr[c]);
+                    cg[c] = M::madd(w, s.color[1], cg[c]);
+                    cb[c] = M::madd(w, s.color[2], cb[c]);
+                    dd[c] = M::madd(w, s.depth, dd[c]);
                     t[c] = if contrib { test_t } else { t[c] };
                     last[c] = if contrib { rank } else { last[c] };
                     al[c] = if stop { zero } else { al[c] };
@@ -194,7 +213,7 @@ impl<F: Real> Default for TileGrad<F> {
 /// behind splat `i`, `Aᵢ = αᵢ₊₁ cᵢ₊₁ + (1 − αᵢ₊₁) Aᵢ₊₁` (starting from the background), so
 /// `∂C/∂αᵢ = Tᵢ (cᵢ − Aᵢ)`; depth (background 0) and alpha (colour 1, background 0) alike.
 #[inline(always)]
-pub fn backward_tile<F: Real>(
+pub fn backward_tile<F: Real, M: MulAdd>(
     geo: &TileGeometry,
     list: &[u32],
     splats: &[Splat<F>],
@@ -224,6 +243,7 @@ pub fn backward_tile<F: Real>(
         let mut lane = [[zero; TILE]; L];
         for r in r0..r1 {
             let dy = F::c((geo.y0 + r) as f64 + 0.5) - s.mean[1];
+            let row = row_terms(s, dy);
             let last = &state.last[r];
             let (gr, gg, gb) = (&grad.color[0][r], &grad.color[1][r], &grad.color[2][r]);
             let (gd, ga) = (&grad.depth[r], &grad.alpha[r]);
@@ -234,38 +254,39 @@ pub fn backward_tile<F: Real>(
             let aa = &mut acc_a[r];
             for c in 0..TILE {
                 let dx = px[c] - s.mean[0];
-                let (power, g, alpha) = splat_alpha(s, dx, dy);
+                let (power, g, alpha) = splat_alpha::<F, M>(s, row, dx);
                 let valid = (rank < last[c]) & (power <= zero) & (alpha >= amin);
                 let one_minus = one - alpha;
                 let t_j = t[c] / one_minus;
                 let w = if valid { alpha * t_j } else { zero };
-                let dl_dalpha = t_j
-                    * (gr[c] * (s.color[0] - ar[c])
-                        + gg[c] * (s.color[1] - ag[c])
-                        + gb[c] * (s.color[2] - ab[c])
-                        + gd[c] * (s.depth - ad[c])
-                        + ga[c] * (one - aa[c]));
-                lane[6][c] = lane[6][c] + w * gr[c];
-                lane[7][c] = lane[7][c] + w * gg[c];
-                lane[8][c] = lane[8][c] + w * gb[c];
-                lane[9][c] = lane[9][c] + w * gd[c];
+                let mut dot = gr[c] * (s.color[0] - ar[c]);
+                dot = M::madd(gg[c], s.color[1] - ag[c], dot);
+                dot = M::madd(gb[c], s.color[2] - ab[c], dot);
+                dot = M::madd(gd[c], s.depth - ad[c], dot);
+                dot = M::madd(ga[c], one - aa[c], dot);
+                let dl_dalpha = t_j * dot;
+                lane[6][c] = M::madd(w, gr[c], lane[6][c]);
+                lane[7][c] = M::madd(w, gg[c], lane[7][c]);
+                lane[8][c] = M::madd(w, gb[c], lane[8][c]);
+                lane[9][c] = M::madd(w, gd[c], lane[9][c]);
                 // α = o·g unless clamped at 0.99, where it no longer depends on o or the shape.
                 let free = valid & (s.opacity * g < amax);
                 let dl_dalpha = if free { dl_dalpha } else { zero };
                 let dpow = dl_dalpha * alpha;
-                lane[5][c] = lane[5][c] + dl_dalpha * g;
-                lane[0][c] = lane[0][c] + dpow * (s.conic[0] * dx + s.conic[1] * dy);
-                lane[1][c] = lane[1][c] + dpow * (s.conic[2] * dy + s.conic[1] * dx);
-                lane[2][c] = lane[2][c] - half * dpow * dx * dx;
-                lane[3][c] = lane[3][c] - dpow * dx * dy;
-                lane[4][c] = lane[4][c] - half * dpow * dy * dy;
+                lane[5][c] = M::madd(dl_dalpha, g, lane[5][c]);
+                lane[0][c] = M::madd(dpow, M::madd(s.conic[0], dx, s.conic[1] * dy), lane[0][c]);
+                lane[1][c] = M::madd(dpow, M::madd(s.conic[2], dy, s.conic[1] * dx), lane[1][c]);
+                let hdx = half * dpow * dx;
+                lane[2][c] = M::madd(-hdx, dx, lane[2][c]);
+                lane[3][c] = M::madd(-dpow * dx, dy, lane[3][c]);
+                lane[4][c] = M::madd(-half * dpow * dy, dy, lane[4][c]);
                 let keep = if valid { one_minus } else { one };
                 let add = if valid { alpha } else { zero };
-                ar[c] = add * s.color[0] + keep * ar[c];
-                ag[c] = add * s.color[1] + keep * ag[c];
-                ab[c] = add * s.color[2] + keep * ab[c];
-                ad[c] = add * s.depth + keep * ad[c];
-                aa[c] = add + keep * aa[c];
+                ar[c] = M::madd(add, s.color[0], keep * ar[c]);
+                ag[c] = M::madd(add, s.color[1], keep * ag[c]);
+                ab[c] = M::madd(add, s.color[2], keep * ab[c]);
+                ad[c] = M::madd(add, s.depth, keep * ad[c]);
+                aa[c] = M::madd(keep, aa[c], add);
                 t[c] = if valid { t_j } else { t[c] };
             }
         }

@@ -8,7 +8,7 @@ use super::blend::{TileGeometry, TileGrad, TileState, backward_tile, forward_til
 use super::project::{CameraF, ParamGrad, Splat, SplatGrad, project_one, project_one_backward};
 use super::tiles::{TileBins, bin};
 use super::{GaussianRefs, RenderCamera, RenderSettings, TILE};
-use crate::real::Real;
+use crate::real::{Fused, Real, Unfused};
 
 /// Channels of the rasterizer's output image, interleaved per pixel: R, G, B, depth, alpha.
 pub const OUT_CHANNELS: usize = 5;
@@ -80,8 +80,15 @@ fn tile_geometry(cam: &RenderCamera, t: usize, tiles_x: usize) -> TileGeometry {
     }
 }
 
-/// Runs the tile kernel compiled for AVX2 when the CPU has it (the generic body is inlined into
-/// a `target_feature` function so its loops use 8-wide vectors), else the baseline build.
+/// Whether the CPU runs the AVX2 + FMA build of the tile kernels.
+#[cfg(target_arch = "x86_64")]
+fn has_avx2_fma() -> bool {
+    std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+}
+
+/// Runs the tile kernel compiled for AVX2 + FMA when the CPU has them (the generic body is
+/// inlined into a `target_feature` function so its loops use 8-wide vectors and fused
+/// multiply-adds), else the baseline build.
 fn forward_tile_best<F: Real>(
     geo: &TileGeometry,
     list: &[u32],
@@ -90,21 +97,21 @@ fn forward_tile_best<F: Real>(
 ) -> u64 {
     #[cfg(target_arch = "x86_64")]
     {
-        #[target_feature(enable = "avx2")]
+        #[target_feature(enable = "avx2,fma")]
         fn avx2<F: Real>(
             geo: &TileGeometry,
             list: &[u32],
             splats: &[Splat<F>],
             state: &mut TileState<F>,
         ) -> u64 {
-            forward_tile(geo, list, splats, state)
+            forward_tile::<F, Fused>(geo, list, splats, state)
         }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
+        if has_avx2_fma() {
+            // SAFETY: the CPU supports AVX2 and FMA (checked just above).
             return unsafe { avx2(geo, list, splats, state) };
         }
     }
-    forward_tile(geo, list, splats, state)
+    forward_tile::<F, Unfused>(geo, list, splats, state)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -119,7 +126,7 @@ fn backward_tile_best<F: Real>(
 ) -> u64 {
     #[cfg(target_arch = "x86_64")]
     {
-        #[target_feature(enable = "avx2")]
+        #[target_feature(enable = "avx2,fma")]
         fn avx2<F: Real>(
             geo: &TileGeometry,
             list: &[u32],
@@ -129,14 +136,14 @@ fn backward_tile_best<F: Real>(
             grad: &TileGrad<F>,
             out: &mut [F],
         ) -> u64 {
-            backward_tile(geo, list, splats, state, background, grad, out)
+            backward_tile::<F, Fused>(geo, list, splats, state, background, grad, out)
         }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
+        if has_avx2_fma() {
+            // SAFETY: the CPU supports AVX2 and FMA (checked just above).
             return unsafe { avx2(geo, list, splats, state, background, grad, out) };
         }
     }
-    backward_tile(geo, list, splats, state, background, grad, out)
+    backward_tile::<F, Unfused>(geo, list, splats, state, background, grad, out)
 }
 
 /// Renders the Gaussians from `camera`.
