@@ -1,1 +1,31 @@
-//! Geometry toolbox (paper 000 §1–2, §4; paper 001 Alg. 3): see the modules.
+//! Geometry toolbox (paper 000 §1–2, §4; paper 001 Alg. 3).
+//!
+//! - [`depth`]: depth maps to meshes and point clouds with the depth-edge test of Eq. (1),
+//!   [`contract`]: the contraction of Eq. (2) and point subsampling (paper 000 §1–2).
+//! - [`blend`]: occlusion-aware Poisson blending (Eq. 3), standard Poisson, Laplacian-pyramid and
+//!   Gaussian-feather blending (paper 000 §4, Fig. 2/9).
+//! - [`mcubes`]: marching cubes on dense grids and chunked closures; [`cleanup`]: largest
+//!   component and mask culling.
+//! - [`registration`]: similarity pre-alignment, FPFH + RANSAC, ICP (paper 001 Alg. 3).
+//! - [`chamfer`]: the DTU Chamfer protocol and Chamfer-L1 / F-score / normal consistency.
+//! - [`io`]: PLY, OBJ, OFF, `.npy`, depth PNGs and camera JSON.
+
+//TODO pub mod bench;
+//TODO pub mod blend;
+//TODO pub mod chamfer;
+//TODO pub mod cleanup;
+//TODO pub mod contract;
+pub mod depth;
+pub mod error;
+pub mod io;
+//TODO pub mod knn;
+//TODO pub mod mcubes;
+pub mod mesh;
+//TODO pub mod registration;
+//TODO pub mod sampling;
+//TODO pub mod similarity;
+pub mod topology;
+
+pub use error::{GeomError, Result};
+pub use mesh::{Mesh, Points};
+//TODO pub use similarity::Similarity;
