@@ -13,16 +13,16 @@
 //TODO pub mod bench;
 //TODO pub mod blend;
 //TODO pub mod chamfer;
-//TODO pub mod cleanup;
-//TODO pub mod contract;
+pub mod cleanup;
+pub mod contract;
 pub mod depth;
 pub mod error;
 pub mod io;
-//TODO pub mod knn;
-//TODO pub mod mcubes;
+pub mod knn;
+pub mod mcubes;
 pub mod mesh;
 //TODO pub mod registration;
-//TODO pub mod sampling;
+pub mod sampling;
 //TODO pub mod similarity;
 pub mod topology;
 
