@@ -12,7 +12,7 @@
 
 //TODO pub mod bench;
 //TODO pub mod blend;
-//TODO pub mod chamfer;
+pub mod chamfer;
 pub mod cleanup;
 pub mod contract;
 pub mod depth;
