@@ -100,14 +100,22 @@ fn mean_below(d: &[(usize, f64)], max: f64, what: &str) -> Result<f64> {
 }
 
 /// The DTU protocol for a predicted mesh against ground-truth points (see the module docs).
-pub fn dtu_chamfer(pred: &Mesh, gt_points: &[[f32; 3]], options: &DtuOptions) -> Result<DtuChamfer> {
+pub fn dtu_chamfer(
+    pred: &Mesh,
+    gt_points: &[[f32; 3]],
+    options: &DtuOptions,
+) -> Result<DtuChamfer> {
     let samples = dtu_sample(pred, options.density)?;
     dtu_chamfer_points(&samples, gt_points, options)
 }
 
 /// The DTU protocol from already sampled predicted points (a point-cloud reconstruction):
 /// down-sampling, masking and distances.
-pub fn dtu_chamfer_points(pred: &[[f32; 3]], gt_points: &[[f32; 3]], options: &DtuOptions) -> Result<DtuChamfer> {
+pub fn dtu_chamfer_points(
+    pred: &[[f32; 3]],
+    gt_points: &[[f32; 3]],
+    options: &DtuOptions,
+) -> Result<DtuChamfer> {
     if pred.is_empty() {
         return Err(GeomError::invalid("prediction", "has no points"));
     }
@@ -129,15 +137,22 @@ pub fn dtu_chamfer_points(pred: &[[f32; 3]], gt_points: &[[f32; 3]], options: &D
     let (data_in, data_obs): (Vec<[f32; 3]>, Vec<[f32; 3]>) = match &options.obs_mask {
         Some(m) => {
             if m.mask.len() != m.dims.iter().product::<usize>() || !(m.res > 0.0) {
-                return Err(GeomError::invalid("observation mask", "size does not match dims, or res ≤ 0"));
+                return Err(GeomError::invalid(
+                    "observation mask",
+                    "size does not match dims, or res ≤ 0",
+                ));
             }
             let lo = m.bb_min.map(|b| b - options.patch);
             let hi = m.bb_max.map(|b| b + 2.0 * options.patch);
-            let data_in: Vec<[f32; 3]> = down.into_iter().filter(|p| inside(p, lo, hi, true)).collect();
+            let data_in: Vec<[f32; 3]> = down
+                .into_iter()
+                .filter(|p| inside(p, lo, hi, true))
+                .collect();
             let obs = data_in
                 .iter()
                 .filter(|p| {
-                    let g: [f64; 3] = std::array::from_fn(|k| ((p[k] as f64 - m.bb_min[k]) / m.res).round());
+                    let g: [f64; 3] =
+                        std::array::from_fn(|k| ((p[k] as f64 - m.bb_min[k]) / m.res).round());
                     if (0..3).any(|k| g[k] < 0.0 || g[k] >= m.dims[k] as f64) {
                         return false;
                     }
@@ -150,19 +165,27 @@ pub fn dtu_chamfer_points(pred: &[[f32; 3]], gt_points: &[[f32; 3]], options: &D
         }
         None => {
             let data_in: Vec<[f32; 3]> = match options.bbox {
-                Some((lo, hi)) => down.into_iter().filter(|p| inside(p, lo, hi, false)).collect(),
+                Some((lo, hi)) => down
+                    .into_iter()
+                    .filter(|p| inside(p, lo, hi, false))
+                    .collect(),
                 None => down,
             };
             (data_in.clone(), data_in)
         }
     };
     if data_obs.is_empty() {
-        return Err(GeomError::invalid("prediction", "no point left inside the mask / bounding box"));
+        return Err(GeomError::invalid(
+            "prediction",
+            "no point left inside the mask / bounding box",
+        ));
     }
     let gt_used: Vec<[f32; 3]> = match options.ground_plane {
         Some(pl) => gt_points
             .iter()
-            .filter(|p| pl[0] * p[0] as f64 + pl[1] * p[1] as f64 + pl[2] * p[2] as f64 + pl[3] > 0.0)
+            .filter(|p| {
+                pl[0] * p[0] as f64 + pl[1] * p[1] as f64 + pl[2] * p[2] as f64 + pl[3] > 0.0
+            })
             .copied()
             .collect(),
         None => gt_points.to_vec(),
@@ -206,7 +229,13 @@ pub struct FScore {
 }
 
 /// Chamfer-L1/L2, F-score@τ and normal consistency from `samples` uniform points per mesh.
-pub fn surface_metrics(pred: &Mesh, gt: &Mesh, samples: usize, taus: &[f64], seed: u64) -> Result<SurfaceMetrics> {
+pub fn surface_metrics(
+    pred: &Mesh,
+    gt: &Mesh,
+    samples: usize,
+    taus: &[f64],
+    seed: u64,
+) -> Result<SurfaceMetrics> {
     if samples == 0 {
         return Err(GeomError::invalid("samples", "must be at least 1"));
     }
@@ -217,7 +246,9 @@ pub fn surface_metrics(pred: &Mesh, gt: &Mesh, samples: usize, taus: &[f64], see
     let normal = |m: &Mesh, f: u32| m.face_cross(f as usize).normalize();
     let p_to_g = PointTree::new(&gp).nearest_many(&pp);
     let g_to_p = PointTree::new(&pp).nearest_many(&gp);
-    let mean = |d: &[(usize, f64)], pow: i32| d.iter().map(|x| x.1.powi(pow)).sum::<f64>() / d.len() as f64;
+    let mean = |d: &[(usize, f64)], pow: i32| {
+        d.iter().map(|x| x.1.powi(pow)).sum::<f64>() / d.len() as f64
+    };
     let accuracy = mean(&p_to_g, 1);
     let completeness = mean(&g_to_p, 1);
     let nc = |from: &Mesh, ff: &[u32], to: &Mesh, tf: &[u32], nn: &[(usize, f64)]| {
@@ -228,18 +259,25 @@ pub fn surface_metrics(pred: &Mesh, gt: &Mesh, samples: usize, taus: &[f64], see
             .sum::<f64>()
             / nn.len() as f64
     };
-    let normal_consistency = 0.5 * (nc(pred, &pf, gt, &gf, &p_to_g) + nc(gt, &gf, pred, &pf, &g_to_p));
+    let normal_consistency =
+        0.5 * (nc(pred, &pf, gt, &gf, &p_to_g) + nc(gt, &gf, pred, &pf, &g_to_p));
     let fscore = taus
         .iter()
         .map(|&tau| {
-            let frac = |d: &[(usize, f64)]| d.iter().filter(|x| x.1 < tau).count() as f64 / d.len() as f64;
+            let frac =
+                |d: &[(usize, f64)]| d.iter().filter(|x| x.1 < tau).count() as f64 / d.len() as f64;
             let (precision, recall) = (frac(&p_to_g), frac(&g_to_p));
             let fscore = if precision + recall > 0.0 {
                 2.0 * precision * recall / (precision + recall)
             } else {
                 0.0
             };
-            FScore { tau, precision, recall, fscore }
+            FScore {
+                tau,
+                precision,
+                recall,
+                fscore,
+            }
         })
         .collect();
     Ok(SurfaceMetrics {
@@ -293,11 +331,19 @@ mod tests {
             let shifted = plane(10, 30.0, d);
             let r = dtu_chamfer(&shifted, &gt, &opts).unwrap();
             assert!((r.chamfer / d as f64 - 1.0).abs() < 0.01, "d = {d}: {r:?}");
-            assert!((r.accuracy / d as f64 - 1.0).abs() < 0.01 && (r.completeness / d as f64 - 1.0).abs() < 0.01);
+            assert!(
+                (r.accuracy / d as f64 - 1.0).abs() < 0.01
+                    && (r.completeness / d as f64 - 1.0).abs() < 0.01
+            );
         }
         // Past max_dist nothing counts.
         let far = plane(10, 30.0, 25.0);
-        assert!(dtu_chamfer(&far, &gt, &opts).unwrap_err().to_string().contains("max_dist"));
+        assert!(
+            dtu_chamfer(&far, &gt, &opts)
+                .unwrap_err()
+                .to_string()
+                .contains("max_dist")
+        );
     }
 
     #[test]
@@ -307,11 +353,15 @@ mod tests {
         // Prediction: the plane plus a far blob of outliers at 10 mm that a bbox excludes.
         let mut pred = m.clone();
         let base = pred.vertices.len() as u32;
-        pred.vertices.extend([[5.0, 5.0, 10.0], [6.0, 5.0, 10.0], [5.0, 6.0, 10.0]]);
+        pred.vertices
+            .extend([[5.0, 5.0, 10.0], [6.0, 5.0, 10.0], [5.0, 6.0, 10.0]]);
         pred.faces.push([base, base + 1, base + 2]);
         let with = dtu_chamfer(&pred, &gt, &DtuOptions::default()).unwrap();
         assert!(with.accuracy > 0.01);
-        let boxed = DtuOptions { bbox: Some(([-1.0; 3], [31.0, 31.0, 1.0])), ..Default::default() };
+        let boxed = DtuOptions {
+            bbox: Some(([-1.0; 3], [31.0, 31.0, 1.0])),
+            ..Default::default()
+        };
         assert!(dtu_chamfer(&pred, &gt, &boxed).unwrap().accuracy < 1e-6);
         // An observation mask that observes only x < 15 (voxels of 1 mm from the origin).
         let dims = [31, 31, 11];
@@ -323,13 +373,25 @@ mod tests {
                 }
             }
         }
-        let obs = ObservationMask { mask, dims, bb_min: [0.0; 3], bb_max: [30.0, 30.0, 10.0], res: 1.0 };
-        let o = DtuOptions { obs_mask: Some(obs), ..Default::default() };
+        let obs = ObservationMask {
+            mask,
+            dims,
+            bb_min: [0.0; 3],
+            bb_max: [30.0, 30.0, 10.0],
+            res: 1.0,
+        };
+        let o = DtuOptions {
+            obs_mask: Some(obs),
+            ..Default::default()
+        };
         let r = dtu_chamfer(&pred, &gt, &o).unwrap();
         assert!(r.accuracy < 1e-6, "the blob at z = 10 is unobserved: {r:?}");
         assert!(r.predicted_points < with.predicted_points / 2 + 10);
         // The ground plane z > 0.5 leaves no ground truth here.
-        let p = DtuOptions { ground_plane: Some([0.0, 0.0, 1.0, -0.5]), ..Default::default() };
+        let p = DtuOptions {
+            ground_plane: Some([0.0, 0.0, 1.0, -0.5]),
+            ..Default::default()
+        };
         assert!(dtu_chamfer(&pred, &gt, &p).is_err());
     }
 

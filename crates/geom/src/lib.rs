@@ -23,9 +23,9 @@ pub mod mcubes;
 pub mod mesh;
 //TODO pub mod registration;
 pub mod sampling;
-//TODO pub mod similarity;
+pub mod similarity;
 pub mod topology;
 
 pub use error::{GeomError, Result};
 pub use mesh::{Mesh, Points};
-//TODO pub use similarity::Similarity;
+pub use similarity::Similarity;

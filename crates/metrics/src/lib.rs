@@ -1,1 +1,3 @@
 //! Metrics the papers report: see the modules.
+
+pub mod pose_error;
