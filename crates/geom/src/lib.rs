@@ -10,8 +10,8 @@
 //! - [`chamfer`]: the DTU Chamfer protocol and Chamfer-L1 / F-score / normal consistency.
 //! - [`io`]: PLY, OBJ, OFF, `.npy`, depth PNGs and camera JSON.
 
-//TODO pub mod bench;
-//TODO pub mod blend;
+pub mod bench;
+pub mod blend;
 pub mod chamfer;
 pub mod cleanup;
 pub mod contract;
