@@ -21,7 +21,7 @@ pub mod io;
 pub mod knn;
 pub mod mcubes;
 pub mod mesh;
-//TODO pub mod registration;
+pub mod registration;
 pub mod sampling;
 pub mod similarity;
 pub mod topology;
