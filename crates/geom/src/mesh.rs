@@ -106,13 +106,15 @@ fn check_finite(what: &str, positions: &[[f32; 3]]) -> Result<()> {
     Ok(())
 }
 
+/// A point as an `f64` vector.
 #[inline]
-pub(crate) fn v3(p: &[f32; 3]) -> Vector3<f64> {
+pub fn v3(p: &[f32; 3]) -> Vector3<f64> {
     Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64)
 }
 
+/// An `f64` vector as an `f32` point.
 #[inline]
-pub(crate) fn f3(v: &Vector3<f64>) -> [f32; 3] {
+pub fn f3(v: &Vector3<f64>) -> [f32; 3] {
     [v.x as f32, v.y as f32, v.z as f32]
 }
 

@@ -93,6 +93,11 @@ impl Similarity {
         })
     }
 
+    /// From the rows of `[sR | t; 0 0 0 1]` (see [`from_matrix4`](Self::from_matrix4)).
+    pub fn from_rows(rows: &[[f64; 4]; 4]) -> Result<Similarity> {
+        Self::from_matrix4(&Matrix4::from_fn(|r, c| rows[r][c]))
+    }
+
     /// The rows of [`to_matrix4`](Self::to_matrix4), for JSON output.
     pub fn matrix_rows(&self) -> [[f64; 4]; 4] {
         let m = self.to_matrix4();

@@ -95,7 +95,7 @@ pub struct NpyArray {
     pub data: Vec<f32>,
 }
 
-/// Reads a float32/float64 (or integer) `.npy` array in C order.
+/// Reads a float32/float64 (or bool, uint8, uint16, int32) `.npy` array in C order.
 pub fn read_npy(path: &Path) -> Result<NpyArray> {
     let bytes = std::fs::read(path).map_err(|e| GeomError::io(path, e))?;
     let npy = npyz::NpyFile::new(&bytes[..])
@@ -113,6 +113,18 @@ pub fn read_npy(path: &Path) -> Result<NpyArray> {
             (npyz::TypeChar::Float, 4) => npy.into_vec::<f32>().map_err(bad)?,
             (npyz::TypeChar::Float, 8) => npy
                 .into_vec::<f64>()
+                .map_err(bad)?
+                .into_iter()
+                .map(|v| v as f32)
+                .collect(),
+            (npyz::TypeChar::Bool, 1) => npy
+                .into_vec::<bool>()
+                .map_err(bad)?
+                .into_iter()
+                .map(|v| v as u8 as f32)
+                .collect(),
+            (npyz::TypeChar::Uint, 1) => npy
+                .into_vec::<u8>()
                 .map_err(bad)?
                 .into_iter()
                 .map(|v| v as f32)
