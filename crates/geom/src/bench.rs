@@ -91,7 +91,12 @@ fn timed(w: usize, h: usize, solver: Solver) -> Result<(f64, crate::blend::Poiss
 
 /// Occlusion-aware Poisson blend of a 1024×1024 three-channel pair (see [`blend_problem`]).
 pub fn blend_1024() -> Result<BlendBench> {
-    let (w, h) = (1024, 1024);
+    blend_bench(1024)
+}
+
+/// [`blend_1024`] at `size × size` (the reference at half that).
+pub fn blend_bench(size: usize) -> Result<BlendBench> {
+    let (w, h) = (size, size);
     let cpu0 = process_cpu_seconds();
     let (seconds, stats) = timed(w, h, Solver::MultigridCg)?;
     let cpu_seconds = process_cpu_seconds().zip(cpu0).map(|(b, a)| b - a);
@@ -122,13 +127,11 @@ pub fn blend_1024() -> Result<BlendBench> {
 
 #[cfg(test)]
 mod tests {
-    /// Not a timed test: prints the figures (`cargo test --release -p fewview-geom
-    /// blend_bench -- --ignored --nocapture`).
     #[test]
-    #[ignore = "benchmark; run by hand or through `fewview bench`"]
-    fn blend_bench() {
-        let b = super::blend_1024().unwrap();
-        eprintln!("{b:#?}");
-        assert!(b.relative_residual < 1e-6);
+    fn small_benchmark_runs_and_both_solvers_converge() {
+        let b = super::blend_bench(96).unwrap();
+        assert!(b.relative_residual < 1e-6, "{b:?}");
+        assert!(b.unknowns > 96 * 96 / 2 && b.reference_unknowns > 48 * 48 / 2);
+        assert!(b.seconds > 0.0 && b.reference_seconds > 0.0);
     }
 }

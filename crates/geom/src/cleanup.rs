@@ -115,7 +115,7 @@ mod tests {
         }
         let out = cull_by_masks(
             &cube,
-            &[cam.clone()],
+            std::slice::from_ref(&cam),
             &[mask.clone()],
             &CullOptions::default(),
         )
@@ -131,15 +131,20 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(
-            cull_by_masks(&cube, &[cam.clone()], &[mask], &opts)
+            cull_by_masks(&cube, std::slice::from_ref(&cam), &[mask], &opts)
                 .unwrap()
                 .vertices
                 .len(),
             8
         );
         let empty = Image::new(64, 48, 1);
-        let e =
-            cull_by_masks(&cube, &[cam.clone()], &[empty], &CullOptions::default()).unwrap_err();
+        let e = cull_by_masks(
+            &cube,
+            std::slice::from_ref(&cam),
+            &[empty],
+            &CullOptions::default(),
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("mask 0") && e.to_string().contains("empty"));
         let small = Image::new(10, 10, 1);
         assert!(cull_by_masks(&cube, &[cam], &[small], &CullOptions::default()).is_err());

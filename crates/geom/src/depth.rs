@@ -179,6 +179,9 @@ fn pixel_color(img: &Image, i: usize, j: usize) -> [f32; 3] {
     }
 }
 
+/// World points, their pixel indices and (optional) colours.
+type BackProjected = (Vec<[f32; 3]>, Vec<usize>, Option<Vec<[f32; 3]>>);
+
 /// Back-projected world points of the valid pixels (row-major order), their pixel indices and
 /// colours.
 fn back_project(
@@ -186,7 +189,7 @@ fn back_project(
     camera: &Camera,
     colors: Option<&Image>,
     valid: &[bool],
-) -> (Vec<[f32; 3]>, Vec<usize>, Option<Vec<[f32; 3]>>) {
+) -> BackProjected {
     let w = camera.width() as usize;
     let c2w = camera.camera_to_world();
     let mut pos = Vec::new();

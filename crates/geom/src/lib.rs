@@ -10,6 +10,10 @@
 //! - [`chamfer`]: the DTU Chamfer protocol and Chamfer-L1 / F-score / normal consistency.
 //! - [`io`]: PLY, OBJ, OFF, `.npy`, depth PNGs and camera JSON.
 
+// Numeric code here indexes several parallel arrays with one loop variable, and tests for
+// positivity with `!(x > 0.0)` on purpose so that NaN is rejected too.
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod bench;
 pub mod blend;
 pub mod chamfer;

@@ -286,6 +286,9 @@ pub fn bbox_diagonal(points: &[[f32; 3]]) -> f64 {
 }
 
 #[cfg(test)]
+pub(crate) use tests::cube as test_cube;
+
+#[cfg(test)]
 mod tests {
     use super::*;
 
@@ -359,6 +362,3 @@ mod tests {
         );
     }
 }
-
-#[cfg(test)]
-pub(crate) use tests::cube as test_cube;

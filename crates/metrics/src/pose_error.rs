@@ -202,7 +202,7 @@ pub fn pose_error_pairwise(
             }
             let d_est = (est_c2w[a].translation - est_c2w[b].translation).norm();
             let d_gt = (gt_c2w[a].translation - gt_c2w[b].translation).norm();
-            if !(d_est > 0.0) {
+            if d_est.is_nan() || d_est <= 0.0 {
                 continue;
             }
             let s = d_gt / d_est;

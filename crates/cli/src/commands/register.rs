@@ -104,7 +104,7 @@ pub fn run(args: Args) -> Result<()> {
         }
         _ => None,
     };
-    if !(args.voxel > 0.0) {
+    if args.voxel.is_nan() || args.voxel <= 0.0 {
         bail!("--voxel must be positive");
     }
     let mut options = RegistrationOptions::for_voxel(args.voxel);

@@ -134,14 +134,14 @@ impl GridOperator {
                 // edges leaving the block become coarse edges.
                 diag[c] += self.diag[p];
                 if i + 1 < w && self.wx[p] != 0.0 {
-                    if (i + 1) / 2 == i / 2 {
+                    if i % 2 == 0 {
                         diag[c] -= 2.0 * self.wx[p];
                     } else {
                         wx[c] += self.wx[p];
                     }
                 }
                 if j + 1 < h && self.wy[p] != 0.0 {
-                    if (j + 1) / 2 == j / 2 {
+                    if j % 2 == 0 {
                         diag[c] -= 2.0 * self.wy[p];
                     } else {
                         wy[c] += self.wy[p];
