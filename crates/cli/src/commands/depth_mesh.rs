@@ -76,8 +76,10 @@ pub fn load_depth_view(
     Ok((d.depth, cam, img))
 }
 
-/// Mesh a depth map: back-project every pixel centre, connect right/down neighbours into
-/// triangles, drop depth-edge pixels with Eq. (1).
+/// Mesh a depth map (paper 000 §1).
+///
+/// Back-projects every pixel centre, connects right/down neighbours into triangles and drops
+/// depth-edge pixels with the test of Eq. (1).
 ///
 /// Depth: .npy float32 H×W (z-depth along the optical axis) or 16-bit PNG (× --png-scale);
 /// 0 means no depth, NaN is an error.

@@ -12,20 +12,14 @@ mod register;
 use clap::Subcommand;
 
 #[derive(Debug, Subcommand)]
+// Each subcommand's help (short and long) comes from the doc comment of its `Args`.
 pub enum Command {
-    /// Blend two images with validity masks (occlusion-aware Poisson, Poisson, pyramid, feather).
     Blend(blend::Args),
-    /// Mesh a depth map (paper 000 §1).
     DepthMesh(depth_mesh::Args),
-    /// Point cloud from depth maps, with contraction and subsampling (paper 000 §2).
     DepthPoints(depth_points::Args),
-    /// Marching cubes of a scalar grid (.npy), with cleanup.
     Mcubes(mcubes::Args),
-    /// Register point clouds: pre-alignment, FPFH + RANSAC, ICP (paper 001 Alg. 3).
     Register(register::Args),
-    /// Chamfer distance: DTU protocol or synthetic-mesh metrics.
     Chamfer(chamfer::Args),
-    /// Camera pose error (paper 001 Alg. 1–2).
     PoseError(pose_error::Args),
 }
 
