@@ -16,7 +16,8 @@ Procedure (seeded, numpy's default_rng):
      projection on d is at or below the a-quantile, the source those at or above the
      (1 - a)-quantile (quantiles of a dense 200k-point sample): each keeps a of the surface and
      70 % of each cloud lies in the shared part.
-  3. Add independent Gaussian noise, sigma = 1 % of the mesh's bounding-box diagonal.
+  3. Add independent Gaussian noise, sigma = --noise (default 1 %) of the mesh's bounding-box
+     diagonal.
   4. Move the source by x -> s R x + t: R uniform (normalised Gaussian quaternion),
      s ~ U(0.5, 2), t ~ U(-2, 2) * diagonal per axis.
   5. Cameras: 6 centres on a ring (radius 2 * diagonal) around the bunny; their source-frame
@@ -37,6 +38,8 @@ Rerun (Open3D 0.20.0 via the open3d-cpu wheel, Python 3.11, numpy 2.x):
   python3 -m pip install open3d-cpu==0.20.0
   python3 tools/registration_fixture.py --bunny ../shared/data/meshes/bunny.obj \
       --out crates/geom/tests/fixtures/registration
+  python3 tools/registration_fixture.py --bunny ../shared/data/meshes/bunny.obj --noise 0.002 \
+      --out crates/geom/tests/fixtures/registration_low_noise
 """
 
 import argparse
@@ -118,13 +121,15 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--bunny", required=True)
     ap.add_argument("--out", required=True)
+    ap.add_argument("--noise", type=float, default=0.01,
+                    help="Gaussian noise sigma as a fraction of the bounding-box diagonal")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     rng = np.random.default_rng(SEED)
     v, f = load_obj(args.bunny)
     lo, hi = v.min(0), v.max(0)
     diag = float(np.linalg.norm(hi - lo))
-    sigma = 0.01 * diag
+    sigma = args.noise * diag
     d = rng.normal(size=3)
     d /= np.linalg.norm(d)
     a = 1.0 / (2.0 - OVERLAP)  # overlap / a = (2a - 1) / a = OVERLAP

@@ -14,6 +14,10 @@ fn fixture_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/registration")
 }
 
+fn low_noise_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/registration_low_noise")
+}
+
 fn matrix(v: &Value) -> Matrix4<f64> {
     let rows = v.as_array().expect("4×4 rows");
     Matrix4::from_fn(|r, c| rows[r][c].as_f64().expect("number"))
@@ -30,9 +34,8 @@ fn errors(est: &Similarity, truth: &Similarity, points: &[Vector3<f64>]) -> (f64
     (rot, ms.sqrt())
 }
 
-#[test]
-fn alg3_recovers_the_bunny_similarity_like_open3d() {
-    let dir = fixture_dir();
+/// Runs Alg. 3 on a fixture; returns ((ours rotation °, displacement / diagonal), (Open3D's)).
+fn run_fixture(dir: &std::path::Path) -> ((f64, f64), (f64, f64)) {
     let fx: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("fixture.json")).unwrap()).unwrap();
     let source = read_points(&dir.join("source.ply")).unwrap();
@@ -84,15 +87,29 @@ fn alg3_recovers_the_bunny_similarity_like_open3d() {
             .unwrap(),
         100.0 * o3d_disp / diag,
     );
-    // Both stay within 1 % of the diagonal; ours is no worse than Open3D by more than a margin.
+    ((ours_rot, ours_disp / diag), (o3d_rot, o3d_disp / diag))
+}
+
+/// The setting: σ = 1 % of the diagonal. Neither Open3D (≈ 1°) nor we reach 0.5° here:
+/// with this much noise and 30 % unmatched points, ICP's minimum itself sits about a degree
+/// from the truth. Both stay within 1 % of the diagonal.
+#[test]
+fn alg3_at_one_percent_noise_matches_open3d() {
+    let ((rot, disp), (o3d_rot, _)) = run_fixture(&fixture_dir());
+    assert!(disp < 0.01, "displacement {disp} of the diagonal");
     assert!(
-        ours_disp / diag < 0.01,
-        "displacement {} of the diagonal",
-        ours_disp / diag
+        rot < o3d_rot.max(0.5) + 0.5,
+        "rotation {rot}° vs Open3D {o3d_rot}°"
     );
+}
+
+/// σ = 0.2 % of the diagonal: the < 0.5° and < 1 % targets hold.
+#[test]
+fn alg3_at_low_noise_recovers_the_similarity() {
+    let ((rot, disp), (o3d_rot, o3d_disp)) = run_fixture(&low_noise_dir());
     assert!(
-        ours_rot < o3d_rot.max(0.5) + 0.5,
-        "rotation {ours_rot}° vs Open3D {o3d_rot}°"
+        rot < 0.5 && disp < 0.01,
+        "ours {rot}°, {disp}; Open3D {o3d_rot}°, {o3d_disp}"
     );
 }
 
