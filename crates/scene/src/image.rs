@@ -105,11 +105,7 @@ impl Image {
 
     /// One channel as its own image.
     pub fn channel(&self, c: usize) -> Self {
-        let data = self
-            .data
-            .chunks_exact(self.channels)
-            .map(|p| p[c])
-            .collect();
+        let data = self.data.chunks_exact(self.channels).map(|p| p[c]).collect();
         Self::from_vec(self.width, self.height, 1, data)
     }
 
