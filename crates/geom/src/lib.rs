@@ -1,1 +1,35 @@
-//! Geometry toolbox (paper 000 §1–2, §4; paper 001 Alg. 3): see the modules.
+//! Geometry toolbox (paper 000 §1–2, §4; paper 001 Alg. 3).
+//!
+//! - [`depth`]: depth maps to meshes and point clouds with the depth-edge test of Eq. (1),
+//!   [`contract`]: the contraction of Eq. (2) and point subsampling (paper 000 §1–2).
+//! - [`blend`]: occlusion-aware Poisson blending (Eq. 3), standard Poisson, Laplacian-pyramid and
+//!   Gaussian-feather blending (paper 000 §4, Fig. 2/9).
+//! - [`mcubes`]: marching cubes on dense grids and chunked closures; [`cleanup`]: largest
+//!   component and mask culling.
+//! - [`registration`]: similarity pre-alignment, FPFH + RANSAC, ICP (paper 001 Alg. 3).
+//! - [`chamfer`]: the DTU Chamfer protocol and Chamfer-L1 / F-score / normal consistency.
+//! - [`io`]: PLY, OBJ, OFF, `.npy`, depth PNGs and camera JSON.
+
+// Numeric code here indexes several parallel arrays with one loop variable, and tests for
+// positivity with `!(x > 0.0)` on purpose so that NaN is rejected too.
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
+
+pub mod bench;
+pub mod blend;
+pub mod chamfer;
+pub mod cleanup;
+pub mod contract;
+pub mod depth;
+pub mod error;
+pub mod io;
+pub mod knn;
+pub mod mcubes;
+pub mod mesh;
+pub mod registration;
+pub mod sampling;
+pub mod similarity;
+pub mod topology;
+
+pub use error::{GeomError, Result};
+pub use mesh::{Mesh, Points};
+pub use similarity::Similarity;

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod error;
+pub mod pose_error;
 pub mod psnr;
 pub mod ssim;
 

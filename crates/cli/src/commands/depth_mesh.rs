@@ -1,0 +1,128 @@
+//! `fewview depth-mesh`: mesh a depth map (paper 000 §1, Eq. 1).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use clap::{Args as ClapArgs, ValueEnum};
+use fewview_geom::depth::{DepthOptions, EdgeTest, TAU_DEPTH, depth_to_mesh_with};
+use fewview_geom::io::{cameras::read_cameras, read_depth, write_mesh};
+use fewview_scene::Camera;
+
+use super::geom_common::load_image;
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum EdgeTestArg {
+    /// ‖(X − Xₓ) × (X − Xᵧ)‖ / D² of the back-projected triangle (default; see the docs of
+    /// fewview_geom::depth for why).
+    Area,
+    /// The literal scalar (D − Dₓ)(D − Dᵧ) / D² (misses edges along the pixel axes).
+    Product,
+}
+
+impl From<EdgeTestArg> for EdgeTest {
+    fn from(a: EdgeTestArg) -> Self {
+        match a {
+            EdgeTestArg::Area => EdgeTest::TriangleArea,
+            EdgeTestArg::Product => EdgeTest::DepthProduct,
+        }
+    }
+}
+
+/// Depth-edge filter options shared by depth-mesh and depth-points.
+#[derive(Clone, Debug, ClapArgs)]
+pub struct DepthInput {
+    /// τ_depth of Eq. (1); pixels whose edge measure reaches it are dropped. 0 disables the
+    /// filter.
+    #[arg(long, default_value_t = TAU_DEPTH)]
+    pub tau: f32,
+    #[arg(long, value_enum, default_value = "area")]
+    pub edge_test: EdgeTestArg,
+    /// Scale of 16-bit PNG depth values (e.g. 0.001 for millimetres → metres).
+    #[arg(long, default_value_t = 1.0)]
+    pub png_scale: f32,
+}
+
+pub fn load_camera(path: &std::path::Path, view: usize) -> Result<Camera> {
+    let cams = read_cameras(path)?;
+    let n = cams.len();
+    cams.into_iter()
+        .nth(view)
+        .with_context(|| format!("{}: camera {view} asked for, file has {n}", path.display()))
+}
+
+/// Reads one depth map with camera `view` of a camera file and optional colours.
+pub fn load_depth_view(
+    depth: &std::path::Path,
+    input: &DepthInput,
+    camera: &std::path::Path,
+    view: usize,
+    image: Option<&std::path::Path>,
+) -> Result<(Vec<f32>, Camera, Option<fewview_scene::Image>)> {
+    let d = read_depth(depth, input.png_scale)?;
+    let cam = load_camera(camera, view)?;
+    if (d.width, d.height) != (cam.width() as usize, cam.height() as usize) {
+        bail!(
+            "{}: depth is {}×{} but camera {} of {} is {}×{}",
+            depth.display(),
+            d.width,
+            d.height,
+            view,
+            camera.display(),
+            cam.width(),
+            cam.height()
+        );
+    }
+    let img = image.map(load_image).transpose()?;
+    Ok((d.depth, cam, img))
+}
+
+/// Mesh a depth map (paper 000 §1).
+///
+/// Back-projects every pixel centre, connects right/down neighbours into triangles and drops
+/// depth-edge pixels with the test of Eq. (1).
+///
+/// Depth: .npy float32 H×W (z-depth along the optical axis) or 16-bit PNG (× --png-scale);
+/// 0 means no depth, NaN is an error.
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    /// Depth map (.npy or .png).
+    #[arg(long)]
+    pub depth: PathBuf,
+    /// Camera JSON (intrinsics + row-major world_to_camera 4×4, OpenCV axes); a file with a
+    /// list of cameras needs --view.
+    #[arg(long)]
+    pub camera: PathBuf,
+    /// Which camera of the file.
+    #[arg(long, default_value_t = 0)]
+    pub view: usize,
+    /// Colour image for vertex colours (same size as the depth map).
+    #[arg(long)]
+    pub image: Option<PathBuf>,
+    #[command(flatten)]
+    pub input: DepthInput,
+    /// Output mesh (.ply, .obj or .off).
+    #[arg(long, short)]
+    pub out: PathBuf,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let (depth, cam, img) = load_depth_view(
+        &args.depth,
+        &args.input,
+        &args.camera,
+        args.view,
+        args.image.as_deref(),
+    )?;
+    let opts = DepthOptions {
+        tau: args.input.tau,
+        test: args.input.edge_test.into(),
+    };
+    let mesh = depth_to_mesh_with(&depth, &cam, img.as_ref(), &opts)
+        .with_context(|| format!("meshing {}", args.depth.display()))?;
+    write_mesh(&args.out, &mesh)?;
+    println!(
+        "{}",
+        serde_json::json!({"vertices": mesh.vertices.len(), "faces": mesh.faces.len(), "out": args.out})
+    );
+    Ok(())
+}

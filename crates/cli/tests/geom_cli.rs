@@ -1,0 +1,408 @@
+//! The geometry subcommands, run as a user would: `--help`, real inputs, and bad inputs that
+//! must fail with a one-line error naming the problem.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use fewview_geom::io::{read_mesh, write_mesh, write_npy};
+use fewview_geom::mesh::Mesh;
+use fewview_scene::Image;
+
+fn fewview(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_fewview"))
+        .args(args)
+        .output()
+        .expect("run fewview");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+const CAMERA: &str = r#"{"intrinsics": {"fx": 400, "fy": 400, "cx": 40, "cy": 30, "width": 80, "height": 60},
+ "world_to_camera": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}"#;
+
+#[test]
+fn every_geometry_command_has_help() {
+    for (cmd, flag) in [
+        ("blend", "--mask-f"),
+        ("depth-mesh", "--tau"),
+        ("depth-points", "--subsample"),
+        ("mcubes", "--iso"),
+        ("register", "--voxel"),
+        ("chamfer", "--max-dist"),
+        ("pose-error", "--eps"),
+    ] {
+        let (ok, out, err) = fewview(&[cmd, "--help"]);
+        assert!(ok, "{cmd} --help failed: {err}");
+        assert!(out.contains(flag), "{cmd} --help lacks {flag}:\n{out}");
+    }
+}
+
+fn two_planes_depth(dir: &Path) -> (PathBuf, PathBuf) {
+    let mut d = vec![0f32; 80 * 60];
+    for j in 0..60 {
+        for i in 0..80 {
+            d[j * 80 + i] = if i < 40 { 2.0 } else { 3.0 };
+        }
+    }
+    let depth = dir.join("depth.npy");
+    write_npy(&depth, &[60, 80], &d).unwrap();
+    let cam = dir.join("cam.json");
+    std::fs::write(&cam, CAMERA).unwrap();
+    (depth, cam)
+}
+
+#[test]
+fn depth_mesh_and_points_from_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let (depth, cam) = two_planes_depth(dir.path());
+    let out = dir.path().join("m.ply");
+    let (ok, _, err) = fewview(&[
+        "depth-mesh",
+        "--depth",
+        s(&depth),
+        "--camera",
+        s(&cam),
+        "-o",
+        s(&out),
+    ]);
+    assert!(ok, "{err}");
+    let m = read_mesh(&out).unwrap();
+    assert_eq!(m.vertices.len(), 80 * 60 - 60, "one edge column dropped");
+    let unfiltered = dir.path().join("u.obj");
+    let (ok, _, err) = fewview(&[
+        "depth-mesh",
+        "--depth",
+        s(&depth),
+        "--camera",
+        s(&cam),
+        "--tau",
+        "0",
+        "-o",
+        s(&unfiltered),
+    ]);
+    assert!(ok, "{err}");
+    assert_eq!(read_mesh(&unfiltered).unwrap().faces.len(), 2 * 79 * 59);
+    let pts = dir.path().join("p.ply");
+    let (ok, stdout, err) = fewview(&[
+        "depth-points",
+        "--depth",
+        s(&depth),
+        "--cameras",
+        s(&cam),
+        "--contract",
+        "paper",
+        "--subsample",
+        "0.1",
+        "--seed",
+        "3",
+        "-o",
+        s(&pts),
+    ]);
+    assert!(ok, "{err}");
+    assert!(stdout.contains("\"b_near\":3.0"), "{stdout}");
+    assert_eq!(
+        read_mesh(&pts).unwrap().vertices.len(),
+        ((80 * 60 - 60) as f64 * 0.1).round() as usize
+    );
+    // NaN depth: clear error, no output.
+    let mut d = vec![1f32; 80 * 60];
+    d[81] = f32::NAN;
+    write_npy(&depth, &[60, 80], &d).unwrap();
+    let bad = dir.path().join("bad.ply");
+    let (ok, _, err) = fewview(&[
+        "depth-mesh",
+        "--depth",
+        s(&depth),
+        "--camera",
+        s(&cam),
+        "-o",
+        s(&bad),
+    ]);
+    assert!(
+        !ok && err.contains("NaN") && err.contains("(1, 1)"),
+        "{err}"
+    );
+    assert!(!bad.exists());
+    // Size mismatch between depth and camera.
+    write_npy(&depth, &[10, 10], &[1.0; 100]).unwrap();
+    let (ok, _, err) = fewview(&[
+        "depth-mesh",
+        "--depth",
+        s(&depth),
+        "--camera",
+        s(&cam),
+        "-o",
+        s(&bad),
+    ]);
+    assert!(
+        !ok && err.contains("10×10") && err.contains("80×60"),
+        "{err}"
+    );
+}
+
+fn save(img: &Image, p: &Path) {
+    img.save_png(p).unwrap();
+}
+
+#[test]
+fn blend_writes_an_image_and_rejects_bad_masks() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (40, 30);
+    let f = Image::filled(w, h, &[0.2, 0.4, 0.6]);
+    let g = Image::filled(w, h, &[0.6, 0.4, 0.2]);
+    let mut mf = Image::new(w, h, 1);
+    let mut mg = Image::new(w, h, 1);
+    for j in 0..h {
+        for i in 0..w {
+            mf.set(i, j, 0, (i < 25) as u8 as f32);
+            mg.set(i, j, 0, (i >= 15) as u8 as f32);
+        }
+    }
+    let paths: Vec<PathBuf> = ["f.png", "g.png", "mf.png", "mg.png"]
+        .iter()
+        .map(|n| dir.path().join(n))
+        .collect();
+    save(&f, &paths[0]);
+    save(&g, &paths[1]);
+    save(&mf, &paths[2]);
+    save(&mg, &paths[3]);
+    let out = dir.path().join("o.png");
+    for method in ["occlusion-aware", "poisson", "pyramid", "feather"] {
+        let (ok, stdout, err) = fewview(&[
+            "blend",
+            "--f",
+            s(&paths[0]),
+            "--g",
+            s(&paths[1]),
+            "--mask-f",
+            s(&paths[2]),
+            "--mask-g",
+            s(&paths[3]),
+            "--method",
+            method,
+            "--levels",
+            "2",
+            "-o",
+            s(&out),
+        ]);
+        assert!(ok, "{method}: {err}");
+        assert!(stdout.contains("method"), "{stdout}");
+        let o = Image::load(&out).unwrap();
+        // Left of the overlap is f, right of it g.
+        assert!((o.get(2, 5, 0) - 0.2).abs() < 0.01, "{method}");
+        if method != "poisson" {
+            assert!((o.get(38, 5, 0) - 0.6).abs() < 0.01, "{method}");
+        }
+    }
+    let empty = dir.path().join("empty.png");
+    save(&Image::new(w, h, 1), &empty);
+    let (ok, _, err) = fewview(&[
+        "blend",
+        "--f",
+        s(&paths[0]),
+        "--g",
+        s(&paths[1]),
+        "--mask-f",
+        s(&paths[2]),
+        "--mask-g",
+        s(&empty),
+        "-o",
+        s(&out),
+    ]);
+    assert!(!ok && err.contains("empty"), "{err}");
+    let small = dir.path().join("small.png");
+    save(&Image::filled(10, 10, &[1.0]), &small);
+    let (ok, _, err) = fewview(&[
+        "blend",
+        "--f",
+        s(&paths[0]),
+        "--g",
+        s(&paths[1]),
+        "--mask-f",
+        s(&small),
+        "--mask-g",
+        s(&paths[3]),
+        "-o",
+        s(&out),
+    ]);
+    assert!(!ok && err.contains("10×10"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
+}
+
+#[test]
+fn mcubes_of_a_sphere_grid_is_watertight() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 24;
+    let mut g = Vec::with_capacity(n * n * n);
+    for i in 0..n {
+        for j in 0..n {
+            for k in 0..n {
+                let p = [i, j, k].map(|x| x as f32 - 11.5);
+                g.push((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - 8.0);
+            }
+        }
+    }
+    let grid = dir.path().join("g.npy");
+    write_npy(&grid, &[n, n, n], &g).unwrap();
+    let out = dir.path().join("s.ply");
+    let (ok, stdout, err) = fewview(&[
+        "mcubes",
+        "--grid",
+        s(&grid),
+        "--voxel",
+        "0.5",
+        "--origin",
+        "-1,-1,-1",
+        "-o",
+        s(&out),
+    ]);
+    assert!(ok, "{err}");
+    assert!(stdout.contains("\"watertight\":true"), "{stdout}");
+    let m = read_mesh(&out).unwrap();
+    assert!(m.signed_volume() > 0.0);
+    write_npy(&grid, &[n * n * n], &g).unwrap();
+    let (ok, _, err) = fewview(&["mcubes", "--grid", s(&grid), "-o", s(&out)]);
+    assert!(!ok && err.contains("3-D"), "{err}");
+}
+
+fn plane(z: f32) -> Mesh {
+    let n = 6;
+    let mut v = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            v.push([i as f32 * 5.0, j as f32 * 5.0, z]);
+        }
+    }
+    let mut f = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let a = (j * (n + 1) + i) as u32;
+            let b = a + 1;
+            let c = a + (n + 1) as u32;
+            f.push([a, b, c + 1]);
+            f.push([a, c + 1, c]);
+        }
+    }
+    Mesh::new(v, f)
+}
+
+#[test]
+fn chamfer_of_a_shifted_plane_and_a_non_manifold_mesh() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = dir.path().join("a.ply");
+    let b = dir.path().join("b.ply");
+    write_mesh(&a, &plane(0.0)).unwrap();
+    write_mesh(&b, &plane(2.0)).unwrap();
+    let json = dir.path().join("c.json");
+    let (ok, _, err) = fewview(&[
+        "chamfer",
+        "--pred",
+        s(&b),
+        "--gt",
+        s(&a),
+        "--protocol",
+        "synthetic",
+        "--samples",
+        "20000",
+        "--json",
+        s(&json),
+    ]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let c = v["chamfer_l1"].as_f64().unwrap();
+    assert!((c / 2.0 - 1.0).abs() < 0.01, "{c}");
+    let (ok, stdout, err) = fewview(&["chamfer", "--pred", s(&b), "--gt", s(&a)]);
+    assert!(ok, "{err}");
+    assert!(stdout.contains("chamfer"), "{stdout}");
+    let mut fin = plane(0.0);
+    let extra = fin.vertices.len() as u32;
+    fin.vertices.push([2.5, 0.0, 3.0]);
+    fin.faces.push([0, 1, extra]); // edge 0–1 now has two faces on one side plus this one
+    fin.faces.push([1, 0, extra]);
+    let nm = dir.path().join("nm.obj");
+    write_mesh(&nm, &fin).unwrap();
+    let (ok, _, err) = fewview(&[
+        "chamfer",
+        "--pred",
+        s(&nm),
+        "--gt",
+        s(&a),
+        "--protocol",
+        "synthetic",
+    ]);
+    assert!(
+        !ok && err.contains("not manifold") && err.contains("nm.obj"),
+        "{err}"
+    );
+}
+
+#[test]
+fn pose_error_of_identical_poses_is_the_floor() {
+    let dir = tempfile::tempdir().unwrap();
+    let poses = r#"[[[1,0,0,0],[0,1,0,0],[0,0,1,1],[0,0,0,1]],
+                    [[0,0,1,0],[0,1,0,0],[-1,0,0,2],[0,0,0,1]],
+                    [[0,-1,0,0],[1,0,0,0],[0,0,1,3],[0,0,0,1]]]"#;
+    let p = dir.path().join("p.json");
+    std::fs::write(&p, poses).unwrap();
+    let (ok, stdout, err) = fewview(&["pose-error", "--est", s(&p), "--gt", s(&p)]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    let floor = v["rotation_floor_deg_f64"].as_f64().unwrap();
+    assert!((v["rotation_deg"].as_f64().unwrap() - floor).abs() < 1e-9);
+    assert!((floor - 0.081028).abs() < 1e-6);
+    let q = dir.path().join("q.json");
+    std::fs::write(&q, "[[[1,0,0,0],[0,1,0,0],[0,0,1,1],[0,0,0,1]]]").unwrap();
+    let (ok, _, err) = fewview(&["pose-error", "--est", s(&q), "--gt", s(&p)]);
+    assert!(!ok && err.contains("1 estimated poses but 3"), "{err}");
+}
+
+#[test]
+fn register_the_bunny_fixture() {
+    let fx = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../geom/tests/fixtures/registration");
+    let dir = tempfile::tempdir().unwrap();
+    let fixture: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(fx.join("fixture.json")).unwrap()).unwrap();
+    let pre = dir.path().join("pre.json");
+    std::fs::write(&pre, fixture["prealignment"].to_string()).unwrap();
+    let out = dir.path().join("moved.ply");
+    let report = dir.path().join("r.json");
+    let (ok, _, err) = fewview(&[
+        "register",
+        "--source",
+        s(&fx.join("source.ply")),
+        "--target",
+        s(&fx.join("target.ply")),
+        "--voxel",
+        "0.008",
+        "--prealign",
+        s(&pre),
+        "--icp-threshold",
+        "0.02",
+        "--icp-threshold",
+        "0.01",
+        "--icp-threshold",
+        "0.005",
+        "--icp-threshold",
+        "0.003",
+        "-o",
+        s(&out),
+        "--report",
+        s(&report),
+    ]);
+    assert!(ok, "{err}");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert!(r["icp"]["fitness"].as_f64().unwrap() > 0.5, "{r}");
+    assert_eq!(
+        read_mesh(&out).unwrap().vertices.len() as u64,
+        fixture["source_points"].as_u64().unwrap()
+    );
+}

@@ -1,0 +1,306 @@
+//! Tests of the blends against independent computations.
+
+use super::poisson::occlusion_aware_planes;
+use super::*;
+use rand::{RngExt, SeedableRng};
+
+/// Smooth-ish random test image.
+fn image(w: usize, h: usize, ch: usize, seed: u64) -> Image {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let (a, b, c): (f32, f32, f32) = (rng.random(), rng.random(), rng.random());
+    let mut img = Image::new(w, h, ch);
+    for j in 0..h {
+        for i in 0..w {
+            for k in 0..ch {
+                let x = i as f32 / w as f32;
+                let y = j as f32 / h as f32;
+                let v = 0.5
+                    + 0.3 * ((a * 7.0 + k as f32) * x + b * 5.0 * y).sin() * (c * 3.0 * y).cos()
+                    + 0.05 * rng.random::<f32>();
+                img.set(i, j, k, v);
+            }
+        }
+    }
+    img
+}
+
+/// f valid on the left 60 %, g on the right 60 %, plus a hole valid in neither.
+fn masks(w: usize, h: usize) -> (Vec<bool>, Vec<bool>) {
+    let mut mf = vec![false; w * h];
+    let mut mg = vec![false; w * h];
+    for j in 0..h {
+        for i in 0..w {
+            let hole =
+                (i as isize - w as isize / 2).abs() < 3 && (j as isize - h as isize / 3).abs() < 3;
+            mf[j * w + i] = i < w * 6 / 10 && !hole;
+            mg[j * w + i] = i >= w * 4 / 10 && !hole;
+        }
+    }
+    (mf, mg)
+}
+
+/// Naive residual of Eq. (3) at the overlap pixels, straight from the definition.
+fn naive_residual(
+    f: &Image,
+    g: &Image,
+    mf: &[bool],
+    mg: &[bool],
+    wf: f64,
+    planes: &[Vec<f64>],
+) -> f64 {
+    let (w, h, ch) = (f.width, f.height, f.channels);
+    let (mut r2, mut b2) = (0.0, 0.0);
+    for c in 0..ch {
+        for j in 0..h {
+            for i in 0..w {
+                let p = j * w + i;
+                if !(mf[p] && mg[p]) {
+                    continue;
+                }
+                let (mut lap, mut div) = (0.0, 0.0);
+                for (di, dj) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+                    let (a, b) = (i as i64 + di, j as i64 + dj);
+                    if a < 0 || b < 0 || a >= w as i64 || b >= h as i64 {
+                        continue;
+                    }
+                    let q = b as usize * w + a as usize;
+                    if !(mf[q] || mg[q]) {
+                        continue;
+                    }
+                    let fv = |img: &Image, x: usize| img.data[x * ch + c] as f64;
+                    lap += planes[c][p] - planes[c][q];
+                    let df = fv(f, p) - fv(f, q);
+                    let dg = fv(g, p) - fv(g, q);
+                    div += match (mf[q], mg[q]) {
+                        (true, true) => wf * df + (1.0 - wf) * dg,
+                        (true, false) => df,
+                        _ => dg,
+                    };
+                }
+                r2 += (lap - div).powi(2);
+                b2 += div * div;
+            }
+        }
+    }
+    (r2 / b2).sqrt()
+}
+
+#[test]
+fn occlusion_aware_keeps_single_mask_pixels_and_solves_eq3() {
+    let (w, h) = (70, 50);
+    let f = image(w, h, 3, 1);
+    let g = image(w, h, 3, 2);
+    let (mf, mg) = masks(w, h);
+    for solver in [Solver::MultigridCg, Solver::Direct] {
+        let opts = PoissonOptions {
+            solver,
+            ..Default::default()
+        };
+        let s = occlusion_aware_planes(&f, &g, &mf, &mg, Weights::Constant(0.3), &opts).unwrap();
+        let res = naive_residual(&f, &g, &mf, &mg, 0.3, &s.planes);
+        assert!(res < 1e-6, "{solver:?}: residual {res}");
+        assert!(s.stats.solve.relative_residual < 1e-6);
+        let (img, _) =
+            occlusion_aware_poisson_with(&f, &g, &mf, &mg, Weights::Constant(0.3), &opts).unwrap();
+        for p in 0..w * h {
+            for c in 0..3 {
+                let v = img.data[p * 3 + c];
+                match (mf[p], mg[p]) {
+                    (true, false) => assert_eq!(v, f.data[p * 3 + c]),
+                    (false, true) => assert_eq!(v, g.data[p * 3 + c]),
+                    (false, false) => assert_eq!(v, 0.0),
+                    _ => {}
+                }
+            }
+        }
+    }
+    // The two solvers agree.
+    let a = occlusion_aware_planes(
+        &f,
+        &g,
+        &mf,
+        &mg,
+        Weights::Constant(0.3),
+        &PoissonOptions::default(),
+    )
+    .unwrap();
+    let b = occlusion_aware_planes(
+        &f,
+        &g,
+        &mf,
+        &mg,
+        Weights::Constant(0.3),
+        &PoissonOptions {
+            solver: Solver::Direct,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let diff = a
+        .planes
+        .iter()
+        .flatten()
+        .zip(b.planes.iter().flatten())
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max);
+    assert!(diff < 1e-6, "{diff}");
+}
+
+#[test]
+fn a_conservative_guidance_is_reproduced_exactly() {
+    // f and g are the same image up to a constant offset; with Dirichlet values from f on both
+    // sides (g = f there too) the guidance ∇f is integrable and the solution is f itself.
+    let (w, h) = (40, 30);
+    let f = image(w, h, 1, 3);
+    let g = f.clone();
+    let (mf, mg) = masks(w, h);
+    let img = occlusion_aware_poisson(&f, &g, &mf, &mg, Weights::Constant(0.5)).unwrap();
+    for p in 0..w * h {
+        if mf[p] || mg[p] {
+            assert!((img.data[p] - f.data[p]).abs() < 1e-5);
+        }
+    }
+}
+
+#[test]
+fn isolated_overlap_is_pinned_and_per_pixel_weights_work() {
+    let (w, h) = (20, 20);
+    let f = image(w, h, 2, 4);
+    let g = image(w, h, 2, 5);
+    // Both masks cover everything: no Dirichlet pixel at all.
+    let all = vec![true; w * h];
+    let wts: Vec<f32> = (0..w * h)
+        .map(|p| (p % w) as f32 / (w - 1) as f32)
+        .collect();
+    let s = occlusion_aware_planes(
+        &f,
+        &g,
+        &all,
+        &all,
+        Weights::PerPixel(&wts),
+        &PoissonOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(s.stats.pinned, 1);
+    let p0 = 0;
+    let expect = wts[0] as f64 * f.data[0] as f64 + (1.0 - wts[0] as f64) * g.data[0] as f64;
+    assert!((s.planes[0][p0] - expect).abs() < 1e-6);
+}
+
+#[test]
+fn standard_poisson_matches_the_direct_solution_and_keeps_the_outside() {
+    let (w, h) = (48, 40);
+    let target = image(w, h, 3, 6);
+    let source = image(w, h, 3, 7);
+    let mask: Vec<bool> = (0..w * h)
+        .map(|p| {
+            let (i, j) = ((p % w) as f64, (p / w) as f64);
+            (i - 24.0).powi(2) + (j - 20.0).powi(2) < 100.0
+        })
+        .collect();
+    let (a, sa) =
+        poisson_blend(&target, &source, &mask, false, &PoissonOptions::default()).unwrap();
+    let (b, _) = poisson_blend(
+        &target,
+        &source,
+        &mask,
+        false,
+        &PoissonOptions {
+            solver: Solver::Direct,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert!(sa.solve.relative_residual < 1e-6);
+    for p in 0..w * h {
+        for c in 0..3 {
+            assert!((a.data[p * 3 + c] - b.data[p * 3 + c]).abs() < 1e-5);
+            if !mask[p] {
+                assert_eq!(a.data[p * 3 + c], target.data[p * 3 + c]);
+            }
+        }
+    }
+    // Inside, the result differs from the source by a harmonic function: the Laplacians match.
+    let lap = |img: &Image, i: usize, j: usize| {
+        let v = |x: usize, y: usize| img.get(x, y, 0) as f64;
+        4.0 * v(i, j) - v(i - 1, j) - v(i + 1, j) - v(i, j - 1) - v(i, j + 1)
+    };
+    assert!((lap(&a, 24, 20) - lap(&source, 24, 20)).abs() < 1e-4);
+    let (m, _) = poisson_blend(&target, &source, &mask, true, &PoissonOptions::default()).unwrap();
+    assert!(m.is_finite());
+}
+
+#[test]
+fn feather_and_pyramid_respect_masks() {
+    let (w, h) = (64, 48);
+    let f = image(w, h, 3, 8);
+    let g = image(w, h, 3, 9);
+    let (mf, mg) = masks(w, h);
+    let fe = gaussian_feather_blend(&f, &g, &mf, &mg, 4.0, Weights::default()).unwrap();
+    for p in 0..w * h {
+        let v = fe.data[p * 3];
+        match (mf[p], mg[p]) {
+            (true, false) => assert_eq!(v, f.data[p * 3]),
+            (false, true) => assert_eq!(v, g.data[p * 3]),
+            (false, false) => assert_eq!(v, 0.0),
+            _ => {
+                let (lo, hi) = (
+                    f.data[p * 3].min(g.data[p * 3]),
+                    f.data[p * 3].max(g.data[p * 3]),
+                );
+                assert!(v >= lo - 1e-6 && v <= hi + 1e-6);
+            }
+        }
+    }
+    // Pyramid: one level is the plain weighted average; identical inputs come back unchanged.
+    let one = laplacian_pyramid_blend(&f, &g, &mf, &mg, 1, Weights::Constant(0.25)).unwrap();
+    for p in 0..w * h {
+        let want = match (mf[p], mg[p]) {
+            (true, false) => f.data[p * 3],
+            (false, true) => g.data[p * 3],
+            (true, true) => 0.25 * f.data[p * 3] + 0.75 * g.data[p * 3],
+            _ => 0.0,
+        };
+        assert!((one.data[p * 3] - want).abs() < 1e-6);
+    }
+    let same = laplacian_pyramid_blend(&f, &f, &mf, &mg, 5, Weights::default()).unwrap();
+    for p in 0..w * h {
+        if mf[p] || mg[p] {
+            assert!((same.data[p * 3] - f.data[p * 3]).abs() < 1e-4);
+        }
+    }
+    // Far from the overlap the pyramid blend is the image itself.
+    let py = laplacian_pyramid_blend(&f, &g, &mf, &mg, 4, Weights::default()).unwrap();
+    assert!((py.get(2, 10, 0) - f.get(2, 10, 0)).abs() < 1e-4);
+}
+
+#[test]
+fn bad_inputs_give_clear_errors() {
+    let f = image(10, 8, 3, 1);
+    let g = image(12, 8, 3, 2);
+    let m = vec![true; 80];
+    let e = occlusion_aware_poisson(&f, &g, &m, &m, Weights::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("10×8 vs 12×8"), "{e}");
+    let g = image(10, 8, 3, 2);
+    let empty = vec![false; 80];
+    let e = occlusion_aware_poisson(&f, &g, &m, &empty, Weights::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("mask of g: is empty"), "{e}");
+    let e = occlusion_aware_poisson(&f, &g, &m[..50], &m, Weights::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("50 values"), "{e}");
+    let mut nan = f.clone();
+    nan.data[5] = f32::NAN;
+    let e = gaussian_feather_blend(&nan, &g, &m, &m, 2.0, Weights::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("(1, 0)") && e.contains("not finite"), "{e}");
+    let e = laplacian_pyramid_blend(&f, &g, &m, &m, 3, Weights::Constant(1.5))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("1.5"), "{e}");
+}
