@@ -24,6 +24,7 @@ pub mod llff;
 pub mod load;
 mod numpy;
 pub mod split;
+pub mod synthetic;
 pub mod transforms;
 pub mod video;
 

@@ -9,6 +9,7 @@ pub mod init;
 pub mod loss;
 pub mod model;
 pub mod op;
+pub mod pipeline;
 pub mod ply;
 pub mod raster;
 pub mod real;

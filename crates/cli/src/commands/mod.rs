@@ -2,18 +2,29 @@
 
 mod blend;
 mod chamfer;
+mod dataset_args;
+mod demo;
 mod depth_mesh;
 mod depth_points;
+mod eval;
 mod geom_common;
 mod mcubes;
 mod pose_error;
+mod progress;
 mod register;
+mod render;
+mod train;
+mod train_args;
 
 use clap::Subcommand;
 
 #[derive(Debug, Subcommand)]
 // Each subcommand's help (short and long) comes from the doc comment of its `Args`.
 pub enum Command {
+    Demo(demo::Args),
+    Train(train::Args),
+    Render(render::Args),
+    Eval(eval::Args),
     Blend(blend::Args),
     DepthMesh(depth_mesh::Args),
     DepthPoints(depth_points::Args),
@@ -25,6 +36,10 @@ pub enum Command {
 
 pub fn run(command: Command) -> anyhow::Result<()> {
     match command {
+        Command::Demo(a) => demo::run(a),
+        Command::Train(a) => train::run(a),
+        Command::Render(a) => render::run(a),
+        Command::Eval(a) => eval::run(a),
         Command::Blend(a) => blend::run(a),
         Command::DepthMesh(a) => depth_mesh::run(a),
         Command::DepthPoints(a) => depth_points::run(a),

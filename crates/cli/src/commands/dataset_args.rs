@@ -1,0 +1,58 @@
+//! Flags shared by the commands that read a dataset.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+use fewview_scene::load::LoadOptions;
+use fewview_scene::split::parse_view_list;
+use fewview_scene::{Dataset, DatasetFormat, load_dataset};
+
+/// Which dataset and which views.
+#[derive(Debug, Clone, Args)]
+pub struct DatasetArgs {
+    /// Dataset folder: LLFF (`poses_bounds.npy` + `images_N/`), NeRF-synthetic
+    /// (`transforms_train.json`), nerfstudio (`transforms.json`), IDR/NeuS DTU
+    /// (`cameras_sphere.npz` + `image/` + `mask/`) or COLMAP (`sparse/0` + `images/`).
+    #[arg(long, value_name = "DIR")]
+    pub data: PathBuf,
+    /// Force the format instead of detecting it: llff, blender, nerfstudio, dtu, colmap.
+    #[arg(long, value_name = "NAME")]
+    pub format: Option<DatasetFormat>,
+    /// Downscale images by this integer factor on load (intrinsics follow).
+    #[arg(long, default_value_t = 1, value_name = "K")]
+    pub downscale: u32,
+    /// Number of training views of the format's standard sparse split (LLFF 3, NeRF-synthetic 8,
+    /// DTU 3 by default).
+    #[arg(long, value_name = "N")]
+    pub n_train: Option<usize>,
+    /// Explicit training views, e.g. `22,25,28` (indices in the dataset's view order).
+    #[arg(long, value_name = "LIST", value_parser = parse_view_list)]
+    pub train_views: Option<Vec<usize>>,
+    /// Explicit held-out views, e.g. `0,8,16`.
+    #[arg(long, value_name = "LIST", value_parser = parse_view_list)]
+    pub test_views: Option<Vec<usize>>,
+    /// DTU: camera file inside the scene folder (e.g. `cameras_linear_init.npz`).
+    #[arg(long, value_name = "FILE")]
+    pub cameras_file: Option<String>,
+}
+
+impl DatasetArgs {
+    pub fn load_options(&self) -> LoadOptions {
+        LoadOptions {
+            format: self.format,
+            downscale: self.downscale,
+            n_train: self.n_train,
+            train_views: self.train_views.clone(),
+            test_views: self.test_views.clone(),
+            cameras_file: self.cameras_file.clone(),
+            ..LoadOptions::default()
+        }
+    }
+
+    pub fn load(&self) -> anyhow::Result<Dataset> {
+        let ds = load_dataset(&self.data, &self.load_options())
+            .with_context(|| format!("cannot load dataset {}", self.data.display()))?;
+        Ok(ds)
+    }
+}

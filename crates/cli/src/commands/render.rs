@@ -1,0 +1,114 @@
+//! `fewview render`: images of a trained model at dataset cameras, and a smooth camera path.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::{Args as ClapArgs, ValueEnum};
+use fewview_scene::video::{VideoOptions, write_video};
+use fewview_splat::eval::render_model;
+use fewview_splat::pipeline::render_path;
+use fewview_splat::ply::read_ply;
+use fewview_splat::raster::{RenderCamera, RenderSettings};
+
+use super::dataset_args::DatasetArgs;
+use super::progress;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Which {
+    /// The held-out views.
+    Test,
+    /// The training views.
+    Train,
+    /// Every view of the dataset.
+    All,
+    /// No dataset views (only the camera path).
+    None,
+}
+
+/// Render a trained model (Inria PLY) at a dataset's cameras to PNG, and optionally along a smooth
+/// camera path through the training views (rotations by SLERP, centres linearly) to a video.
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    /// Trained Gaussians (Inria PLY layout).
+    #[arg(long, value_name = "FILE")]
+    pub ply: PathBuf,
+    #[command(flatten)]
+    pub dataset: DatasetArgs,
+    /// Which dataset views to render.
+    #[arg(long, value_enum, default_value_t = Which::Test)]
+    pub views: Which,
+    /// Output folder for the PNGs (`<name>.png`, and `<name>_depth.png` with `--depth`).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Also write expected depth, normalised by alpha and scaled to the frame's range.
+    #[arg(long)]
+    pub depth: bool,
+    /// Render a camera path through the training views to this file: `.mp4` (H.264), `.gif`, or
+    /// a folder of PNG frames (no extension).
+    #[arg(long, value_name = "FILE")]
+    pub path: Option<PathBuf>,
+    /// Frames between consecutive training views on the path.
+    #[arg(long, default_value_t = 30)]
+    pub frames_per_segment: usize,
+    /// Frame rate of the path video.
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f32,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let model = read_ply(&args.ply).context("cannot read the model")?;
+    let ds = args.dataset.load()?;
+    let settings = RenderSettings {
+        background: ds.background,
+        sh_degree: model.sh_degree(),
+        ..RenderSettings::default()
+    };
+    let indices: Vec<usize> = match args.views {
+        Which::Test => ds.test.clone(),
+        Which::Train => ds.train.clone(),
+        Which::All => (0..ds.views.len()).collect(),
+        Which::None => vec![],
+    };
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let bar = progress::iterations(indices.len() as u64, "render");
+    for &i in &indices {
+        let v = &ds.views[i];
+        let r = render_model(&model, &RenderCamera::from(&v.camera), &settings);
+        r.rgb.save_png(&args.out.join(format!("{}.png", v.name)))?;
+        if args.depth {
+            let d = r.normalized_depth();
+            let max = d.data.iter().copied().fold(0.0f32, f32::max).max(1e-12);
+            let scaled = fewview_scene::Image::from_vec(
+                d.width,
+                d.height,
+                1,
+                d.data.iter().map(|x| x / max).collect(),
+            );
+            scaled.save_png(&args.out.join(format!("{}_depth.png", v.name)))?;
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    println!("rendered {} views to {}", indices.len(), args.out.display());
+    if let Some(path) = &args.path {
+        let keys: Vec<_> = ds.train_views().map(|v| v.camera.clone()).collect();
+        if keys.len() < 2 {
+            bail!(
+                "a camera path needs at least 2 training views, the split has {}",
+                keys.len()
+            );
+        }
+        if args.frames_per_segment == 0 {
+            bail!("--frames-per-segment must be at least 1");
+        }
+        let frames = render_path(&model, &keys, args.frames_per_segment, &settings);
+        write_video(path, &frames, args.fps, &VideoOptions::default())?;
+        println!(
+            "wrote a {}-frame camera path to {}",
+            frames.len(),
+            path.display()
+        );
+    }
+    Ok(())
+}

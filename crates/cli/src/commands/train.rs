@@ -1,0 +1,96 @@
+//! `fewview train`: 3D Gaussian splatting on a dataset's sparse training views.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args as ClapArgs;
+use fewview_splat::pipeline::{RunSummary, train_run};
+
+use super::dataset_args::DatasetArgs;
+use super::progress;
+use super::train_args::TrainArgs;
+
+/// Train 3D Gaussians on a dataset's training views and score its held-out views.
+///
+/// Writes a run directory: `config.json`, `checkpoint.bin` while training (resume with
+/// `--resume`), `point_cloud.ply` (Inria layout, opens in splat viewers), `renders/test/*.png`
+/// and `metrics.json` (PSNR, SSIM per held-out view and their means).
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    #[command(flatten)]
+    pub dataset: DatasetArgs,
+    #[command(flatten)]
+    pub train: TrainArgs,
+    /// Run directory. Default: `runs/<dataset folder name>`.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Continue the run in `--out` from its last checkpoint (same flags as the first time).
+    #[arg(long)]
+    pub resume: bool,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let ds = args.dataset.load()?;
+    let cfg = args.train.run_config(ds.background)?;
+    let out = args.out.clone().unwrap_or_else(|| {
+        let name = args
+            .dataset
+            .data
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "run".into());
+        PathBuf::from("runs").join(name)
+    });
+    eprintln!(
+        "training on {} ({} train / {} held-out views, {}x{}) → {}",
+        ds.name,
+        ds.train.len(),
+        ds.test.len(),
+        ds.views[ds.train[0]].image.width,
+        ds.views[ds.train[0]].image.height,
+        out.display()
+    );
+    let summary = train_with_progress(&ds, &cfg, &out, args.resume)?;
+    print_summary(&summary, &out);
+    Ok(())
+}
+
+/// Runs the pipeline with a progress bar.
+pub fn train_with_progress(
+    ds: &fewview_scene::Dataset,
+    cfg: &fewview_splat::pipeline::RunConfig,
+    out: &std::path::Path,
+    resume: bool,
+) -> anyhow::Result<RunSummary> {
+    let bar = progress::iterations(cfg.train.iterations as u64, "train");
+    let summary = train_run(ds, cfg, out, resume, |p| {
+        bar.set_position(p.iteration as u64);
+        if p.iteration % 10 == 0 || p.iteration == p.iterations {
+            bar.set_message(format!("loss {:.4}  {} Gaussians", p.loss, p.gaussians));
+        }
+    })
+    .with_context(|| format!("training run in {}", out.display()))?;
+    bar.finish_and_clear();
+    Ok(summary)
+}
+
+pub fn print_summary(s: &RunSummary, out: &std::path::Path) {
+    println!("dataset          {}", s.dataset);
+    println!(
+        "iterations       {}{}",
+        s.iterations,
+        s.resumed_from
+            .map(|i| format!(" (resumed at {i})"))
+            .unwrap_or_default()
+    );
+    println!("Gaussians        {}", s.gaussians);
+    println!("training time    {:.1} s", s.train_seconds);
+    println!("held-out views   {}", s.test.views.len());
+    println!("held-out PSNR    {:.3} dB", s.test.mean_psnr);
+    println!("held-out SSIM    {:.4}", s.test.mean_ssim);
+    if let (Some(p), Some(q)) = (s.test.mean_masked_psnr, s.test.mean_masked_ssim) {
+        println!("masked PSNR      {p:.3} dB");
+        println!("masked SSIM      {q:.4}");
+    }
+    println!("outputs          {}", out.display());
+}

@@ -1,0 +1,79 @@
+//! Training flags shared by `train` and `demo`.
+
+use std::path::PathBuf;
+
+use anyhow::bail;
+use clap::Args;
+use fewview_splat::pipeline::{InitStrategy, RunConfig};
+use fewview_splat::train::TrainConfig;
+
+#[derive(Debug, Clone, Args)]
+pub struct TrainArgs {
+    /// Training iterations. The densification schedule is rescaled to the run length (see
+    /// `TrainConfig::sparse_view` and the README).
+    #[arg(long, default_value_t = 3000)]
+    pub iterations: usize,
+    /// Seed of every random choice (initialisation, view order, splits of Gaussians).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Largest spherical-harmonics degree (0–3).
+    #[arg(long, default_value_t = 3)]
+    pub sh_degree: usize,
+    /// Initial Gaussians: `auto` (dataset points, else random in the training frustums when the
+    /// views have depth bounds, else random in a box), `points`, `frustum`, `box`,
+    /// `box:HALF_SIZE`, or `ply:FILE`.
+    #[arg(long, default_value = "auto", value_name = "HOW")]
+    pub init: String,
+    /// Number of random initial points.
+    #[arg(long, default_value_t = 20_000)]
+    pub init_points: usize,
+    /// Weight λ of the SSIM term in `(1 − λ) L1 + λ (1 − SSIM)`.
+    #[arg(long, default_value_t = 0.2)]
+    pub lambda_dssim: f32,
+    /// Save a checkpoint every N iterations (0: never).
+    #[arg(long, default_value_t = 500)]
+    pub checkpoint_every: usize,
+}
+
+impl TrainArgs {
+    pub fn run_config(&self, background: [f32; 3]) -> anyhow::Result<RunConfig> {
+        let mut train = TrainConfig::sparse_view(self.iterations);
+        train.seed = self.seed;
+        train.sh_degree = self.sh_degree;
+        train.lambda_dssim = self.lambda_dssim;
+        train.background = background;
+        train.checkpoint_interval = self.checkpoint_every;
+        if let Err(m) = train.validate() {
+            bail!("invalid training options: {m}");
+        }
+        let init = parse_init(&self.init)?;
+        if self.init_points == 0 {
+            bail!("--init-points must be at least 1");
+        }
+        Ok(RunConfig {
+            train,
+            init,
+            init_points: self.init_points,
+        })
+    }
+}
+
+fn parse_init(s: &str) -> anyhow::Result<InitStrategy> {
+    Ok(match s {
+        "auto" => InitStrategy::Auto,
+        "points" => InitStrategy::DatasetPoints,
+        "frustum" => InitStrategy::RandomFrustum,
+        "box" => InitStrategy::RandomBox { half_size: None },
+        _ if s.starts_with("box:") => {
+            let v: f64 = s[4..]
+                .parse()
+                .map_err(|_| anyhow::anyhow!("--init {s}: `{}` is not a number", &s[4..]))?;
+            if !(v.is_finite() && v > 0.0) {
+                bail!("--init {s}: the half-size must be positive");
+            }
+            InitStrategy::RandomBox { half_size: Some(v) }
+        }
+        _ if s.starts_with("ply:") => InitStrategy::Ply(PathBuf::from(&s[4..])),
+        _ => bail!("--init {s}: expected auto, points, frustum, box, box:HALF_SIZE or ply:FILE"),
+    })
+}

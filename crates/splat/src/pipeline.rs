@@ -1,0 +1,384 @@
+//! One training run on a dataset, as `fewview train` and `fewview demo` do it: a run directory
+//! holding the resolved configuration, checkpoints (resumable), the trained Gaussians as an
+//! Inria PLY, held-out renders and `metrics.json`.
+//!
+//! ```text
+//! <run>/config.json        resolved configuration and split
+//! <run>/checkpoint.bin     latest checkpoint (removed when the run completes)
+//! <run>/point_cloud.ply    trained Gaussians (Inria layout)
+//! <run>/metrics.json       held-out PSNR/SSIM per view and means, Gaussian count, timings
+//! <run>/renders/test/      held-out renders (PNG)
+//! ```
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::tensor::Device;
+use fewview_scene::{Camera, Dataset, Image, SceneError};
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::eval::{EvalReport, evaluate, render_model};
+use crate::init::{FrustumView, from_points, random_in_box, random_in_frustums};
+use crate::model::GaussianModel;
+use crate::ply::{read_ply, write_ply};
+use crate::raster::{RenderCamera, RenderSettings};
+use crate::train::{Progress, TrainConfig, TrainError, TrainState, TrainView, Trainer};
+
+/// How to place the initial Gaussians.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InitStrategy {
+    /// The dataset's sparse points if it has them, else random points in the training frustums
+    /// if the views have depth bounds (LLFF), else random points in a box around the point the
+    /// cameras look at.
+    Auto,
+    /// The dataset's sparse points (COLMAP `points3D`).
+    DatasetPoints,
+    /// Random points in the training frustums between each view's depth bounds.
+    RandomFrustum,
+    /// Random points in a cube of half-size `half_size` (default: 0.35 × the median camera
+    /// distance) around the point the cameras look at.
+    RandomBox { half_size: Option<f64> },
+    /// Gaussians read from an Inria-layout PLY.
+    Ply(PathBuf),
+}
+
+/// Everything that defines a run besides the data.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunConfig {
+    pub train: TrainConfig,
+    pub init: InitStrategy,
+    /// Number of random initial points (random strategies).
+    pub init_points: usize,
+}
+
+impl RunConfig {
+    pub fn new(train: TrainConfig) -> Self {
+        Self {
+            train,
+            init: InitStrategy::Auto,
+            init_points: 20_000,
+        }
+    }
+}
+
+/// Errors of a run, each naming what failed.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Train(#[from] TrainError),
+    #[error("{path}: {message}")]
+    Checkpoint { path: PathBuf, message: String },
+    #[error("initialisation: {0}")]
+    Init(String),
+    #[error("evaluation: {0}")]
+    Eval(String),
+}
+
+/// Paths inside a run directory.
+#[derive(Clone, Debug)]
+pub struct RunDir(pub PathBuf);
+
+impl RunDir {
+    pub fn config(&self) -> PathBuf {
+        self.0.join("config.json")
+    }
+    pub fn checkpoint(&self) -> PathBuf {
+        self.0.join("checkpoint.bin")
+    }
+    pub fn ply(&self) -> PathBuf {
+        self.0.join("point_cloud.ply")
+    }
+    pub fn metrics(&self) -> PathBuf {
+        self.0.join("metrics.json")
+    }
+    pub fn renders(&self, split: &str) -> PathBuf {
+        self.0.join("renders").join(split)
+    }
+}
+
+/// The `config.json` of a run.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ResolvedConfig {
+    pub dataset: String,
+    pub train_views: Vec<String>,
+    pub test_views: Vec<String>,
+    pub width: usize,
+    pub height: usize,
+    pub extent: f64,
+    pub run: RunConfig,
+}
+
+/// What a finished run reports (also written to `metrics.json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct RunSummary {
+    pub dataset: String,
+    pub iterations: usize,
+    pub gaussians: usize,
+    pub train_seconds: f64,
+    pub resumed_from: Option<usize>,
+    pub test: EvalReport,
+}
+
+const CHECKPOINT_MAGIC: &[u8; 8] = b"FVCKPT01";
+
+/// Saves a checkpoint (configuration and training state), atomically.
+pub fn save_checkpoint(
+    path: &Path,
+    config: &TrainConfig,
+    state: &TrainState,
+) -> Result<(), PipelineError> {
+    let body = postcard::to_allocvec(&(config, state)).map_err(|e| PipelineError::Checkpoint {
+        path: path.to_path_buf(),
+        message: format!("cannot encode: {e}"),
+    })?;
+    fewview_scene::atomic::write_with(path, |w| {
+        use std::io::Write;
+        w.write_all(CHECKPOINT_MAGIC)?;
+        w.write_all(&body)
+    })?;
+    Ok(())
+}
+
+/// Loads a checkpoint written by [`save_checkpoint`].
+pub fn load_checkpoint(path: &Path) -> Result<(TrainConfig, TrainState), PipelineError> {
+    let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    let bad = |m: String| PipelineError::Checkpoint {
+        path: path.to_path_buf(),
+        message: m,
+    };
+    if bytes.len() < 8 || &bytes[..8] != CHECKPOINT_MAGIC {
+        return Err(bad("not a fewview checkpoint".into()));
+    }
+    let (config, state): (TrainConfig, TrainState) =
+        postcard::from_bytes(&bytes[8..]).map_err(|e| bad(format!("corrupt checkpoint: {e}")))?;
+    state
+        .model
+        .validate()
+        .map_err(|m| bad(format!("corrupt checkpoint: {m}")))?;
+    Ok((config, state))
+}
+
+/// The point closest (least squares) to every camera's optical axis: where the cameras look.
+pub fn look_at_point(cameras: &[&Camera]) -> Vector3<f64> {
+    let mut a = Matrix3::zeros();
+    let mut b = Vector3::zeros();
+    for c in cameras {
+        let d = c.forward();
+        let p = Matrix3::identity() - d * d.transpose();
+        a += p;
+        b += p * c.center();
+    }
+    a.try_inverse().map(|inv| inv * b).unwrap_or_else(|| {
+        cameras.iter().map(|c| c.center()).sum::<Vector3<f64>>() / cameras.len().max(1) as f64
+    })
+}
+
+/// The initial Gaussians for a dataset.
+pub fn initial_model(ds: &Dataset, cfg: &RunConfig) -> Result<GaussianModel, PipelineError> {
+    let degree = cfg.train.sh_degree;
+    let seed = cfg.train.seed;
+    let strategy = match &cfg.init {
+        InitStrategy::Auto if ds.points.as_ref().is_some_and(|p| !p.is_empty()) => {
+            InitStrategy::DatasetPoints
+        }
+        InitStrategy::Auto if ds.train_views().all(|v| v.depth_bounds.is_some()) => {
+            InitStrategy::RandomFrustum
+        }
+        InitStrategy::Auto => InitStrategy::RandomBox { half_size: None },
+        s => s.clone(),
+    };
+    let model = match strategy {
+        InitStrategy::DatasetPoints => {
+            let pts = ds
+                .points
+                .as_ref()
+                .filter(|p| !p.is_empty())
+                .ok_or_else(|| {
+                    PipelineError::Init(format!("dataset `{}` has no sparse points", ds.name))
+                })?;
+            from_points(pts, degree)
+        }
+        InitStrategy::RandomFrustum => {
+            let views: Vec<FrustumView<'_>> = ds
+                .train_views()
+                .map(|v| {
+                    let (near, far) = v.depth_bounds.ok_or_else(|| {
+                        PipelineError::Init(format!(
+                            "view `{}` has no depth bounds for frustum sampling",
+                            v.name
+                        ))
+                    })?;
+                    Ok(FrustumView {
+                        camera: &v.camera,
+                        image: &v.image,
+                        near,
+                        far,
+                    })
+                })
+                .collect::<Result<_, PipelineError>>()?;
+            from_points(&random_in_frustums(&views, cfg.init_points, seed), degree)
+        }
+        InitStrategy::RandomBox { half_size } => {
+            let cams: Vec<&Camera> = ds.train_views().map(|v| &v.camera).collect();
+            let center = look_at_point(&cams);
+            let mut dists: Vec<f64> = cams.iter().map(|c| (c.center() - center).norm()).collect();
+            dists.sort_by(|a, b| a.total_cmp(b));
+            let half = half_size.unwrap_or(0.35 * dists[dists.len() / 2]);
+            let lo = [center.x - half, center.y - half, center.z - half];
+            let hi = [center.x + half, center.y + half, center.z + half];
+            let views: Vec<(&Camera, &Image)> =
+                ds.train_views().map(|v| (&v.camera, &v.image)).collect();
+            from_points(
+                &random_in_box(lo, hi, cfg.init_points, seed, &views),
+                degree,
+            )
+        }
+        InitStrategy::Ply(path) => {
+            let m = read_ply(&path)?;
+            if m.sh_degree() != degree {
+                return Err(PipelineError::Init(format!(
+                    "{}: SH degree {} but the run uses degree {degree}",
+                    path.display(),
+                    m.sh_degree()
+                )));
+            }
+            m
+        }
+        InitStrategy::Auto => unreachable!("resolved above"),
+    };
+    if model.is_empty() {
+        return Err(PipelineError::Init("no initial Gaussians".into()));
+    }
+    Ok(model)
+}
+
+/// Trains on `ds` in `dir` (resuming from its checkpoint when `resume`), writes the PLY, held-out
+/// renders and `metrics.json`, and returns the summary.
+pub fn train_run(
+    ds: &Dataset,
+    cfg: &RunConfig,
+    dir: &Path,
+    resume: bool,
+    on_progress: impl FnMut(&Progress),
+) -> Result<RunSummary, PipelineError> {
+    let run = RunDir(dir.to_path_buf());
+    std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
+    let device = Device::flex().autodiff();
+    let (_, extent) = ds.camera_extent();
+    let first = ds
+        .train_views()
+        .next()
+        .ok_or_else(|| PipelineError::Init("the split has no training views".into()))?;
+    let resolved = ResolvedConfig {
+        dataset: ds.name.clone(),
+        train_views: ds.train_views().map(|v| v.name.clone()).collect(),
+        test_views: ds.test_views().map(|v| v.name.clone()).collect(),
+        width: first.image.width,
+        height: first.image.height,
+        extent,
+        run: cfg.clone(),
+    };
+    let views: Vec<TrainView> = ds
+        .train_views()
+        .map(|v| TrainView::new(&v.name, RenderCamera::from(&v.camera), &v.image, &device))
+        .collect();
+
+    if resume && !run.checkpoint().exists() {
+        return Err(PipelineError::Checkpoint {
+            path: run.checkpoint(),
+            message: if run.ply().exists() {
+                "nothing to resume: the run already finished".into()
+            } else {
+                "no checkpoint to resume from".into()
+            },
+        });
+    }
+    let (model, resumed) = if resume {
+        let (saved_cfg, state) = load_checkpoint(&run.checkpoint())?;
+        if saved_cfg != cfg.train {
+            return Err(PipelineError::Checkpoint {
+                path: run.checkpoint(),
+                message: "the checkpoint was written with a different training configuration"
+                    .into(),
+            });
+        }
+        (None, Some(state))
+    } else {
+        (Some(initial_model(ds, cfg)?), None)
+    };
+    let json =
+        serde_json::to_vec_pretty(&resolved).map_err(|e| PipelineError::Eval(e.to_string()))?;
+    fewview_scene::atomic::write_bytes(&run.config(), &json)?;
+
+    let mut trainer = match (model, resumed) {
+        (Some(m), _) => Trainer::new(cfg.train.clone(), m, views, extent as f32, device)?,
+        (None, Some(state)) => {
+            let mut t = Trainer::new(
+                cfg.train.clone(),
+                state.model.clone(),
+                views,
+                extent as f32,
+                device,
+            )?;
+            t.state = state;
+            t
+        }
+        (None, None) => unreachable!("one of model or state"),
+    };
+    let resumed_from = (trainer.state.iteration > 0).then_some(trainer.state.iteration);
+    let start = Instant::now();
+    let ckpt_path = run.checkpoint();
+    trainer.run(on_progress, |state, config| {
+        save_checkpoint(&ckpt_path, config, state).map_err(|e| e.to_string())
+    })?;
+    let train_seconds = start.elapsed().as_secs_f64();
+    let model = &trainer.state.model;
+    write_ply(&run.ply(), model)?;
+
+    let settings = RenderSettings {
+        background: cfg.train.background,
+        sh_degree: cfg.train.sh_degree,
+        near_plane: cfg.train.near_plane,
+    };
+    let test: Vec<_> = ds.test_views().collect();
+    let (report, renders) =
+        evaluate(model, &test, &settings).map_err(|e| PipelineError::Eval(e.to_string()))?;
+    let out = run.renders("test");
+    std::fs::create_dir_all(&out).map_err(|e| SceneError::io(&out, e))?;
+    for (v, r) in test.iter().zip(&renders) {
+        r.rgb.save_png(&out.join(format!("{}.png", v.name)))?;
+    }
+    let summary = RunSummary {
+        dataset: ds.name.clone(),
+        iterations: trainer.state.iteration,
+        gaussians: model.len(),
+        train_seconds,
+        resumed_from,
+        test: report,
+    };
+    let json =
+        serde_json::to_vec_pretty(&summary).map_err(|e| PipelineError::Eval(e.to_string()))?;
+    fewview_scene::atomic::write_bytes(&run.metrics(), &json)?;
+    if run.checkpoint().exists() {
+        // The run is complete; its result is the PLY.
+        std::fs::remove_file(run.checkpoint()).map_err(|e| SceneError::io(run.checkpoint(), e))?;
+    }
+    Ok(summary)
+}
+
+/// Renders `model` along a smooth path through `keys` (SLERP rotations, linear centres).
+pub fn render_path(
+    model: &GaussianModel,
+    keys: &[Camera],
+    frames_per_segment: usize,
+    settings: &RenderSettings,
+) -> Vec<Image> {
+    fewview_scene::camera_path(keys, frames_per_segment)
+        .iter()
+        .map(|c| render_model(model, &RenderCamera::from(c), settings).rgb)
+        .collect()
+}
