@@ -1,5 +1,6 @@
 //! Subcommands: one module each, exposing `Args` (clap) and `run`.
 
+mod bench;
 mod blend;
 mod chamfer;
 mod dataset_args;
@@ -25,6 +26,7 @@ pub enum Command {
     Train(train::Args),
     Render(render::Args),
     Eval(eval::Args),
+    Bench(bench::Args),
     Blend(blend::Args),
     DepthMesh(depth_mesh::Args),
     DepthPoints(depth_points::Args),
@@ -40,6 +42,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Train(a) => train::run(a),
         Command::Render(a) => render::run(a),
         Command::Eval(a) => eval::run(a),
+        Command::Bench(a) => bench::run(a),
         Command::Blend(a) => blend::run(a),
         Command::DepthMesh(a) => depth_mesh::run(a),
         Command::DepthPoints(a) => depth_points::run(a),
