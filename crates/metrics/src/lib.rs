@@ -1,1 +1,13 @@
-//! Metrics the papers report: see the modules.
+//! Metrics the papers report: image quality (PSNR, SSIM), and the errors they share.
+
+pub mod bench;
+pub mod error;
+pub mod psnr;
+pub mod ssim;
+
+pub use error::MetricsError;
+pub use psnr::{mse, psnr, psnr_from_mse, psnr_masked};
+pub use ssim::{
+    SsimBorder, SsimOptions, SsimWorkspace, ssim, ssim_masked, ssim_masked_with_grad, ssim_with,
+    ssim_with_grad, ssim_with_grad_f64,
+};
