@@ -4,6 +4,7 @@ pub mod bench;
 pub mod error;
 pub mod psnr;
 pub mod ssim;
+pub mod study;
 
 pub use error::MetricsError;
 pub use psnr::{mse, psnr, psnr_from_mse, psnr_masked};
