@@ -27,6 +27,22 @@ pub trait PerceptualDistance {
     /// Name reported with the results (e.g. `lpips-alex-v0.1`).
     fn name(&self) -> String;
     fn distance(&self, a: &Image, b: &Image) -> Result<f64>;
+
+    /// Per-frame distances `D(out_t, gt_t)` and tLP values (see [`tlp_per_transition`]) of
+    /// equal-length sequences. The default calls [`Self::distance`]; an implementation may
+    /// share work between the calls (LPIPS computes each frame's features once).
+    fn sequence_distances(
+        &self,
+        output: &[Image],
+        ground_truth: &[Image],
+    ) -> Result<(Vec<f64>, Vec<f64>)> {
+        let per_frame = output
+            .iter()
+            .zip(ground_truth)
+            .map(|(o, g)| self.distance(o, g))
+            .collect::<Result<_>>()?;
+        Ok((per_frame, tlp_per_transition(output, ground_truth, self)?))
+    }
 }
 
 /// Backward optical flow of frame `t`: pixel `(x, y)` of frame `t` shows the point that was at
@@ -158,13 +174,10 @@ pub fn evaluate_sequence(
     let ssim_series = MetricSeries::new("ssim", per_frame(&|o, g| ssim_with(o, g, ssim_opts))?);
     let (lpips, tlp) = match perceptual {
         Some(p) => {
-            let values = per_frame(&|o, g| p.distance(o, g))?;
+            let (values, tlp) = p.sequence_distances(output, ground_truth)?;
             (
                 Some(MetricSeries::new("lpips", values)),
-                Some(MetricSeries::new(
-                    "tlp",
-                    tlp_per_transition(output, ground_truth, p)?,
-                )),
+                Some(MetricSeries::new("tlp", tlp)),
             )
         }
         None => (None, None),
@@ -189,10 +202,10 @@ pub fn evaluate_sequence(
 
 /// TecoGAN's tLP for each transition `t = 1..T−1`:
 /// `100 · |D(gt_{t−1}, gt_t) − D(out_{t−1}, out_t)|`.
-pub fn tlp_per_transition(
+pub fn tlp_per_transition<D: PerceptualDistance + ?Sized>(
     output: &[Image],
     ground_truth: &[Image],
-    d: &dyn PerceptualDistance,
+    d: &D,
 ) -> Result<Vec<f64>> {
     (1..output.len())
         .map(|t| {

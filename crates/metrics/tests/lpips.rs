@@ -180,3 +180,27 @@ fn bad_weight_files_give_clear_errors() {
             .contains("at least 32x32")
     );
 }
+
+/// The cached-feature sequence path gives exactly the pairwise distances.
+#[test]
+fn sequence_distances_match_pairwise_calls() {
+    use fewview_metrics::temporal::PerceptualDistance;
+    let model = Lpips::default_st_alex().unwrap();
+    let a = Image::load(&fixture_dir().join("pair00_a.png")).unwrap();
+    let b = Image::load(&fixture_dir().join("pair00_b.png")).unwrap();
+    let mut c = a.clone();
+    c.data.iter_mut().for_each(|v| *v = 1.0 - *v);
+    let out = [a.clone(), b.clone(), c.clone()];
+    let gt = [b.clone(), a.clone(), a.clone()];
+    let (per_frame, tlp) = model.sequence_distances(&out, &gt).unwrap();
+    for t in 0..3 {
+        assert!((per_frame[t] - model.distance(&out[t], &gt[t]).unwrap()).abs() < 1e-6);
+    }
+    for t in 1..3 {
+        let want = 100.0
+            * (model.distance(&gt[t - 1], &gt[t]).unwrap()
+                - model.distance(&out[t - 1], &out[t]).unwrap())
+            .abs();
+        assert!((tlp[t - 1] - want).abs() < 1e-4, "{} vs {want}", tlp[t - 1]);
+    }
+}

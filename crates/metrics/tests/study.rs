@@ -159,6 +159,14 @@ fn reproduces_paper_000_table_1_ranking() {
                 p.method_b
             );
         }
+        // Relative skills: same order, centred on zero.
+        let rel: Vec<f64> = bt
+            .ranking()
+            .iter()
+            .map(|&i| bt.skills[i].relative_mean)
+            .collect();
+        assert!(rel.windows(2).all(|w| w[0] > w[1]), "{rel:?}");
+        assert!(rel.iter().sum::<f64>().abs() < 1e-9);
         // The posterior win probability of each better-ranked method exceeds 1/2.
         for w in ranking.windows(2) {
             let (i, j) = (

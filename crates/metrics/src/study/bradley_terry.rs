@@ -56,6 +56,13 @@ pub struct SkillSummary {
     pub rhat: f64,
     pub ess_bulk: f64,
     pub ess_tail: f64,
+    /// The skill relative to the mean of all methods' skills in the same draw
+    /// (`s_m − mean_j s_j`): the likelihood only sees skill differences, so the common level is
+    /// set by the prior alone and widens every raw interval alike; the relative skill removes it.
+    /// Posterior mean and equal-tailed interval. The ranking plot shows these.
+    pub relative_mean: f64,
+    pub relative_lower: f64,
+    pub relative_upper: f64,
 }
 
 /// The fitted model: per-method summaries (in the input order), pairwise posterior win
@@ -307,20 +314,34 @@ fn summarise(
     let k = methods.len();
     let alpha = (1.0 - settings.credible_mass) / 2.0;
     let mut skills = Vec::with_capacity(k);
+    // Per draw, the mean skill over methods.
+    let level: Vec<f64> = chains
+        .iter()
+        .flat_map(|(d, _)| {
+            (0..d[0].len()).map(move |i| d.iter().map(|m| m[i]).sum::<f64>() / d.len() as f64)
+        })
+        .collect();
+    let quantile = |sorted: &[f64], p: f64| {
+        let pos = p * (sorted.len() - 1) as f64;
+        let lo = pos.floor() as usize;
+        let hi = (lo + 1).min(sorted.len() - 1);
+        sorted[lo] + (pos - lo as f64) * (sorted[hi] - sorted[lo])
+    };
     for (m, name) in methods.iter().enumerate() {
         let per_chain: Vec<Vec<f64>> = chains.iter().map(|(d, _)| d[m].clone()).collect();
         let mut all: Vec<f64> = per_chain.iter().flatten().copied().collect();
+        let mut relative: Vec<f64> = all.iter().zip(&level).map(|(s, l)| s - l).collect();
         let n = all.len() as f64;
         let mean = all.iter().sum::<f64>() / n;
+        let relative_mean = relative.iter().sum::<f64>() / n;
         let sd = (all.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
         all.sort_by(f64::total_cmp);
-        let q = |p: f64| {
-            let pos = p * (all.len() - 1) as f64;
-            let lo = pos.floor() as usize;
-            let hi = (lo + 1).min(all.len() - 1);
-            all[lo] + (pos - lo as f64) * (all[hi] - all[lo])
-        };
+        relative.sort_by(f64::total_cmp);
+        let q = |p: f64| quantile(&all, p);
         skills.push(SkillSummary {
+            relative_mean,
+            relative_lower: quantile(&relative, alpha),
+            relative_upper: quantile(&relative, 1.0 - alpha),
             method: name.clone(),
             mean,
             sd,

@@ -277,18 +277,21 @@ impl StudyAnalysis {
             );
             let mass = 100.0 * bt.settings.credible_mass;
             s += &format!(
-                "| Rank | Method | Skill (mean) | SD | {mass:.0}% CrI | R-hat | ESS bulk | ESS tail |\n|---:|---|---:|---:|---|---:|---:|---:|\n"
+                "| Rank | Method | Skill (mean) | SD | {mass:.0}% CrI | Relative skill | {mass:.0}% CrI (relative) | R-hat | ESS bulk | ESS tail |\n|---:|---|---:|---:|---|---:|---|---:|---:|---:|\n"
             );
             for (rank, &i) in bt.ranking().iter().enumerate() {
                 let k = &bt.skills[i];
                 s += &format!(
-                    "| {} | {} | {:.3} | {:.3} | [{:.3}, {:.3}] | {:.4} | {:.0} | {:.0} |\n",
+                    "| {} | {} | {:.3} | {:.3} | [{:.3}, {:.3}] | {:.3} | [{:.3}, {:.3}] | {:.4} | {:.0} | {:.0} |\n",
                     rank + 1,
                     k.method,
                     k.mean,
                     k.sd,
                     k.lower,
                     k.upper,
+                    k.relative_mean,
+                    k.relative_lower,
+                    k.relative_upper,
                     k.rhat,
                     k.ess_bulk,
                     k.ess_tail
@@ -349,14 +352,15 @@ impl StudyAnalysis {
 
     /// CSV of the Bradley–Terry summaries.
     pub fn skills_csv(&self) -> String {
-        let mut s =
-            String::from("question,rank,method,mean,sd,lower,upper,rhat,ess_bulk,ess_tail\n");
+        let mut s = String::from(
+            "question,rank,method,mean,sd,lower,upper,relative_mean,relative_lower,relative_upper,rhat,ess_bulk,ess_tail\n",
+        );
         for q in &self.questions {
             let bt = &q.bradley_terry;
             for (rank, &i) in bt.ranking().iter().enumerate() {
                 let k = &bt.skills[i];
                 s += &format!(
-                    "{},{},{},{},{},{},{},{},{},{}\n",
+                    "{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                     csv_field(&q.question),
                     rank + 1,
                     csv_field(&k.method),
@@ -364,6 +368,9 @@ impl StudyAnalysis {
                     k.sd,
                     k.lower,
                     k.upper,
+                    k.relative_mean,
+                    k.relative_lower,
+                    k.relative_upper,
                     k.rhat,
                     k.ess_bulk,
                     k.ess_tail

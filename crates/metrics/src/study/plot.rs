@@ -1,4 +1,5 @@
-//! The ranking plot: each method's posterior mean Bradley–Terry skill with its credible interval,
+//! The ranking plot: each method's posterior mean Bradley–Terry skill relative to the average
+//! method (see [`super::SkillSummary::relative_mean`]) with its credible interval,
 //! best on top. Drawn with `plotters` on an in-memory bitmap; the labels use the DejaVu Sans Mono
 //! font embedded in the binary (`assets/`, Bitstream Vera licence), so no system font or
 //! fontconfig is needed.
@@ -38,12 +39,12 @@ pub fn ranking_plot(q: &QuestionAnalysis, path: &Path) -> Result<()> {
     let lo = bt
         .skills
         .iter()
-        .map(|s| s.lower)
+        .map(|s| s.relative_lower)
         .fold(f64::INFINITY, f64::min);
     let hi = bt
         .skills
         .iter()
-        .map(|s| s.upper)
+        .map(|s| s.relative_upper)
         .fold(f64::NEG_INFINITY, f64::max);
     let pad = 0.1 * (hi - lo).max(1e-3);
     let draw_err = |e: &dyn std::fmt::Display| MetricsError::invalid(format!("plot: {e}"));
@@ -51,7 +52,7 @@ pub fn ranking_plot(q: &QuestionAnalysis, path: &Path) -> Result<()> {
         let root = BitMapBackend::with_buffer(&mut buffer, (width, height)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| draw_err(&e))?;
         let caption = format!(
-            "Q {}: Bradley-Terry skill, mean and {:.0}% credible interval",
+            "{}: Bradley-Terry skill vs. the average method, mean and {:.0}% CrI",
             q.question,
             100.0 * bt.settings.credible_mass
         );
@@ -76,7 +77,7 @@ pub fn ranking_plot(q: &QuestionAnalysis, path: &Path) -> Result<()> {
                     String::new()
                 }
             })
-            .x_desc("skill (log-odds)")
+            .x_desc("relative skill (log-odds vs. the mean of all methods)")
             .label_style((FAMILY, 16))
             .axis_desc_style((FAMILY, 16))
             .draw()
@@ -87,13 +88,13 @@ pub fn ranking_plot(q: &QuestionAnalysis, path: &Path) -> Result<()> {
             let colour = Palette99::pick(rank).to_rgba();
             chart
                 .draw_series(std::iter::once(PathElement::new(
-                    vec![(s.lower, y), (s.upper, y)],
+                    vec![(s.relative_lower, y), (s.relative_upper, y)],
                     colour.stroke_width(3),
                 )))
                 .map_err(|e| draw_err(&e))?;
             chart
                 .draw_series(std::iter::once(Circle::new(
-                    (s.mean, y),
+                    (s.relative_mean, y),
                     7,
                     colour.filled(),
                 )))
