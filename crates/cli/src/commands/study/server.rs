@@ -86,6 +86,17 @@ fn media_kind(path: &std::path::Path) -> &'static str {
     }
 }
 
+/// The file of `method` in the trial's scene. A stored plan can name a scene or method that
+/// the configuration no longer has (it was edited after participants joined): a clear error.
+fn video_path(app: &AppState, trial: &Trial, method: &str) -> Result<std::path::PathBuf, ApiError> {
+    app.config.videos.get(&trial.scene).and_then(|m| m.get(method)).cloned().ok_or_else(|| {
+        ApiError(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            format!("the stored plan names scene {:?}, method {method:?}, which the study configuration no longer has", trial.scene),
+        )
+    })
+}
+
 fn state_json(app: &AppState, participant: &str) -> Result<serde_json::Value, ApiError> {
     let (answered, total, next) = app
         .store
@@ -93,13 +104,20 @@ fn state_json(app: &AppState, participant: &str) -> Result<serde_json::Value, Ap
         .expect("store lock")
         .progress(participant)
         .map_err(db_error)?;
-    let trial = next.map(|t: Trial| {
-        let side = |s: &str, method: &str| {
-            let path = &app.config.videos[&t.scene][method];
-            serde_json::json!({ "url": format!("/media/{participant}/{}/{s}", t.index), "kind": media_kind(path) })
-        };
-        serde_json::json!({ "index": t.index, "left": side("left", &t.left), "right": side("right", &t.right) })
-    });
+    let trial = match next {
+        Some(t) => {
+            let side = |s: &str, method: &str| -> Result<serde_json::Value, ApiError> {
+                let path = video_path(app, &t, method)?;
+                Ok(
+                    serde_json::json!({ "url": format!("/media/{participant}/{}/{s}", t.index), "kind": media_kind(&path) }),
+                )
+            };
+            Some(
+                serde_json::json!({ "index": t.index, "left": side("left", &t.left)?, "right": side("right", &t.right)? }),
+            )
+        }
+        None => None,
+    };
     Ok(serde_json::json!({
         "participant": participant,
         "answered": answered,
@@ -249,7 +267,7 @@ async fn media(
     } else {
         &trial.right
     };
-    let path = app.config.videos[&trial.scene][method].clone();
+    let path = video_path(&app, &trial, method)?;
     // ServeFile handles Range requests (video seeking) and content types.
     let response = ServeFile::new(path)
         .oneshot(request)
