@@ -302,35 +302,6 @@ fn bilinear(img: &Image, x: f32, y: f32, out: &mut [f32]) -> bool {
     true
 }
 
-/// The image files (`.png`, `.jpg`, `.jpeg`) of a folder in file-name order (name frames with
-/// zero-padded numbers), RGBA composited over `background`.
-pub fn load_frame_dir(dir: &std::path::Path, background: [f32; 3]) -> Result<Vec<Image>> {
-    let entries = std::fs::read_dir(dir).map_err(|e| MetricsError::io(dir, e))?;
-    let mut files: Vec<std::path::PathBuf> = Vec::new();
-    for entry in entries {
-        let path = entry.map_err(|e| MetricsError::io(dir, e))?.path();
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .unwrap_or("")
-            .to_ascii_lowercase();
-        if path.is_file() && ["png", "jpg", "jpeg"].contains(&ext.as_str()) {
-            files.push(path);
-        }
-    }
-    files.sort();
-    if files.is_empty() {
-        return Err(MetricsError::format(
-            dir,
-            "no .png/.jpg frames in this folder",
-        ));
-    }
-    files
-        .iter()
-        .map(|f| Ok(Image::load(f)?.composite_over(background)))
-        .collect()
-}
-
 /// Reads a Middlebury `.flo` optical-flow file (little-endian: magic 202021.25, width, height,
 /// then `(u, v)` per pixel). Values above 1e9 mark unknown flow and become invalid pixels.
 pub fn read_flo(path: &std::path::Path) -> Result<Flow> {

@@ -16,6 +16,14 @@ where
         _ => Path::new("."),
     };
     let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| SceneError::io(path, e))?;
+    // Temporary files are created private (0600); outputs should be readable like any file.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        tmp.as_file()
+            .set_permissions(std::fs::Permissions::from_mode(0o644))
+            .map_err(|e| SceneError::io(path, e))?;
+    }
     {
         let file = tmp.as_file_mut();
         let mut w = BufWriter::new(file);

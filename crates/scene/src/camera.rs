@@ -60,7 +60,9 @@ impl Intrinsics {
     }
 
     pub fn is_finite(&self) -> bool {
-        [self.fx, self.fy, self.cx, self.cy].iter().all(|v| v.is_finite())
+        [self.fx, self.fy, self.cx, self.cy]
+            .iter()
+            .all(|v| v.is_finite())
             && self.fx > 0.0
             && self.fy > 0.0
     }
@@ -140,7 +142,8 @@ impl Se3 {
     }
 
     pub fn is_finite(&self) -> bool {
-        self.rotation.iter().all(|v| v.is_finite()) && self.translation.iter().all(|v| v.is_finite())
+        self.rotation.iter().all(|v| v.is_finite())
+            && self.translation.iter().all(|v| v.is_finite())
     }
 }
 

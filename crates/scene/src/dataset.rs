@@ -1,7 +1,7 @@
 //! A loaded dataset: views (camera + image + optional mask), the train/test split, and what the
 //! format offers for initialisation (sparse points, depth bounds).
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix4, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::camera::Camera;
@@ -52,6 +52,11 @@ pub struct Dataset {
     pub points: Option<PointCloud>,
     /// Background colour the RGBA images were composited over (black for opaque photos).
     pub background: [f32; 3],
+    /// Maps this dataset's world coordinates back to the source's own world frame when the
+    /// loader normalised them (DTU: IDR's `scale_mat`, normalised unit-sphere coordinates to
+    /// millimetres; LLFF: the inverse of NeRF's bounds rescaling and recentring). `None` when the
+    /// poses are as stored.
+    pub to_source_world: Option<Matrix4<f64>>,
 }
 
 impl Dataset {

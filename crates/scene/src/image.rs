@@ -105,7 +105,11 @@ impl Image {
 
     /// One channel as its own image.
     pub fn channel(&self, c: usize) -> Self {
-        let data = self.data.chunks_exact(self.channels).map(|p| p[c]).collect();
+        let data = self
+            .data
+            .chunks_exact(self.channels)
+            .map(|p| p[c])
+            .collect();
         Self::from_vec(self.width, self.height, 1, data)
     }
 
@@ -143,9 +147,7 @@ impl Image {
         let buf: image::ImageBuffer<image::Rgba<f32>, Vec<f32>> = {
             let mut rgba = Vec::with_capacity(self.num_pixels() * 4);
             for p in self.data.chunks_exact(self.channels) {
-                for c in 0..4 {
-                    rgba.push(if c < self.channels { p[c] } else { 1.0 });
-                }
+                rgba.extend((0..4).map(|c| p.get(c).copied().unwrap_or(1.0)));
             }
             image::ImageBuffer::from_raw(self.width as u32, self.height as u32, rgba)
                 .expect("buffer size matches")

@@ -6,14 +6,29 @@
 //! `(W/2, H/2)` is the exact image centre. Every loader converts to this at the border.
 //!
 //! Images are `f32` sRGB in `[0, 1]`, stored H×W×C row-major.
+//!
+//! **Datasets**: [`load_dataset`] detects and loads LLFF ([`llff`]), NeRF-synthetic and
+//! nerfstudio `transforms` files ([`transforms`]), IDR/NeuS DTU ([`dtu`]) and COLMAP models
+//! ([`colmap`]), with each format's standard sparse-view split ([`split`]) unless
+//! [`LoadOptions`] names the views.
 
 pub mod atomic;
+pub mod axes;
 pub mod camera;
+pub mod colmap;
 pub mod dataset;
+pub mod dtu;
 pub mod error;
 pub mod image;
+pub mod llff;
+pub mod load;
+mod numpy;
+pub mod split;
+pub mod transforms;
+pub mod video;
 
 pub use camera::{Camera, Intrinsics, Se3, camera_path};
 pub use dataset::{Dataset, PointCloud, View};
 pub use error::SceneError;
 pub use image::Image;
+pub use load::{DatasetFormat, LoadOptions, detect_format, load_dataset};

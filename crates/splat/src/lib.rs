@@ -1,1 +1,16 @@
-//! 3D Gaussian splatting: model, rasterizer, training.
+//! 3D Gaussian splatting (Kerbl et al. 2023) on the CPU: the Gaussian model, a differentiable
+//! tile rasterizer exposed as a Burn custom autodiff op, SH colour, the Inria PLY format and
+//! sparse-view training.
+
+pub mod bench;
+pub mod cputime;
+pub mod eval;
+pub mod init;
+pub mod loss;
+pub mod model;
+pub mod op;
+pub mod ply;
+pub mod raster;
+pub mod real;
+pub mod sh;
+pub mod train;

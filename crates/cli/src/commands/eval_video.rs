@@ -1,6 +1,7 @@
 //! `fewview eval-video`: temporal-coherence metrics of a rendered sequence against ground truth
 //! (per-frame PSNR/SSIM/LPIPS, their frame-to-frame Δ as in paper 002's tables, TecoGAN's tLP,
-//! and the warping error with a caller-supplied flow). Inputs are folders of PNG/JPEG frames.
+//! and the warping error with a caller-supplied flow). Inputs are videos (`.mp4`, `.gif`) or
+//! folders of PNG/JPEG frames, read by `fewview_scene::video`.
 
 use std::path::PathBuf;
 
@@ -8,13 +9,14 @@ use anyhow::{Context, bail};
 use fewview_metrics::lpips::{LoadOptions, Lpips, LpipsNet};
 use fewview_metrics::temporal::{self, Flow, MetricSeries, PerceptualDistance};
 use fewview_metrics::{SsimBorder, SsimOptions};
+use fewview_scene::video;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Folder of rendered frames (PNG/JPEG, in file-name order: zero-pad the numbers).
+    /// Rendered sequence: an .mp4 or .gif file, or a folder of PNG/JPEG frames (natural order).
     #[arg(long)]
     output: PathBuf,
-    /// Folder of ground-truth frames, same count and sizes.
+    /// Ground-truth sequence (same forms), same frame count and size.
     #[arg(long)]
     ground_truth: PathBuf,
     /// LPIPS network: st-alex (default: ST-LPIPS AlexNet, weights built in), alex, vgg,
@@ -32,10 +34,11 @@ pub struct Args {
     /// SSIM border convention: reflect (scikit-image, default) or zero (3DGS loss).
     #[arg(long, default_value = "reflect")]
     ssim_border: String,
-    /// Background for RGBA frames (white or black).
+    /// Background for transparent GIF/PNG pixels (white or black).
     #[arg(long, default_value = "white")]
     background: String,
-    /// Write the full report (per-frame values included) as JSON here.
+    /// Write the full report (per-frame values included) as JSON here; JSON has no infinity,
+    /// so the PSNR of an exact frame (+∞) is written as null.
     #[arg(long)]
     json: Option<PathBuf>,
 }
@@ -71,8 +74,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "zero" => SsimBorder::ZeroSame,
         other => bail!("--ssim-border must be reflect or zero, not {other:?}"),
     };
-    let output = temporal::load_frame_dir(&args.output, background)?;
-    let truth = temporal::load_frame_dir(&args.ground_truth, background)?;
+    let read = |path: &std::path::Path| -> anyhow::Result<Vec<fewview_scene::Image>> {
+        let (frames, _fps) = video::read_video_with(path, &video::ReadOptions { background })?;
+        Ok(frames)
+    };
+    let output = read(&args.output)?;
+    let truth = read(&args.ground_truth)?;
     let lpips: Option<Lpips> = match args.lpips.as_str() {
         "none" => None,
         "st-alex" if args.lpips_weights.is_empty() => Some(Lpips::default_st_alex()?),

@@ -1,0 +1,216 @@
+//! COLMAP's binary model format (`cameras.bin`, `images.bin`, `points3D.bin`), little-endian, as
+//! COLMAP writes it:
+//!
+//! * cameras: `u64` count; per camera `u32` id, `i32` model id, `u64` width, `u64` height,
+//!   `f64` × (the model's parameter count).
+//! * images: `u64` count; per image `u32` id, `f64` qw qx qy qz, `f64` tx ty tz, `u32` camera id,
+//!   NUL-terminated name, `u64` point count, then per point `f64` x, `f64` y, `i64` point id.
+//! * points: `u64` count; per point `u64` id, `f64` x y z, `u8` r g b, `f64` error, `u64` track
+//!   length, then per element `u32` image id, `u32` point index.
+//!
+//! Counts come from the file, so no buffer is sized by them: a corrupt count ends in a
+//! "truncated" error instead of a huge allocation.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use super::{CAMERA_MODELS, ColmapCamera, ColmapImage, ColmapPoint};
+use crate::error::{Result, SceneError};
+
+/// A bounds-checked little-endian reader over a whole file.
+struct Reader<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+    path: &'a Path,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8]> {
+        if self.bytes.len() - self.pos < n {
+            return Err(SceneError::format(
+                self.path,
+                format!("truncated at byte {} while reading {what}", self.pos),
+            ));
+        }
+        let s = &self.bytes[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(s)
+    }
+
+    fn array<const N: usize>(&mut self, what: &str) -> Result<[u8; N]> {
+        let mut a = [0u8; N];
+        a.copy_from_slice(self.take(N, what)?);
+        Ok(a)
+    }
+
+    fn u8(&mut self, what: &str) -> Result<u8> {
+        Ok(self.array::<1>(what)?[0])
+    }
+    fn u32(&mut self, what: &str) -> Result<u32> {
+        Ok(u32::from_le_bytes(self.array(what)?))
+    }
+    fn i32(&mut self, what: &str) -> Result<i32> {
+        Ok(i32::from_le_bytes(self.array(what)?))
+    }
+    fn u64(&mut self, what: &str) -> Result<u64> {
+        Ok(u64::from_le_bytes(self.array(what)?))
+    }
+    fn f64(&mut self, what: &str) -> Result<f64> {
+        Ok(f64::from_le_bytes(self.array(what)?))
+    }
+
+    /// Skips `count` records of `size` bytes.
+    fn skip(&mut self, count: u64, size: usize, what: &str) -> Result<()> {
+        let n = usize::try_from(count)
+            .ok()
+            .and_then(|c| c.checked_mul(size))
+            .unwrap_or(usize::MAX);
+        self.take(n, what).map(|_| ())
+    }
+
+    fn name(&mut self) -> Result<String> {
+        let rest = &self.bytes[self.pos..];
+        let end = rest.iter().position(|&b| b == 0).ok_or_else(|| {
+            SceneError::format(
+                self.path,
+                format!("truncated at byte {} while reading an image name", self.pos),
+            )
+        })?;
+        let name = std::str::from_utf8(&rest[..end])
+            .map_err(|_| {
+                SceneError::format(
+                    self.path,
+                    format!("image name at byte {} is not UTF-8", self.pos),
+                )
+            })?
+            .to_owned();
+        self.pos += end + 1;
+        Ok(name)
+    }
+
+    /// The file must end exactly after the last record.
+    fn finish(&self) -> Result<()> {
+        let left = self.bytes.len() - self.pos;
+        if left != 0 {
+            return Err(SceneError::format(
+                self.path,
+                format!("corrupt file: {left} bytes left over after the last record"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+fn read_file(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).map_err(|e| SceneError::io(path, e))
+}
+
+pub fn read_cameras(path: &Path) -> Result<BTreeMap<u32, ColmapCamera>> {
+    let bytes = read_file(path)?;
+    let mut r = Reader {
+        bytes: &bytes,
+        pos: 0,
+        path,
+    };
+    let count = r.u64("the camera count")?;
+    let mut out = BTreeMap::new();
+    for _ in 0..count {
+        let id = r.u32("a camera id")?;
+        let model_id = r.i32("a camera model")?;
+        let (model, n_params) = usize::try_from(model_id)
+            .ok()
+            .and_then(|m| CAMERA_MODELS.get(m))
+            .ok_or_else(|| {
+                SceneError::format(
+                    path,
+                    format!("camera {id}: unknown camera model id {model_id}"),
+                )
+            })?;
+        let width = r.u64("a camera width")?;
+        let height = r.u64("a camera height")?;
+        let params = (0..*n_params)
+            .map(|_| r.f64("camera parameters"))
+            .collect::<Result<Vec<_>>>()?;
+        let cam = ColmapCamera {
+            id,
+            model: model.to_string(),
+            width,
+            height,
+            params,
+        };
+        if out.insert(id, cam).is_some() {
+            return Err(SceneError::format(
+                path,
+                format!("camera {id} defined twice"),
+            ));
+        }
+    }
+    r.finish()?;
+    Ok(out)
+}
+
+pub fn read_images(path: &Path) -> Result<Vec<ColmapImage>> {
+    let bytes = read_file(path)?;
+    let mut r = Reader {
+        bytes: &bytes,
+        pos: 0,
+        path,
+    };
+    let count = r.u64("the image count")?;
+    let mut out = Vec::new();
+    for _ in 0..count {
+        let id = r.u32("an image id")?;
+        let mut qvec = [0.0; 4];
+        for q in qvec.iter_mut() {
+            *q = r.f64("a quaternion")?;
+        }
+        let mut tvec = [0.0; 3];
+        for t in tvec.iter_mut() {
+            *t = r.f64("a translation")?;
+        }
+        let camera_id = r.u32("a camera id")?;
+        let name = r.name()?;
+        let n_points = r.u64("a 2D point count")?;
+        r.skip(n_points, 24, "2D points")?;
+        out.push(ColmapImage {
+            id,
+            qvec,
+            tvec,
+            camera_id,
+            name,
+        });
+    }
+    r.finish()?;
+    Ok(out)
+}
+
+pub fn read_points(path: &Path) -> Result<Vec<ColmapPoint>> {
+    let bytes = read_file(path)?;
+    let mut r = Reader {
+        bytes: &bytes,
+        pos: 0,
+        path,
+    };
+    let count = r.u64("the point count")?;
+    let mut out = Vec::new();
+    for _ in 0..count {
+        let id = r.u64("a point id")?;
+        let xyz = [
+            r.f64("a position")?,
+            r.f64("a position")?,
+            r.f64("a position")?,
+        ];
+        let rgb = [r.u8("a colour")?, r.u8("a colour")?, r.u8("a colour")?];
+        let error = r.f64("a reprojection error")?;
+        let track = r.u64("a track length")?;
+        r.skip(track, 8, "a track")?;
+        out.push(ColmapPoint {
+            id,
+            xyz,
+            rgb,
+            error,
+        });
+    }
+    r.finish()?;
+    Ok(out)
+}

@@ -1,0 +1,529 @@
+//! COLMAP sparse models (text or binary): `cameras`, `images`, `points3D`, with the photos in
+//! `images/`.
+//!
+//! COLMAP already uses this crate's convention: `cam_from_world` (quaternion `qw qx qy qz` +
+//! translation) maps world to OpenCV camera axes, and the centre of the top-left pixel is at
+//! `(0.5, 0.5)`. Pinhole models (`SIMPLE_PINHOLE`, `PINHOLE`) load as they are; the distortion
+//! models `SIMPLE_RADIAL`, `RADIAL`, `OPENCV` and `FULL_OPENCV` load only when every distortion
+//! coefficient is zero (undistort first, e.g. with `colmap image_undistorter`); fisheye and other
+//! models are errors. COLMAP 3.12+ also writes `rigs` and `frames` files; they are not needed.
+
+pub mod binary;
+pub mod text;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use rayon::prelude::*;
+
+use crate::camera::{Camera, Intrinsics, Se3};
+use crate::dataset::{Dataset, PointCloud, View};
+use crate::error::{Result, SceneError};
+use crate::load::{self, LoadOptions};
+use crate::split;
+
+/// COLMAP's camera models, with their numeric ids (binary files) and parameter counts.
+pub const CAMERA_MODELS: [(&str, usize); 18] = [
+    ("SIMPLE_PINHOLE", 3),
+    ("PINHOLE", 4),
+    ("SIMPLE_RADIAL", 4),
+    ("RADIAL", 5),
+    ("OPENCV", 8),
+    ("OPENCV_FISHEYE", 8),
+    ("FULL_OPENCV", 12),
+    ("FOV", 5),
+    ("SIMPLE_RADIAL_FISHEYE", 4),
+    ("RADIAL_FISHEYE", 5),
+    ("THIN_PRISM_FISHEYE", 12),
+    ("RAD_TAN_THIN_PRISM_FISHEYE", 16),
+    ("SIMPLE_DIVISION", 4),
+    ("DIVISION", 5),
+    ("SIMPLE_FISHEYE", 3),
+    ("FISHEYE", 4),
+    ("EUCM", 6),
+    ("EQUIRECTANGULAR", 2),
+];
+
+/// The parameter count of a model name.
+pub fn model_param_count(model: &str) -> Option<usize> {
+    CAMERA_MODELS
+        .iter()
+        .find(|(m, _)| *m == model)
+        .map(|&(_, n)| n)
+}
+
+/// One camera of `cameras.{txt,bin}`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ColmapCamera {
+    pub id: u32,
+    pub model: String,
+    pub width: u64,
+    pub height: u64,
+    pub params: Vec<f64>,
+}
+
+impl ColmapCamera {
+    /// Pinhole intrinsics, or why the camera has none (see the module docs).
+    pub fn intrinsics(&self) -> std::result::Result<Intrinsics, String> {
+        let p = &self.params;
+        match model_param_count(&self.model) {
+            Some(n) if n == p.len() => {}
+            Some(n) => {
+                return Err(format!(
+                    "{} needs {n} parameters, has {}",
+                    self.model,
+                    p.len()
+                ));
+            }
+            None => return Err(format!("unknown camera model {}", self.model)),
+        }
+        // (fx, fy, cx, cy) and the distortion coefficients of each accepted model.
+        let (fx, fy, cx, cy, distortion) = match self.model.as_str() {
+            "SIMPLE_PINHOLE" => (p[0], p[0], p[1], p[2], &p[3..]),
+            "PINHOLE" => (p[0], p[1], p[2], p[3], &p[4..]),
+            "SIMPLE_RADIAL" | "RADIAL" => (p[0], p[0], p[1], p[2], &p[3..]),
+            "OPENCV" | "FULL_OPENCV" => (p[0], p[1], p[2], p[3], &p[4..]),
+            m => return Err(format!("camera model {m} is not a pinhole model")),
+        };
+        if let Some(d) = distortion.iter().find(|&&d| d != 0.0) {
+            return Err(format!(
+                "{} distortion {d} is not supported: undistort the images first (colmap image_undistorter)",
+                self.model
+            ));
+        }
+        let (width, height) = match (u32::try_from(self.width), u32::try_from(self.height)) {
+            (Ok(w), Ok(h)) if w > 0 && h > 0 => (w, h),
+            _ => {
+                return Err(format!(
+                    "image size {}×{} is invalid",
+                    self.width, self.height
+                ));
+            }
+        };
+        Ok(Intrinsics {
+            fx,
+            fy,
+            cx,
+            cy,
+            width,
+            height,
+        })
+    }
+}
+
+/// One registered image of `images.{txt,bin}` (its 2D points are skipped).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ColmapImage {
+    pub id: u32,
+    /// `cam_from_world` rotation as `(qw, qx, qy, qz)`.
+    pub qvec: [f64; 4],
+    /// `cam_from_world` translation.
+    pub tvec: [f64; 3],
+    pub camera_id: u32,
+    pub name: String,
+}
+
+impl ColmapImage {
+    /// The world-to-camera pose (quaternion normalised; zero or non-finite is an error).
+    pub fn world_to_camera(&self) -> std::result::Result<Se3, String> {
+        let [w, x, y, z] = self.qvec;
+        let q = Quaternion::new(w, x, y, z);
+        let n = q.norm();
+        let finite = n.is_finite() && self.tvec.iter().all(|v| v.is_finite());
+        if !finite || n < 1e-9 {
+            return Err(format!(
+                "image {} ({}): pose contains NaN, Inf or a zero quaternion",
+                self.id, self.name
+            ));
+        }
+        let r = UnitQuaternion::from_quaternion(q)
+            .to_rotation_matrix()
+            .into_inner();
+        Ok(Se3::new(r, Vector3::from(self.tvec)))
+    }
+}
+
+/// One point of `points3D.{txt,bin}` (its track is skipped).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ColmapPoint {
+    pub id: u64,
+    pub xyz: [f64; 3],
+    pub rgb: [u8; 3],
+    pub error: f64,
+}
+
+/// A sparse model.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ColmapModel {
+    pub cameras: BTreeMap<u32, ColmapCamera>,
+    pub images: Vec<ColmapImage>,
+    pub points: Vec<ColmapPoint>,
+}
+
+impl ColmapModel {
+    /// The points as a coloured cloud (`f32`, colours in `[0, 1]`).
+    pub fn point_cloud(&self) -> PointCloud {
+        PointCloud {
+            positions: self
+                .points
+                .iter()
+                .map(|p| p.xyz.map(|v| v as f32))
+                .collect(),
+            colors: self
+                .points
+                .iter()
+                .map(|p| p.rgb.map(|c| c as f32 / 255.0))
+                .collect(),
+        }
+    }
+}
+
+/// The folder holding a COLMAP model: `sparse/0/`, `sparse/` or `root` itself, the first with a
+/// `cameras.bin` or `cameras.txt`.
+pub fn find_model_dir(root: &Path) -> Option<PathBuf> {
+    [
+        root.join("sparse").join("0"),
+        root.join("sparse"),
+        root.to_owned(),
+    ]
+    .into_iter()
+    .find(|d| d.join("cameras.bin").is_file() || d.join("cameras.txt").is_file())
+}
+
+/// Reads the model in `dir`: binary when `cameras.bin` exists, else text. A missing file of the
+/// three is an error naming it.
+pub fn read_model(dir: &Path) -> Result<ColmapModel> {
+    let (ext, is_binary) = if dir.join("cameras.bin").is_file() {
+        ("bin", true)
+    } else {
+        ("txt", false)
+    };
+    let path = |name: &str| dir.join(format!("{name}.{ext}"));
+    for name in ["cameras", "images", "points3D"] {
+        let p = path(name);
+        if !p.is_file() {
+            let e = std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                "missing file of the COLMAP model",
+            );
+            return Err(SceneError::io(p, e));
+        }
+    }
+    let model = if is_binary {
+        ColmapModel {
+            cameras: binary::read_cameras(&path("cameras"))?,
+            images: binary::read_images(&path("images"))?,
+            points: binary::read_points(&path("points3D"))?,
+        }
+    } else {
+        ColmapModel {
+            cameras: text::read_cameras(&path("cameras"))?,
+            images: text::read_images(&path("images"))?,
+            points: text::read_points(&path("points3D"))?,
+        }
+    };
+    if let Some(img) = model
+        .images
+        .iter()
+        .find(|i| !model.cameras.contains_key(&i.camera_id))
+    {
+        return Err(SceneError::invalid(
+            path("images"),
+            format!(
+                "image {} ({}) refers to camera {}, which cameras.{ext} lacks",
+                img.id, img.name, img.camera_id
+            ),
+        ));
+    }
+    Ok(model)
+}
+
+/// The points of the model in `dir` alone (`points3D.bin`, else `points3D.txt`), `None` when
+/// neither exists.
+pub fn read_points_in(dir: &Path) -> Result<Option<Vec<ColmapPoint>>> {
+    let (bin, txt) = (dir.join("points3D.bin"), dir.join("points3D.txt"));
+    if bin.is_file() {
+        binary::read_points(&bin).map(Some)
+    } else if txt.is_file() {
+        text::read_points(&txt).map(Some)
+    } else {
+        Ok(None)
+    }
+}
+
+/// Loads a COLMAP scene: the model (see [`find_model_dir`]), photos from `images/` by name.
+/// Views are sorted by image name (as 3DGS does); the split is LLFF-style
+/// ([`split::llff_split`]: every `holdout_every`-th view is a test view, `n_train` spread evenly
+/// over the rest, default all). The model's points become [`Dataset::points`].
+pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
+    let dir = find_model_dir(root).ok_or_else(|| {
+        SceneError::format(
+            root,
+            "no COLMAP model (cameras.bin or cameras.txt in sparse/0/, sparse/ or the folder)",
+        )
+    })?;
+    let model = read_model(&dir)?;
+    let mut images = model.images.clone();
+    if images.is_empty() {
+        return Err(SceneError::format(
+            &dir,
+            "the model has no registered images",
+        ));
+    }
+    images.sort_by(|a, b| a.name.cmp(&b.name));
+    let background = opts.background.unwrap_or([0.0; 3]);
+    let image_dir = root.join("images");
+    let k = opts.downscale;
+    let views = images
+        .par_iter()
+        .map(|img| {
+            let cam = &model.cameras[&img.camera_id];
+            let intrinsics = cam
+                .intrinsics()
+                .map_err(|m| SceneError::invalid(&dir, format!("camera {}: {m}", cam.id)))?;
+            let pose = img
+                .world_to_camera()
+                .map_err(|m| SceneError::invalid(&dir, m))?;
+            let camera = Camera::new(intrinsics, pose);
+            load::check_camera(&camera, &dir, &format!("image {} ({})", img.id, img.name))?;
+            let file = image_dir.join(&img.name);
+            let photo = load::load_photo(&file, background)?;
+            load::check_size(&photo.rgb, &camera, &file, "image")?;
+            let mask = match photo.alpha {
+                Some(a) => Some(load::downscale_mask(&a, k, false, &file)?),
+                None => None,
+            };
+            Ok(View {
+                name: load::stem(Path::new(&img.name)),
+                camera: load::downscale_camera(&camera, k),
+                image: load::downscale_image(&photo.rgb, k, &file)?,
+                mask,
+                depth_bounds: None,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let n_views = views.len();
+    let (train, test) = load::choose_split(
+        opts,
+        n_views,
+        root,
+        |n| Ok(split::llff_split(n_views, opts.holdout_every, n, root)?.0),
+        || split::holdout_test_views(n_views, opts.holdout_every),
+    )?;
+    Ok(Dataset {
+        name: load::scene_name(root),
+        views,
+        train,
+        test,
+        points: Some(model.point_cloud()),
+        background,
+        to_source_world: None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::Image;
+    use serde_json::Value;
+
+    fn fixtures() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/colmap")
+    }
+
+    fn reference() -> Value {
+        let text = std::fs::read_to_string(fixtures().join("reference.json")).unwrap();
+        serde_json::from_str(&text).unwrap()
+    }
+
+    /// A scene folder with the fixture model under `sparse/0` and blank photos of the right sizes.
+    fn scene(sub: &str) -> tempfile::TempDir {
+        let dir = tempfile::tempdir().unwrap();
+        let model = dir.path().join("sparse/0");
+        std::fs::create_dir_all(&model).unwrap();
+        for entry in std::fs::read_dir(fixtures().join(sub)).unwrap() {
+            let p = entry.unwrap().path();
+            std::fs::copy(&p, model.join(p.file_name().unwrap())).unwrap();
+        }
+        std::fs::create_dir_all(dir.path().join("images")).unwrap();
+        for (name, img) in reference()["images"].as_object().unwrap() {
+            let (w, h) = (
+                img["width"].as_u64().unwrap(),
+                img["height"].as_u64().unwrap(),
+            );
+            Image::filled(w as usize, h as usize, &[0.5, 0.25, 0.0])
+                .save_png(&dir.path().join("images").join(name))
+                .unwrap();
+        }
+        dir
+    }
+
+    fn f(v: &Value) -> f64 {
+        v.as_f64().unwrap()
+    }
+
+    /// Both encodings reproduce pycolmap's cameras, poses, projections and points.
+    #[test]
+    fn text_and_binary_match_pycolmap() {
+        let reference = reference();
+        let mut models = Vec::new();
+        for sub in ["text", "binary"] {
+            let model = read_model(&fixtures().join(sub)).unwrap();
+            models.push(model.clone());
+            let dir = scene(sub);
+            let d = load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
+            let names: Vec<&str> = d.views.iter().map(|v| v.name.as_str()).collect();
+            assert_eq!(names, ["a", "b", "c", "d"], "{sub}");
+            assert_eq!((d.test.clone(), d.train.clone()), (vec![0], vec![1, 2, 3]));
+            let points = d.points.as_ref().unwrap();
+            let ref_points = reference["points"].as_array().unwrap();
+            assert_eq!(points.len(), ref_points.len());
+            for (v, img) in d.views.iter().zip(["a.png", "b.png", "c.png", "d.png"]) {
+                let r = &reference["images"][img];
+                let kr = &r["K"];
+                let k = &v.camera.intrinsics;
+                assert_eq!(
+                    (k.fx, k.fy, k.cx, k.cy),
+                    (f(&kr[0][0]), f(&kr[1][1]), f(&kr[0][2]), f(&kr[1][2])),
+                    "{sub} {img}"
+                );
+                let m = v.camera.world_to_camera.to_matrix4();
+                for row in 0..3 {
+                    for col in 0..4 {
+                        assert!((m[(row, col)] - f(&r["cam_from_world"][row][col])).abs() < 1e-12);
+                    }
+                }
+                let c = v.camera.center();
+                for a in 0..3 {
+                    assert!((c[a] - f(&r["center"][a])).abs() < 1e-12);
+                }
+                for (rp, proj) in ref_points.iter().zip(r["projections"].as_array().unwrap()) {
+                    let x = Vector3::new(f(&rp["xyz"][0]), f(&rp["xyz"][1]), f(&rp["xyz"][2]));
+                    let (u, w, _) = v.camera.project(&x).unwrap();
+                    assert!(
+                        (u - f(&proj[0])).abs() < 1e-9 && (w - f(&proj[1])).abs() < 1e-9,
+                        "{sub} {img}"
+                    );
+                }
+            }
+            for (p, rp) in points.positions.iter().zip(ref_points) {
+                for a in 0..3 {
+                    assert_eq!(p[a], f(&rp["xyz"][a]) as f32);
+                }
+            }
+            for (c, rp) in points.colors.iter().zip(ref_points) {
+                for a in 0..3 {
+                    assert_eq!(c[a], rp["rgb"][a].as_u64().unwrap() as f32 / 255.0);
+                }
+            }
+        }
+        // Text (17 significant digits) and binary agree exactly.
+        assert_eq!(models[0], models[1]);
+    }
+
+    #[test]
+    fn distortion_and_bad_files_are_one_line_errors() {
+        let dir = scene("text");
+        let cams = dir.path().join("sparse/0/cameras.txt");
+        let original = std::fs::read_to_string(&cams).unwrap();
+        std::fs::write(&cams, original.replace("16.25 11.75 0", "16.25 11.75 0.01")).unwrap();
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("sparse/0") && e.contains("SIMPLE_RADIAL distortion 0.01 is not supported"),
+            "{e}"
+        );
+        std::fs::write(
+            &cams,
+            original.replace(
+                "3 SIMPLE_RADIAL 32 24 28 16.25 11.75 0",
+                "3 OPENCV_FISHEYE 32 24 28 28 16 12 0 0 0 0",
+            ),
+        )
+        .unwrap();
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("OPENCV_FISHEYE is not a pinhole model"), "{e}");
+        std::fs::write(
+            &cams,
+            original.replace("PINHOLE 40 30 35 33", "PINHOLE 40 30 nan 33"),
+        )
+        .unwrap();
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("intrinsics are not finite"), "{e}");
+        std::fs::write(
+            &cams,
+            original.replace("PINHOLE 40 30 35 33 19.5", "PINHOLE 40 30 35 33"),
+        )
+        .unwrap();
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("cameras.txt")
+                && e.contains("line 5")
+                && e.contains("PINHOLE needs 4 parameters"),
+            "{e}"
+        );
+        std::fs::write(&cams, &original).unwrap();
+        // Photo of the wrong size.
+        Image::filled(10, 10, &[0.0; 3])
+            .save_png(&dir.path().join("images/b.png"))
+            .unwrap();
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("b.png") && e.contains("image is 10×10 but its camera is 32×24"),
+            "{e}"
+        );
+        std::fs::remove_file(dir.path().join("images/b.png")).unwrap();
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("b.png"), "{e}");
+        std::fs::remove_file(dir.path().join("sparse/0/points3D.txt")).unwrap();
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("points3D.txt") && e.contains("missing file"),
+            "{e}"
+        );
+
+        // Binary: truncation anywhere is an error naming the file, never a panic.
+        let dir = scene("binary");
+        for name in ["cameras.bin", "images.bin", "points3D.bin"] {
+            let p = dir.path().join("sparse/0").join(name);
+            let bytes = std::fs::read(&p).unwrap();
+            for cut in [0, 7, 8, 20, bytes.len() / 2, bytes.len() - 1] {
+                std::fs::write(&p, &bytes[..cut]).unwrap();
+                let e = load::load_dataset(dir.path(), &LoadOptions::default())
+                    .unwrap_err()
+                    .to_string();
+                assert!(
+                    e.contains(name) && e.contains("truncated"),
+                    "{name} cut {cut}: {e}"
+                );
+            }
+            std::fs::write(&p, &bytes).unwrap();
+        }
+        // Trailing garbage is corruption too.
+        let p = dir.path().join("sparse/0/cameras.bin");
+        let mut bytes = std::fs::read(&p).unwrap();
+        bytes.extend_from_slice(&[1, 2, 3]);
+        std::fs::write(&p, &bytes).unwrap();
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("cameras.bin") && e.contains("3 bytes left over"),
+            "{e}"
+        );
+    }
+}

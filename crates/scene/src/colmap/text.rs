@@ -1,0 +1,136 @@
+//! COLMAP's text model format (`cameras.txt`, `images.txt`, `points3D.txt`): one record per line
+//! (two for images), fields separated by spaces, `#` comments.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::str::FromStr;
+
+use super::{ColmapCamera, ColmapImage, ColmapPoint, model_param_count};
+use crate::error::{Result, SceneError};
+
+fn read(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))
+}
+
+/// Whether a line holds data (not blank, not a comment).
+fn is_data(line: &str) -> bool {
+    let t = line.trim();
+    !t.is_empty() && !t.starts_with('#')
+}
+
+/// Parses field `i` of a line, naming the line and field in the error.
+fn field<T: FromStr>(
+    fields: &[&str],
+    i: usize,
+    what: &str,
+    path: &Path,
+    line_no: usize,
+) -> Result<T> {
+    let s = fields
+        .get(i)
+        .ok_or_else(|| SceneError::format(path, format!("line {line_no}: missing {what}")))?;
+    s.parse().map_err(|_| {
+        SceneError::format(
+            path,
+            format!("line {line_no}: {what} {s:?} is not a number"),
+        )
+    })
+}
+
+/// `CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]`.
+pub fn read_cameras(path: &Path) -> Result<BTreeMap<u32, ColmapCamera>> {
+    let text = read(path)?;
+    let mut out = BTreeMap::new();
+    for (i, line) in text.lines().enumerate().filter(|(_, l)| is_data(l)) {
+        let n = i + 1;
+        let f: Vec<&str> = line.split_whitespace().collect();
+        let id: u32 = field(&f, 0, "camera id", path, n)?;
+        let model = f
+            .get(1)
+            .ok_or_else(|| SceneError::format(path, format!("line {n}: missing camera model")))?
+            .to_string();
+        let count = model_param_count(&model).ok_or_else(|| {
+            SceneError::format(path, format!("line {n}: unknown camera model {model}"))
+        })?;
+        if f.len() != 4 + count {
+            return Err(SceneError::format(
+                path,
+                format!(
+                    "line {n}: {model} needs {count} parameters, found {}",
+                    f.len().saturating_sub(4)
+                ),
+            ));
+        }
+        let params = (0..count)
+            .map(|k| field(&f, 4 + k, "parameter", path, n))
+            .collect::<Result<Vec<f64>>>()?;
+        let cam = ColmapCamera {
+            id,
+            model,
+            width: field(&f, 2, "width", path, n)?,
+            height: field(&f, 3, "height", path, n)?,
+            params,
+        };
+        if out.insert(id, cam).is_some() {
+            return Err(SceneError::format(
+                path,
+                format!("line {n}: camera {id} defined twice"),
+            ));
+        }
+    }
+    Ok(out)
+}
+
+/// Pairs of lines: `IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME`, then the 2D points (which may
+/// be an empty line, so the second line is taken as is, as COLMAP's reader does).
+pub fn read_images(path: &Path) -> Result<Vec<ColmapImage>> {
+    let text = read(path)?;
+    let mut out = Vec::new();
+    let mut lines = text.lines().enumerate();
+    while let Some((i, line)) = lines.next() {
+        if !is_data(line) {
+            continue;
+        }
+        let n = i + 1;
+        let f: Vec<&str> = line.split_whitespace().collect();
+        if f.len() < 10 {
+            return Err(SceneError::format(
+                path,
+                format!(
+                    "line {n}: an image needs 10 fields (IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME), found {}",
+                    f.len()
+                ),
+            ));
+        }
+        let num = |k: usize, what: &str| field::<f64>(&f, k, what, path, n);
+        out.push(ColmapImage {
+            id: field(&f, 0, "image id", path, n)?,
+            qvec: [num(1, "qw")?, num(2, "qx")?, num(3, "qy")?, num(4, "qz")?],
+            tvec: [num(5, "tx")?, num(6, "ty")?, num(7, "tz")?],
+            camera_id: field(&f, 8, "camera id", path, n)?,
+            name: f[9].to_owned(),
+        });
+        // The 2D points line; its contents are not needed. A file that ends here is fine.
+        let _ = lines.next();
+    }
+    Ok(out)
+}
+
+/// `POINT3D_ID X Y Z R G B ERROR TRACK[]`.
+pub fn read_points(path: &Path) -> Result<Vec<ColmapPoint>> {
+    let text = read(path)?;
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate().filter(|(_, l)| is_data(l)) {
+        let n = i + 1;
+        let f: Vec<&str> = line.split_whitespace().collect();
+        let num = |k: usize, what: &str| field::<f64>(&f, k, what, path, n);
+        let byte = |k: usize, what: &str| field::<u8>(&f, k, what, path, n);
+        out.push(ColmapPoint {
+            id: field(&f, 0, "point id", path, n)?,
+            xyz: [num(1, "x")?, num(2, "y")?, num(3, "z")?],
+            rgb: [byte(4, "red")?, byte(5, "green")?, byte(6, "blue")?],
+            error: num(7, "error")?,
+        });
+    }
+    Ok(out)
+}

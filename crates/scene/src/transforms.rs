@@ -1,0 +1,607 @@
+//! `transforms*.json` datasets: NeRF-synthetic ("Blender": `transforms_train.json` +
+//! `transforms_test.json`) and nerfstudio / instant-ngp (one `transforms.json`).
+//!
+//! Each frame has a 4×4 **camera-to-world** `transform_matrix` in OpenGL camera axes (x right,
+//! y up, looking along −z), converted here to OpenCV by negating the y and z axes. `file_path`
+//! is relative to the JSON file; one without an extension gets `.png` (NeRF-synthetic).
+//!
+//! Intrinsics, per frame or for the whole file (a frame's value wins): `fl_x`, `fl_y`, `cx`,
+//! `cy`, `w`, `h` in pixels, or NeRF's `camera_angle_x` (focal `0.5·W / tan(0.5·angle_x)`,
+//! `fy = fx`, principal point at the image centre). The image centre is `(W/2, H/2)` in this
+//! crate's half-integer pixel convention, as in 3DGS and nerfstudio; NeRF's original ray
+//! generator put pixel centres at integers, half a pixel off from this.
+//!
+//! **Distortion is not supported**: the coefficients `k1, k2, k3, k4, p1, p2` are read and any
+//! non-zero one is an error (undistort the images first, e.g. with COLMAP's
+//! `image_undistorter`); so are non-pinhole `camera_model`s (`OPENCV_FISHEYE`,
+//! `EQUIRECTANGULAR`).
+//!
+//! RGBA images are composited over the background (white by default, the NeRF protocol
+//! `rgb·a + (1 − a)`) and their alpha kept as the view's (soft) mask. A frame's `mask_path`, when
+//! present, gives a binary mask instead.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Matrix3, Matrix4};
+use rayon::prelude::*;
+use serde::Deserialize;
+
+use crate::axes::opengl_to_opencv;
+use crate::camera::{Camera, Intrinsics, Se3};
+use crate::dataset::{Dataset, View};
+use crate::error::{Result, SceneError};
+use crate::load::{self, LoadOptions};
+use crate::split;
+
+/// Intrinsics and distortion fields, at file or frame level.
+#[derive(Clone, Debug, Default, Deserialize)]
+struct CameraFields {
+    camera_angle_x: Option<f64>,
+    fl_x: Option<f64>,
+    fl_y: Option<f64>,
+    cx: Option<f64>,
+    cy: Option<f64>,
+    w: Option<f64>,
+    h: Option<f64>,
+    k1: Option<f64>,
+    k2: Option<f64>,
+    k3: Option<f64>,
+    k4: Option<f64>,
+    p1: Option<f64>,
+    p2: Option<f64>,
+    camera_model: Option<String>,
+}
+
+impl CameraFields {
+    /// Frame-level fields over file-level ones.
+    fn or(&self, file: &CameraFields) -> CameraFields {
+        CameraFields {
+            camera_angle_x: self.camera_angle_x.or(file.camera_angle_x),
+            fl_x: self.fl_x.or(file.fl_x),
+            fl_y: self.fl_y.or(file.fl_y),
+            cx: self.cx.or(file.cx),
+            cy: self.cy.or(file.cy),
+            w: self.w.or(file.w),
+            h: self.h.or(file.h),
+            k1: self.k1.or(file.k1),
+            k2: self.k2.or(file.k2),
+            k3: self.k3.or(file.k3),
+            k4: self.k4.or(file.k4),
+            p1: self.p1.or(file.p1),
+            p2: self.p2.or(file.p2),
+            camera_model: self.camera_model.clone().or(file.camera_model.clone()),
+        }
+    }
+
+    /// Rejects distortion and non-pinhole models (see the module docs).
+    fn check_pinhole(&self) -> std::result::Result<(), String> {
+        if let Some(m) = &self.camera_model {
+            let m = m.to_ascii_uppercase();
+            if !matches!(m.as_str(), "PINHOLE" | "SIMPLE_PINHOLE" | "OPENCV") {
+                return Err(format!("camera_model {m} is not a pinhole model"));
+            }
+        }
+        let named = [
+            ("k1", self.k1),
+            ("k2", self.k2),
+            ("k3", self.k3),
+            ("k4", self.k4),
+            ("p1", self.p1),
+            ("p2", self.p2),
+        ];
+        for (name, v) in named {
+            if let Some(v) = v
+                && v != 0.0
+            {
+                return Err(format!(
+                    "distortion {name} = {v} is not supported: undistort the images first"
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Pinhole intrinsics for an image of `width × height`.
+    fn intrinsics(&self, width: usize, height: usize) -> std::result::Result<Intrinsics, String> {
+        let (w, h) = (width as f64, height as f64);
+        for (name, stated, actual) in [("w", self.w, w), ("h", self.h, h)] {
+            if let Some(stated) = stated
+                && stated != actual
+            {
+                return Err(format!(
+                    "image is {width}×{height} but the file says {name}={stated}"
+                ));
+            }
+        }
+        let k = if let Some(fx) = self.fl_x {
+            Intrinsics {
+                fx,
+                fy: self.fl_y.unwrap_or(fx),
+                cx: self.cx.unwrap_or(w / 2.0),
+                cy: self.cy.unwrap_or(h / 2.0),
+                width: width as u32,
+                height: height as u32,
+            }
+        } else if let Some(angle) = self.camera_angle_x {
+            if !(angle > 0.0 && angle < std::f64::consts::PI) {
+                return Err(format!("camera_angle_x = {angle} is not in (0, π)"));
+            }
+            Intrinsics::centered(0.5 * w / (0.5 * angle).tan(), width as u32, height as u32)
+        } else {
+            return Err("no intrinsics: needs camera_angle_x or fl_x".to_owned());
+        };
+        Ok(k)
+    }
+}
+
+#[derive(Clone, Debug, Deserialize)]
+struct FrameJson {
+    file_path: String,
+    transform_matrix: [[f64; 4]; 4],
+    mask_path: Option<String>,
+    #[serde(flatten)]
+    camera: CameraFields,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+struct TransformsJson {
+    #[serde(flatten)]
+    camera: CameraFields,
+    frames: Vec<FrameJson>,
+}
+
+/// One frame of a transforms file, resolved against the file's folder.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    /// The image file.
+    pub image: PathBuf,
+    /// A separate mask image (`mask_path`), if any.
+    pub mask: Option<PathBuf>,
+    /// Camera-to-world in OpenCV axes.
+    pub camera_to_world: Se3,
+    camera: CameraFields,
+    /// The JSON file, for errors.
+    source: PathBuf,
+    index: usize,
+}
+
+/// Reads a transforms JSON file: frames in file order, poses converted to OpenCV axes.
+pub fn read_transforms(path: &Path) -> Result<Vec<Frame>> {
+    let text = std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))?;
+    let file: TransformsJson = serde_json::from_str(&text)
+        .map_err(|e| SceneError::format(path, format!("invalid transforms JSON: {e}")))?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    if file.frames.is_empty() {
+        return Err(SceneError::format(path, "no frames"));
+    }
+    file.frames
+        .into_iter()
+        .enumerate()
+        .map(|(i, f)| {
+            let m = Matrix4::from_fn(|r, c| f.transform_matrix[r][c]);
+            if !m.iter().all(|v| v.is_finite()) {
+                return Err(SceneError::invalid(
+                    path,
+                    format!("frame {i} ({}): transform_matrix contains NaN or Inf", f.file_path),
+                ));
+            }
+            let gl = Se3::from_matrix4(&m);
+            let err = (gl.rotation.transpose() * gl.rotation - Matrix3::identity()).abs().max();
+            if err > 1e-3 {
+                return Err(SceneError::invalid(
+                    path,
+                    format!(
+                        "frame {i} ({}): transform_matrix rotation is not orthonormal (|RᵀR − I| = {err:.2e})",
+                        f.file_path
+                    ),
+                ));
+            }
+            let camera = f.camera.or(&file.camera);
+            camera
+                .check_pinhole()
+                .map_err(|m| SceneError::invalid(path, format!("frame {i} ({}): {m}", f.file_path)))?;
+            let mut image = dir.join(&f.file_path);
+            if image.extension().is_none() {
+                image.set_extension("png");
+            }
+            Ok(Frame {
+                image,
+                mask: f.mask_path.map(|m| dir.join(m)),
+                camera_to_world: opengl_to_opencv(&gl),
+                camera,
+                source: path.to_owned(),
+                index: i,
+            })
+        })
+        .collect()
+}
+
+/// Loads one frame as a view: image (RGBA composited over `background`, alpha kept as the
+/// mask), camera from the frame's intrinsics at the image's size, then downscaled by `k`.
+fn load_frame(frame: &Frame, background: [f32; 3], k: u32) -> Result<View> {
+    let photo = load::load_photo(&frame.image, background)?;
+    let (w, h) = (photo.rgb.width, photo.rgb.height);
+    let intrinsics = frame.camera.intrinsics(w, h).map_err(|m| {
+        SceneError::invalid(
+            &frame.source,
+            format!("frame {} ({}): {m}", frame.index, frame.image.display()),
+        )
+    })?;
+    let camera = Camera::from_camera_to_world(intrinsics, frame.camera_to_world);
+    load::check_camera(&camera, &frame.source, &format!("frame {}", frame.index))?;
+    let (mask, binary) = match (&frame.mask, photo.alpha) {
+        (Some(p), _) => {
+            let m = load::load_binary_mask(p)?;
+            load::check_size(&m, &camera, p, "mask")?;
+            (Some(m), true)
+        }
+        (None, alpha) => (alpha, false),
+    };
+    let mask = match mask {
+        Some(m) => Some(load::downscale_mask(&m, k, binary, &frame.image)?),
+        None => None,
+    };
+    Ok(View {
+        name: load::stem(&frame.image),
+        camera: load::downscale_camera(&camera, k),
+        image: load::downscale_image(&photo.rgb, k, &frame.image)?,
+        mask,
+        depth_bounds: None,
+    })
+}
+
+fn load_frames(frames: &[&Frame], background: [f32; 3], k: u32) -> Result<Vec<View>> {
+    frames
+        .par_iter()
+        .map(|f| load_frame(f, background, k))
+        .collect()
+}
+
+/// Loads NeRF-synthetic data. Training views are the first `n_train` (default 8) entries of the
+/// seed-0 permutation ([`split::BLENDER_SPARSE_PERMUTATION`], DietNeRF's protocol) among the
+/// frames of `transforms_train.json`, in that order; test views are all frames of
+/// `transforms_test.json`. Only these are loaded: `views` holds the training views, then the
+/// test views; `train_views` / `test_views` index the frames of the respective files.
+pub fn load_blender(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
+    let train_path = root.join("transforms_train.json");
+    let test_path = root.join("transforms_test.json");
+    let train_frames = read_transforms(&train_path)?;
+    let test_frames = read_transforms(&test_path)?;
+    let train_ids = match &opts.train_views {
+        Some(v) => v.clone(),
+        None => split::blender_train_views(
+            train_frames.len(),
+            opts.n_train.unwrap_or(split::BLENDER_DEFAULT_TRAIN),
+            &train_path,
+        )?,
+    };
+    let test_ids = opts
+        .test_views
+        .clone()
+        .unwrap_or_else(|| (0..test_frames.len()).collect());
+    split::validate_split(&train_ids, train_frames.len(), "train", &train_path)?;
+    split::validate_split(&test_ids, test_frames.len(), "test", &test_path)?;
+
+    let background = opts.background.unwrap_or([1.0; 3]);
+    let chosen: Vec<&Frame> = train_ids
+        .iter()
+        .map(|&i| &train_frames[i])
+        .chain(test_ids.iter().map(|&i| &test_frames[i]))
+        .collect();
+    let views = load_frames(&chosen, background, opts.downscale)?;
+    let n_train = train_ids.len();
+    Ok(Dataset {
+        name: load::scene_name(root),
+        views,
+        train: (0..n_train).collect(),
+        test: (n_train..n_train + test_ids.len()).collect(),
+        points: None,
+        background,
+        to_source_world: None,
+    })
+}
+
+/// Loads a nerfstudio / instant-ngp `transforms.json`. Frames are sorted by `file_path` (as
+/// nerfstudio does) and all loaded; the split is LLFF-style ([`split::llff_split`]: every
+/// `holdout_every`-th frame is a test view, `n_train` spread evenly over the rest, default all).
+/// The poses are kept in the file's world frame: nerfstudio's automatic re-orientation and
+/// scaling are not applied.
+pub fn load_nerfstudio(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
+    let path = root.join("transforms.json");
+    let mut frames = read_transforms(&path)?;
+    frames.sort_by(|a, b| a.image.cmp(&b.image));
+    let background = opts.background.unwrap_or([1.0; 3]);
+    let views = load_frames(
+        &frames.iter().collect::<Vec<_>>(),
+        background,
+        opts.downscale,
+    )?;
+    let n_views = views.len();
+    let (train, test) = load::choose_split(
+        opts,
+        n_views,
+        &path,
+        |n| Ok(split::llff_split(n_views, opts.holdout_every, n, &path)?.0),
+        || split::holdout_test_views(n_views, opts.holdout_every),
+    )?;
+    Ok(Dataset {
+        name: load::scene_name(root),
+        views,
+        train,
+        test,
+        points: None,
+        background,
+        to_source_world: None,
+    })
+}
+
+/// A camera-to-world (OpenCV axes) as the 4×4 OpenGL-axes `transform_matrix` of a frame.
+#[cfg(test)]
+fn gl_matrix(c2w_cv: &Se3) -> [[f64; 4]; 4] {
+    let gl = opengl_to_opencv(c2w_cv).to_matrix4();
+    let mut m = [[0.0; 4]; 4];
+    for (r, row) in m.iter_mut().enumerate() {
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = gl[(r, c)];
+        }
+    }
+    m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::Image;
+    use nalgebra::Vector3;
+    use serde_json::json;
+
+    /// Writes a Blender-style scene: `n_train` + `n_test` RGBA frames of 20×16 looking at the
+    /// origin from a circle.
+    fn write_blender(dir: &Path, n_train: usize, n_test: usize, extra: serde_json::Value) {
+        for (split, n) in [("train", n_train), ("test", n_test)] {
+            std::fs::create_dir_all(dir.join(split)).unwrap();
+            let mut frames = Vec::new();
+            for i in 0..n {
+                let a = i as f64 * 0.3 + if split == "test" { 0.1 } else { 0.0 };
+                let eye = Vector3::new(4.0 * a.cos(), 4.0 * a.sin(), 1.0);
+                let cam = Camera::look_at(
+                    Intrinsics::centered(1.0, 1, 1),
+                    eye,
+                    Vector3::zeros(),
+                    Vector3::z(),
+                );
+                frames.push(json!({
+                    "file_path": format!("./{split}/r_{i}"),
+                    "rotation": 0.0,
+                    "transform_matrix": gl_matrix(&cam.camera_to_world()),
+                }));
+                let img = Image::filled(20, 16, &[1.0, 0.0, 0.0, 0.25]);
+                img.save_png(&dir.join(split).join(format!("r_{i}.png")))
+                    .unwrap();
+            }
+            let mut doc = json!({ "camera_angle_x": 0.6911112070083618, "frames": frames });
+            if let (Some(o), Some(e)) = (doc.as_object_mut(), extra.as_object()) {
+                for (k, v) in e {
+                    o.insert(k.clone(), v.clone());
+                }
+            }
+            std::fs::write(
+                dir.join(format!("transforms_{split}.json")),
+                serde_json::to_string_pretty(&doc).unwrap(),
+            )
+            .unwrap();
+        }
+    }
+
+    #[test]
+    fn opengl_pose_projects_known_point_to_known_pixel() {
+        // An OpenGL camera at (0, 0, 5) with identity rotation looks along −z at the origin,
+        // y up. A point up and to the right of the origin must land up-right of the centre:
+        // x = 1, y = 1, depth 5 → u = cx + f/5, v = cy − f/5.
+        let dir = tempfile::tempdir().unwrap();
+        let mut identity = [[0.0; 4]; 4];
+        for (i, row) in identity.iter_mut().enumerate() {
+            row[i] = 1.0;
+        }
+        identity[2][3] = 5.0;
+        let doc = json!({
+            "fl_x": 50.0, "fl_y": 40.0, "cx": 10.0, "cy": 7.5, "w": 20, "h": 15,
+            "k1": 0.0, "p1": 0.0,
+            "frames": [{ "file_path": "images/a.png", "transform_matrix": identity }]
+        });
+        std::fs::create_dir_all(dir.path().join("images")).unwrap();
+        Image::filled(20, 15, &[0.5, 0.5, 0.5])
+            .save_png(&dir.path().join("images/a.png"))
+            .unwrap();
+        std::fs::write(dir.path().join("transforms.json"), doc.to_string()).unwrap();
+        let opts = LoadOptions {
+            train_views: Some(vec![0]),
+            test_views: Some(vec![0]),
+            ..Default::default()
+        };
+        let d = load::load_dataset(dir.path(), &opts).unwrap();
+        let cam = &d.views[0].camera;
+        let (u, v, z) = cam.project(&Vector3::new(1.0, 1.0, 0.0)).unwrap();
+        assert!((u - (10.0 + 50.0 / 5.0)).abs() < 1e-12, "{u}");
+        assert!((v - (7.5 - 40.0 / 5.0)).abs() < 1e-12, "{v}");
+        assert!((z - 5.0).abs() < 1e-12);
+        assert!((cam.center() - Vector3::new(0.0, 0.0, 5.0)).norm() < 1e-12);
+        assert!(d.views[0].mask.is_none());
+    }
+
+    #[test]
+    fn blender_split_composite_and_focal() {
+        let dir = tempfile::tempdir().unwrap();
+        write_blender(dir.path(), 100, 3, json!({}));
+        let d = load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
+        assert_eq!(d.views.len(), 11);
+        let names: Vec<&str> = d.train_views().map(|v| v.name.as_str()).collect();
+        assert_eq!(
+            names,
+            [
+                "r_26", "r_86", "r_2", "r_55", "r_75", "r_93", "r_16", "r_73"
+            ]
+        );
+        assert_eq!(d.test, vec![8, 9, 10]);
+        let f = 0.5 * 20.0 / (0.5f64 * 0.6911112070083618).tan();
+        let k = &d.views[0].camera.intrinsics;
+        assert!((k.fx - f).abs() < 1e-12 && k.fx == k.fy && k.cx == 10.0 && k.cy == 8.0);
+        // rgb·a + (1 − a) with rgb = (1, 0, 0), a = 0.25 (8-bit: 64/255).
+        let a = 64.0 / 255.0;
+        let px = d.views[0].image.pixel(3, 4);
+        assert!(
+            (px[0] - 1.0).abs() < 1e-6 && (px[1] - (1.0 - a)).abs() < 1e-6,
+            "{px:?}"
+        );
+        assert!((d.views[0].mask.as_ref().unwrap().get(3, 4, 0) - a).abs() < 1e-6);
+        // Each frame's camera looks at the origin.
+        for v in &d.views {
+            let (u, w, _) = v.camera.project(&Vector3::zeros()).unwrap();
+            assert!((u - 10.0).abs() < 1e-9 && (w - 8.0).abs() < 1e-9);
+        }
+        // Black background on request, explicit views, downscale.
+        let opts = LoadOptions {
+            background: Some([0.0; 3]),
+            train_views: Some(vec![5]),
+            test_views: Some(vec![2]),
+            downscale: 2,
+            ..Default::default()
+        };
+        let d = load::load_dataset(dir.path(), &opts).unwrap();
+        assert_eq!(d.views[0].name, "r_5");
+        assert!((d.views[0].image.pixel(1, 1)[0] - a).abs() < 1e-6);
+        assert_eq!((d.views[1].image.width, d.views[1].image.height), (10, 8));
+        assert!((d.views[1].camera.intrinsics.fx - f / 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bad_transforms_are_one_line_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        write_blender(dir.path(), 100, 2, json!({ "k1": 0.01 }));
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("transforms_train.json") && e.contains("distortion k1 = 0.01"),
+            "{e}"
+        );
+        write_blender(
+            dir.path(),
+            100,
+            2,
+            json!({ "camera_model": "OPENCV_FISHEYE" }),
+        );
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not a pinhole model"), "{e}");
+        write_blender(dir.path(), 100, 2, json!({ "w": 30, "fl_x": 20.0 }));
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("image is 20×16 but the file says w=30"), "{e}");
+        write_blender(dir.path(), 100, 2, json!({}));
+        let opts = LoadOptions {
+            test_views: Some(vec![2]),
+            ..Default::default()
+        };
+        let e = load::load_dataset(dir.path(), &opts)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("transforms_test.json") && e.contains("test view 2 is out of range"),
+            "{e}"
+        );
+        let opts = LoadOptions {
+            n_train: Some(101),
+            ..Default::default()
+        };
+        let e = load::load_dataset(dir.path(), &opts)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("asked for 101 training views"), "{e}");
+        std::fs::remove_file(dir.path().join("train/r_86.png")).unwrap();
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("r_86.png"), "{e}");
+        // NaN (Python's json writes it as a bare NaN, which is not JSON) and truncated JSON.
+        let text = std::fs::read_to_string(dir.path().join("transforms_test.json")).unwrap();
+        std::fs::write(
+            dir.path().join("transforms_test.json"),
+            text.replacen("1.0", "NaN", 1),
+        )
+        .unwrap();
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("transforms_test.json") && e.contains("invalid transforms JSON"),
+            "{e}"
+        );
+        std::fs::write(
+            dir.path().join("transforms_test.json"),
+            &text[..text.len() / 2],
+        )
+        .unwrap();
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("invalid transforms JSON"), "{e}");
+        // A non-rotation matrix.
+        let doc = json!({ "camera_angle_x": 0.5, "frames": [{ "file_path": "a", "transform_matrix": [[2.0,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]] }] });
+        std::fs::write(dir.path().join("transforms_test.json"), doc.to_string()).unwrap();
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not orthonormal"), "{e}");
+    }
+
+    #[test]
+    fn nerfstudio_masks_sorting_and_split() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(dir.path().join("images")).unwrap();
+        let mut frames = Vec::new();
+        for i in (0..10).rev() {
+            let eye = Vector3::new(3.0, i as f64 * 0.2, 1.0);
+            let cam = Camera::look_at(
+                Intrinsics::centered(1.0, 1, 1),
+                eye,
+                Vector3::zeros(),
+                Vector3::z(),
+            );
+            frames.push(json!({
+                "file_path": format!("images/f_{i:02}.jpg"),
+                "mask_path": format!("images/m_{i:02}.png"),
+                "transform_matrix": gl_matrix(&cam.camera_to_world()),
+                "fl_x": 12.0,
+            }));
+            Image::filled(8, 6, &[0.1, 0.2, 0.3])
+                .save_png(&dir.path().join(format!("images/f_{i:02}.jpg")))
+                .unwrap();
+            let mut m = Image::new(8, 6, 1);
+            m.set(2, 3, 0, 1.0);
+            m.save_png(&dir.path().join(format!("images/m_{i:02}.png")))
+                .unwrap();
+        }
+        let doc = json!({ "camera_model": "OPENCV", "k1": 0.0, "frames": frames });
+        std::fs::write(dir.path().join("transforms.json"), doc.to_string()).unwrap();
+        let d = load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
+        let names: Vec<&str> = d.views.iter().map(|v| v.name.as_str()).collect();
+        assert_eq!(names[..3], ["f_00", "f_01", "f_02"]);
+        assert_eq!(d.test, vec![0, 8]);
+        assert_eq!(d.train, vec![1, 2, 3, 4, 5, 6, 7, 9]);
+        let m = d.views[4].mask.as_ref().unwrap();
+        assert_eq!((m.get(2, 3, 0), m.get(3, 3, 0), m.channels), (1.0, 0.0, 1));
+        assert!((d.views[4].camera.center() - Vector3::new(3.0, 0.8, 1.0)).norm() < 1e-9);
+        let d = load::load_dataset(
+            dir.path(),
+            &LoadOptions {
+                n_train: Some(3),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(d.train, vec![1, 5, 9]);
+    }
+}

@@ -1,0 +1,388 @@
+//! The training loop: render a training view through the Burn op, photometric loss plus any
+//! pluggable [`LossTerm`]s, backward, Adam, densification — and checkpoints that resume to the
+//! same result.
+
+use burn::tensor::{Device, Tensor, TensorData};
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+use rand::seq::SliceRandom;
+use serde::{Deserialize, Serialize};
+
+use super::adam::AdamState;
+use super::config::TrainConfig;
+use super::densify::{DensifyReport, DensifyStats, ModelAdam, densify_and_prune, reset_opacity};
+use crate::loss::photometric_loss;
+use crate::model::GaussianModel;
+use crate::op::{GaussianTensors, RenderTensors, RenderView, render};
+use crate::raster::{RenderCamera, RenderSettings};
+
+/// A training image as the loop uses it.
+#[derive(Clone, Debug)]
+pub struct TrainView {
+    pub name: String,
+    pub camera: RenderCamera,
+    /// `[H, W, 3]` target.
+    pub target: Tensor<3>,
+}
+
+impl TrainView {
+    pub fn new(
+        name: impl Into<String>,
+        camera: RenderCamera,
+        image: &fewview_scene::Image,
+        device: &Device,
+    ) -> Self {
+        let target = Tensor::<3>::from_data(
+            TensorData::new(
+                image.data.clone(),
+                [image.height, image.width, image.channels],
+            ),
+            device,
+        );
+        Self {
+            name: name.into(),
+            camera,
+            target,
+        }
+    }
+}
+
+/// What a loss term sees at one iteration.
+pub struct LossContext<'a> {
+    /// 1-based iteration.
+    pub iteration: usize,
+    /// The training view rendered for the photometric loss this iteration.
+    pub view_index: usize,
+    pub views: &'a [TrainView],
+    /// The parameters being optimised (tracked: losses built from them reach the optimiser).
+    pub gaussians: &'a GaussianTensors,
+    /// The same parameters on the host (for neighbour searches and the like).
+    pub model: &'a GaussianModel,
+    pub settings: &'a RenderSettings,
+    /// Scene extent (radius of the training cameras).
+    pub extent: f32,
+    /// The photometric render of this iteration.
+    pub render: &'a RenderTensors,
+}
+
+impl LossContext<'_> {
+    /// Renders the current Gaussians from any camera (e.g. a virtual camera between training
+    /// views); gradients flow back to the parameters.
+    pub fn render(&self, camera: &RenderCamera) -> RenderTensors {
+        let n = self.model.len();
+        let device = self.gaussians.means.device();
+        render(
+            self.gaussians,
+            Tensor::<2>::zeros([n, 2], &device),
+            &RenderView {
+                camera: camera.clone(),
+                settings: self.settings.clone(),
+            },
+        )
+    }
+}
+
+/// An extra loss term (e.g. the fusion method of paper 000 and its ablations).
+pub trait LossTerm: Send {
+    fn name(&self) -> &str;
+    /// This term's (already weighted) loss at this iteration, or `None` to skip.
+    fn loss(&mut self, ctx: &LossContext<'_>) -> Option<Tensor<1>>;
+}
+
+/// Progress of one iteration, for progress bars and logs.
+#[derive(Clone, Debug, Serialize)]
+pub struct Progress {
+    pub iteration: usize,
+    pub iterations: usize,
+    pub loss: f32,
+    pub gaussians: usize,
+    pub densified: Option<DensifyReport>,
+}
+
+/// Why training stopped early.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error("training diverged at iteration {iteration}: loss is {loss}")]
+    Diverged { iteration: usize, loss: f32 },
+    #[error("invalid training setup: {0}")]
+    Invalid(String),
+}
+
+/// Everything that changes during training; saved in checkpoints.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrainState {
+    /// Iterations completed.
+    pub iteration: usize,
+    pub model: GaussianModel,
+    pub adam: ModelAdam,
+    pub stats: DensifyStats,
+}
+
+/// A training run.
+pub struct Trainer {
+    pub config: TrainConfig,
+    pub state: TrainState,
+    pub views: Vec<TrainView>,
+    /// Scene extent (3DGS: 1.1 × the largest camera distance from their mean).
+    pub extent: f32,
+    pub device: Device,
+    terms: Vec<Box<dyn LossTerm>>,
+}
+
+impl Trainer {
+    pub fn new(
+        config: TrainConfig,
+        model: GaussianModel,
+        views: Vec<TrainView>,
+        extent: f32,
+        device: Device,
+    ) -> Result<Self, TrainError> {
+        config.validate().map_err(TrainError::Invalid)?;
+        model.validate().map_err(TrainError::Invalid)?;
+        if views.is_empty() {
+            return Err(TrainError::Invalid("no training views".into()));
+        }
+        if model.is_empty() {
+            return Err(TrainError::Invalid(
+                "the initial model has no Gaussians".into(),
+            ));
+        }
+        if model.sh_degree() != config.sh_degree {
+            return Err(TrainError::Invalid(format!(
+                "model has SH degree {} but the config asks for {}",
+                model.sh_degree(),
+                config.sh_degree
+            )));
+        }
+        let state = TrainState {
+            iteration: 0,
+            adam: ModelAdam::new(&model),
+            stats: DensifyStats::new(model.len()),
+            model,
+        };
+        Ok(Self {
+            config,
+            state,
+            views,
+            extent,
+            device,
+            terms: Vec::new(),
+        })
+    }
+
+    pub fn add_term(&mut self, term: Box<dyn LossTerm>) {
+        self.terms.push(term);
+    }
+
+    pub fn is_done(&self) -> bool {
+        self.state.iteration >= self.config.iterations
+    }
+
+    /// Render settings at an iteration (the active SH degree grows during training).
+    pub fn settings(&self, iteration: usize) -> RenderSettings {
+        RenderSettings {
+            background: self.config.background,
+            sh_degree: self.config.active_sh_degree(iteration),
+            near_plane: self.config.near_plane,
+        }
+    }
+
+    /// The random generator of one iteration: a pure function of the seed and the iteration, so
+    /// a resumed run makes the same choices as an uninterrupted one.
+    fn rng(&self, iteration: usize, stream: u64) -> StdRng {
+        let mix = self.config.seed
+            ^ (iteration as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ stream.rotate_left(32);
+        StdRng::seed_from_u64(mix)
+    }
+
+    /// The training view of an iteration: views in a fresh random order every epoch (as the
+    /// reference code's shuffled stack).
+    pub fn view_of(&self, iteration: usize) -> usize {
+        let n = self.views.len();
+        let epoch = (iteration - 1) / n;
+        let mut order: Vec<usize> = (0..n).collect();
+        order.shuffle(&mut self.rng(epoch, 1));
+        order[(iteration - 1) % n]
+    }
+
+    /// Runs one iteration.
+    pub fn step(&mut self) -> Result<Progress, TrainError> {
+        let it = self.state.iteration + 1;
+        let cfg = self.config.clone();
+        let view_index = self.view_of(it);
+        let settings = self.settings(it);
+        let n = self.state.model.len();
+
+        let gaussians = self.state.model.to_tensors(&self.device, true);
+        let probe = Tensor::<2>::zeros([n, 2], &self.device).require_grad();
+        let view = &self.views[view_index];
+        let out = render(
+            &gaussians,
+            probe.clone(),
+            &RenderView {
+                camera: view.camera.clone(),
+                settings: settings.clone(),
+            },
+        );
+        let [h, w, _] = out.image.dims();
+        let rgb = out.image.clone().slice([0..h, 0..w, 0..3]);
+        let mut loss = photometric_loss(rgb, view.target.clone(), cfg.lambda_dssim);
+        {
+            let ctx = LossContext {
+                iteration: it,
+                view_index,
+                views: &self.views,
+                gaussians: &gaussians,
+                model: &self.state.model,
+                settings: &settings,
+                extent: self.extent,
+                render: &out,
+            };
+            for term in &mut self.terms {
+                if let Some(extra) = term.loss(&ctx) {
+                    loss = loss + extra;
+                }
+            }
+        }
+        let loss_value = loss
+            .clone()
+            .into_data()
+            .try_to_vec::<f32>()
+            .map(|v| v[0])
+            .unwrap_or(f32::NAN);
+        if !loss_value.is_finite() {
+            return Err(TrainError::Diverged {
+                iteration: it,
+                loss: loss_value,
+            });
+        }
+        let grads = loss.backward();
+        let host = |t: Option<Tensor<2>>, len: usize| -> Vec<f32> {
+            t.and_then(|t| t.into_data().try_to_vec::<f32>().ok())
+                .unwrap_or_else(|| vec![0.0; len])
+        };
+        let g_means = host(gaussians.means.grad(&grads), n * 3);
+        let g_scales = host(gaussians.log_scales.grad(&grads), n * 3);
+        let g_quats = host(gaussians.quats.grad(&grads), n * 4);
+        let g_opacity = gaussians
+            .opacity_logits
+            .grad(&grads)
+            .and_then(|t| t.into_data().try_to_vec::<f32>().ok())
+            .unwrap_or_else(|| vec![0.0; n]);
+        let k3 = self.state.model.sh_coeffs * 3;
+        let g_sh = gaussians
+            .sh
+            .grad(&grads)
+            .and_then(|t| t.into_data().try_to_vec::<f32>().ok())
+            .unwrap_or_else(|| vec![0.0; n * k3]);
+        let g_probe = host(probe.grad(&grads), n * 2);
+        let radii = out
+            .radii
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap_or_else(|_| vec![0.0; n]);
+        if [&g_means, &g_scales, &g_quats, &g_opacity, &g_sh]
+            .iter()
+            .any(|g| g.iter().any(|v| !v.is_finite()))
+        {
+            return Err(TrainError::Diverged {
+                iteration: it,
+                loss: f32::NAN,
+            });
+        }
+
+        // Densification (before the optimiser step, as the reference code; an iteration that
+        // densifies skips the step because its gradients belong to the old set).
+        let d = &cfg.densify;
+        let mut densified = None;
+        if it < d.until_iter {
+            self.state.stats.record(&radii, &g_probe);
+            if it > d.from_iter && it % d.interval == 0 {
+                let screen = (it > d.opacity_reset_interval).then_some(d.max_screen_size);
+                let mut rng = self.rng(it, 2);
+                densified = Some(densify_and_prune(
+                    &mut self.state.model,
+                    &mut self.state.adam,
+                    &mut self.state.stats,
+                    d,
+                    self.extent,
+                    screen,
+                    &mut rng,
+                ));
+            }
+            if it % d.opacity_reset_interval == 0 {
+                reset_opacity(&mut self.state.model, &mut self.state.adam);
+            }
+        }
+        if densified.is_none() {
+            self.adam_step(it, &g_means, &g_scales, &g_quats, &g_opacity, &g_sh);
+        }
+        self.state.iteration = it;
+        Ok(Progress {
+            iteration: it,
+            iterations: cfg.iterations,
+            loss: loss_value,
+            gaussians: self.state.model.len(),
+            densified,
+        })
+    }
+
+    fn adam_step(
+        &mut self,
+        it: usize,
+        gm: &[f32],
+        gs: &[f32],
+        gq: &[f32],
+        go: &[f32],
+        gsh: &[f32],
+    ) {
+        let cfg = &self.config;
+        let lr = &cfg.lr;
+        let m = &mut self.state.model;
+        let a = &mut self.state.adam;
+        let pos_lr = cfg.position_lr(it, self.extent);
+        a.means.step(&mut m.means, gm, pos_lr, &cfg.adam);
+        a.log_scales
+            .step(&mut m.log_scales, gs, lr.scaling, &cfg.adam);
+        a.quats.step(&mut m.quats, gq, lr.rotation, &cfg.adam);
+        a.opacity_logits
+            .step(&mut m.opacity_logits, go, lr.opacity, &cfg.adam);
+        step_sh(&mut a.sh, &mut m.sh, gsh, lr.f_dc, lr.f_rest, cfg);
+    }
+
+    /// Trains to the end (or until `should_stop` says so), reporting progress and saving
+    /// checkpoints through `checkpoint` every `checkpoint_interval` iterations.
+    pub fn run(
+        &mut self,
+        mut on_progress: impl FnMut(&Progress),
+        mut checkpoint: impl FnMut(&TrainState, &TrainConfig) -> Result<(), String>,
+    ) -> Result<(), TrainError> {
+        while !self.is_done() {
+            let p = self.step()?;
+            on_progress(&p);
+            let every = self.config.checkpoint_interval;
+            if every > 0 && p.iteration % every == 0 && !self.is_done() {
+                checkpoint(&self.state, &self.config).map_err(TrainError::Invalid)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Adam on the SH coefficients with the DC band and the higher bands at their own rates.
+fn step_sh(
+    state: &mut AdamState,
+    params: &mut [f32],
+    grads: &[f32],
+    lr_dc: f32,
+    lr_rest: f32,
+    cfg: &TrainConfig,
+) {
+    state.step_per_column(
+        params,
+        grads,
+        |col| if col < 3 { lr_dc } else { lr_rest },
+        &cfg.adam,
+    );
+}
