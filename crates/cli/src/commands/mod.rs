@@ -16,6 +16,8 @@ mod register;
 mod render;
 mod train;
 mod train_args;
+pub mod eval_video;
+pub mod study;
 
 use clap::Subcommand;
 
@@ -34,6 +36,10 @@ pub enum Command {
     Register(register::Args),
     Chamfer(chamfer::Args),
     PoseError(pose_error::Args),
+    /// Temporal-coherence metrics of a rendered frame sequence against ground truth.
+    EvalVideo(eval_video::Args),
+    /// Pairwise 2AFC user study: serve the page, analyse the answers.
+    Study(study::Args),
 }
 
 pub fn run(command: Command) -> anyhow::Result<()> {
@@ -50,5 +56,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Register(a) => register::run(a),
         Command::Chamfer(a) => chamfer::run(a),
         Command::PoseError(a) => pose_error::run(a),
+        Command::EvalVideo(args) => eval_video::run(args),
+        Command::Study(args) => study::run(args),
     }
 }
