@@ -2,8 +2,8 @@
 
 pub mod bench;
 pub mod error;
-pub mod pose_error;
 pub mod lpips;
+pub mod pose_error;
 pub mod psnr;
 pub mod ssim;
 pub mod study;

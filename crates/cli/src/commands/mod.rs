@@ -8,16 +8,16 @@ mod demo;
 mod depth_mesh;
 mod depth_points;
 mod eval;
+pub mod eval_video;
 mod geom_common;
 mod mcubes;
 mod pose_error;
 mod progress;
 mod register;
 mod render;
+pub mod study;
 mod train;
 mod train_args;
-pub mod eval_video;
-pub mod study;
 
 use clap::Subcommand;
 
