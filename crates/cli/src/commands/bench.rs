@@ -8,7 +8,9 @@ use fewview_scene::load::{LoadOptions, load_dataset};
 use fewview_scene::synthetic::{DemoOptions, demo_dataset};
 use serde::Serialize;
 
-/// Measure the rasterizer (forward and backward splat–pixel pairs per CPU-second at 100k
+/// Measure speed and memory, beside references measured in the same run.
+///
+/// Measures the rasterizer (forward and backward splat–pixel pairs per CPU-second at 100k
 /// Gaussians and 504×378, beside a plain single-threaded blend loop), training iterations per
 /// second (the demo scene, and LLFF fern 3-view when the data is available), the SSIM loss, the
 /// occlusion-aware Poisson blend at 1024², and peak memory. Prints a table and writes JSON.
