@@ -62,8 +62,8 @@ fn write_llff(dir: &Path, tweak: impl Fn(usize, &mut [f64; 17])) -> PathBuf {
                     0.5 + 0.4 * (4.0 * v).cos(),
                     0.5 + 0.3 * (3.0 * (u + v)).sin(),
                 ];
-                for k in 0..3 {
-                    img.set(px, py, k, c[k] as f32);
+                for (k, ck) in c.iter().enumerate() {
+                    img.set(px, py, k, *ck as f32);
                 }
             }
         }

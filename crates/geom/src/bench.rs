@@ -4,6 +4,7 @@
 use std::time::Instant;
 
 use fewview_scene::Image;
+use fewview_scene::cputime::measure;
 use serde::Serialize;
 
 use crate::blend::{PoissonOptions, Solver, Weights, occlusion_aware_poisson_with};
@@ -67,17 +68,6 @@ pub fn blend_problem(w: usize, h: usize) -> (Image, Image, Vec<bool>, Vec<bool>)
     (f, g, mf, mg)
 }
 
-/// CPU seconds (user + system, all threads) of this process so far, on Linux.
-pub fn process_cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    // Fields after the command name (which may contain spaces) start after the last ')'.
-    let rest = &stat[stat.rfind(')')? + 2..];
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let (utime, stime): (f64, f64) = (f.get(11)?.parse().ok()?, f.get(12)?.parse().ok()?);
-    // Clock ticks are 100 Hz on every Linux configuration we target.
-    Some((utime + stime) / 100.0)
-}
-
 fn timed(w: usize, h: usize, solver: Solver) -> Result<(f64, crate::blend::PoissonStats)> {
     let (f, g, mf, mg) = blend_problem(w, h);
     let opts = PoissonOptions {
@@ -97,9 +87,9 @@ pub fn blend_1024() -> Result<BlendBench> {
 /// [`blend_1024`] at `size × size` (the reference at half that).
 pub fn blend_bench(size: usize) -> Result<BlendBench> {
     let (w, h) = (size, size);
-    let cpu0 = process_cpu_seconds();
-    let (seconds, stats) = timed(w, h, Solver::MultigridCg)?;
-    let cpu_seconds = process_cpu_seconds().zip(cpu0).map(|(b, a)| b - a);
+    let (timed_run, _, cpu) = measure(|| timed(w, h, Solver::MultigridCg));
+    let (seconds, stats) = timed_run?;
+    let cpu_seconds = Some(cpu).filter(|c| c.is_finite());
     let (rw, rh) = (w / 2, h / 2);
     let (reference_seconds, rstats) = timed(rw, rh, Solver::Direct)?;
     let (ours_small, _) = timed(rw, rh, Solver::MultigridCg)?;

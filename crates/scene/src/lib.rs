@@ -16,6 +16,7 @@ pub mod atomic;
 pub mod axes;
 pub mod camera;
 pub mod colmap;
+pub mod cputime;
 pub mod dataset;
 pub mod dtu;
 pub mod error;

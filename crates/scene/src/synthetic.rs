@@ -242,8 +242,8 @@ fn render_view(scene: &Scene, camera: &Camera, ss: usize) -> (Image, f64, f64) {
                 }
             }
             let n = (ss * ss) as f64;
-            for k in 0..3 {
-                img.set(x, y, k, (acc[k] / n) as f32);
+            for (k, sum) in acc.iter().enumerate() {
+                img.set(x, y, k, (sum / n) as f32);
             }
         }
     }

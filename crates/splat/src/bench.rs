@@ -164,8 +164,8 @@ fn reference_blend(
                     if next < T_MIN as f32 {
                         break;
                     }
-                    for k in 0..3 {
-                        c[k] += s.color[k] * alpha * tr;
+                    for (ck, sk) in c.iter_mut().zip(s.color) {
+                        *ck += sk * alpha * tr;
                     }
                     tr = next;
                 }

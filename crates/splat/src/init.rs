@@ -102,12 +102,15 @@ pub fn random_in_box(
         let p: [f64; 3] = std::array::from_fn(|a| lo[a] + (hi[a] - lo[a]) * rng.random::<f64>());
         let mut color = [0.5f32; 3];
         for (cam, img) in views {
-            if let Some((u, v, _)) = cam.project(&nalgebra::Vector3::from(p)) {
-                if u >= 0.0 && v >= 0.0 && (u as usize) < img.width && (v as usize) < img.height {
-                    let px = img.pixel(u as usize, v as usize);
-                    color = [px[0], px[1], px[2]];
-                    break;
-                }
+            if let Some((u, v, _)) = cam.project(&nalgebra::Vector3::from(p))
+                && u >= 0.0
+                && v >= 0.0
+                && (u as usize) < img.width
+                && (v as usize) < img.height
+            {
+                let px = img.pixel(u as usize, v as usize);
+                color = [px[0], px[1], px[2]];
+                break;
             }
         }
         cloud.positions.push(p.map(|v| v as f32));

@@ -3,7 +3,7 @@
 //! sparse-view training.
 
 pub mod bench;
-pub mod cputime;
+pub use fewview_scene::cputime;
 pub mod eval;
 pub mod init;
 pub mod loss;

@@ -144,7 +144,7 @@ impl SplatKernels for Flex {
             &inputs.sh,
             &inputs.means2d,
         ];
-        let shapes = tensors.map(|t| burn::backend::TensorMetadata::shape(t));
+        let shapes = tensors.map(burn::backend::TensorMetadata::shape);
         let n = shapes[3].num_elements();
         let sh_coeffs = if n == 0 {
             1

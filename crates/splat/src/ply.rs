@@ -234,8 +234,8 @@ pub fn read_ply(path: &Path) -> Result<GaussianModel, SceneError> {
     let fill = |values: &[f64], model: &mut GaussianModel| {
         let f = |i: usize| values[i] as f32;
         model.means.extend(xyz.map(f));
-        for c in 0..3 {
-            model.sh.push(f(dc[c]));
+        for &i in &dc {
+            model.sh.push(f(i));
         }
         let base = model.sh.len() - 3;
         model.sh.resize(base + k * 3, 0.0);

@@ -177,14 +177,10 @@ mod tests {
                 }
             }
         }
-        for i in 0..16 {
-            for j in 0..16 {
+        for (i, row) in gram.iter().enumerate() {
+            for (j, g) in row.iter().enumerate() {
                 let expect = if i == j { 1.0 } else { 0.0 };
-                assert!(
-                    (gram[i][j] - expect).abs() < 2e-4,
-                    "({i},{j}) = {}",
-                    gram[i][j]
-                );
+                assert!((g - expect).abs() < 2e-4, "({i},{j}) = {g}");
             }
         }
     }

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args as ClapArgs;
-use fewview_splat::pipeline::{RunSummary, train_run};
+use fewview_splat::pipeline::{RunSummary, default_iterations, train_run};
 
 use super::dataset_args::DatasetArgs;
 use super::progress;
@@ -31,7 +31,9 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let ds = args.dataset.load()?;
-    let cfg = args.train.run_config(ds.background, 3000)?;
+    let cfg = args
+        .train
+        .run_config(ds.background, default_iterations(&ds))?;
     let out = args.out.clone().unwrap_or_else(|| {
         let name = args
             .dataset

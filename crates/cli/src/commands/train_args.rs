@@ -9,7 +9,7 @@ use fewview_splat::train::TrainConfig;
 
 #[derive(Debug, Clone, Args)]
 pub struct TrainArgs {
-    /// Training iterations (default: 3000 for `train`, 2000 for `demo`). The densification
+    /// Training iterations (default for `train`: 1000 on forward-facing scenes with depth bounds, e.g. LLFF, 3000 otherwise; `demo`: 2000). The densification
     /// schedule is rescaled to the run length (see `TrainConfig::sparse_view` and the README).
     #[arg(long)]
     pub iterations: Option<usize>,

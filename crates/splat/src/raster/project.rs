@@ -8,6 +8,10 @@
 //! - conic `Σ'⁻¹`, screen centre `(fx x/z + cx, fy y/z + cy)`, depth `z`;
 //! - colour `max(0, Σ_k Y_k(d) sh_k + 0.5)` with `d` the unit direction from the camera centre;
 //! - opacity `σ(ô)`.
+//!
+//! The code indexes small matrices and vectors by their mathematical indices, and rejects NaN
+//! with negated comparisons (`!(z >= near)` is true for NaN), so two clippy lints are off here.
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 use super::{ALPHA_MIN, DILATION, FOV_CLAMP, GaussianRefs, RenderCamera};
 use crate::real::Real;
@@ -150,7 +154,7 @@ impl<F: Real> CameraF<F> {
     }
 
     #[inline]
-    fn to_camera(&self, p: [F; 3]) -> [F; 3] {
+    fn world_to_camera(&self, p: [F; 3]) -> [F; 3] {
         let r = &self.rotation;
         let t = &self.translation;
         [
@@ -194,7 +198,7 @@ fn forward_one<F: Real>(
     sh_degree: usize,
 ) -> Option<Forward<F>> {
     let p = [g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]];
-    let t = cam.to_camera(p);
+    let t = cam.world_to_camera(p);
     if !(t[2] >= cam.near) {
         return None;
     }

@@ -1,7 +1,8 @@
 //! A naive, independent renderer used as the test oracle: per pixel, every Gaussian in depth
 //! order, `f64`, projection written with `nalgebra` matrices straight from the formulas (no
 //! tiles, no bounding boxes, no vectorised kernels). Slow (O(pixels × Gaussians)); for tests
-//! and small scenes only.
+//! and small scenes only. Loops use the formulas' indices (clippy's `needless_range_loop` off).
+#![allow(clippy::needless_range_loop)]
 
 use nalgebra::{Matrix2, Matrix2x3, Matrix3, Quaternion, UnitQuaternion, Vector3};
 

@@ -298,7 +298,7 @@ impl Trainer {
         let mut densified = None;
         if it < d.until_iter {
             self.state.stats.record(&radii, &g_probe);
-            if it > d.from_iter && it % d.interval == 0 {
+            if it > d.from_iter && it.is_multiple_of(d.interval) {
                 let screen = (it > d.opacity_reset_interval).then_some(d.max_screen_size);
                 let mut rng = self.rng(it, 2);
                 densified = Some(densify_and_prune(
@@ -311,7 +311,7 @@ impl Trainer {
                     &mut rng,
                 ));
             }
-            if it % d.opacity_reset_interval == 0 {
+            if it.is_multiple_of(d.opacity_reset_interval) {
                 reset_opacity(&mut self.state.model, &mut self.state.adam);
             }
         }

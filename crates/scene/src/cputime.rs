@@ -1,5 +1,5 @@
-//! CPU time of this process (all threads), so throughput figures count the core-seconds the work
-//! actually used, independent of other load on a shared machine.
+//! CPU time of this process (all threads), for the benchmarks of every crate: throughput figures
+//! count the core-seconds the work actually used, independent of other load on a shared machine.
 
 /// Seconds of CPU time this process has used so far, summed over its threads.
 pub fn process_cpu_seconds() -> f64 {
