@@ -151,7 +151,7 @@ fn training_learns_the_demo_scene() {
         train: vec![1, 4, 7],
         supersample: 2,
     });
-    let mut cfg = RunConfig::new(TrainConfig::sparse_view(400));
+    let mut cfg = RunConfig::new(TrainConfig::sparse_view(600));
     cfg.init_points = 5000;
     let before = mean_psnr(&initial_model(&ds, &cfg).unwrap(), &ds);
     let dir = tempfile::tempdir().unwrap();
