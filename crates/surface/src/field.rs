@@ -62,6 +62,11 @@ pub struct FieldConfig {
     pub fd_scheme: FdScheme,
     /// Hash levels active from the start of the coarse-to-fine window.
     pub always_on_levels: usize,
+    /// Hidden activation of the SDF head on the hash grid. ReLU by default: the grid makes the
+    /// field only piecewise smooth anyway and normals come from finite differences, while
+    /// NeuS's Softplus(β = 100) costs two transcendental functions per unit on a CPU (the NeuS
+    /// MLP keeps Softplus(100)).
+    pub sdf_activation: crate::mlp::Activation,
 }
 
 impl Default for FieldConfig {
@@ -77,6 +82,7 @@ impl Default for FieldConfig {
             init_variance: 0.3,
             fd_scheme: FdScheme::Tetrahedron,
             always_on_levels: 4,
+            sdf_activation: Activation::Relu,
         }
     }
 }
@@ -116,7 +122,7 @@ impl HashGridSdf {
         dims.push(1 + cfg.feature_dim);
         let spec = Arc::new(MlpSpec {
             dims,
-            hidden: Activation::Softplus(100.0),
+            hidden: cfg.sdf_activation,
             output: Activation::None,
         });
         spec.validate()?;

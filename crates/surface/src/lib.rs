@@ -16,6 +16,7 @@ pub mod hashgrid;
 pub mod losses;
 pub mod matching;
 pub mod mlp;
+pub mod pipeline;
 pub mod pose;
 pub mod rays;
 pub mod render;

@@ -295,6 +295,18 @@ pub fn surface_points(resolution: usize) -> Points {
     Points::from_positions(pts)
 }
 
+/// The true surface as a mesh: marching cubes of [`sdf`] on `resolution³` samples over
+/// `[−0.8, 0.8]³` (vertex error O(voxel²) of the curvature, ~10⁻⁵ at 256).
+pub fn surface_mesh(resolution: usize) -> fewview_geom::Result<fewview_geom::Mesh> {
+    fewview_geom::mcubes::marching_cubes_chunked(
+        |p: &[[f64; 3]]| p.iter().map(|q| sdf(&Vector3::new(q[0], q[1], q[2])) as f32).collect(),
+        ([-0.8; 3], [0.8; 3]),
+        [resolution; 3],
+        32,
+        0.0,
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -13,6 +13,7 @@ mod pose_error;
 mod progress;
 mod register;
 mod render;
+mod surface;
 mod train;
 mod train_args;
 
@@ -32,6 +33,7 @@ pub enum Command {
     Register(register::Args),
     Chamfer(chamfer::Args),
     PoseError(pose_error::Args),
+    Surface(surface::Args),
 }
 
 pub fn run(command: Command) -> anyhow::Result<()> {
@@ -47,5 +49,6 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Register(a) => register::run(a),
         Command::Chamfer(a) => chamfer::run(a),
         Command::PoseError(a) => pose_error::run(a),
+        Command::Surface(a) => surface::run(a),
     }
 }

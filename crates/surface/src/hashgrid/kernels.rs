@@ -24,7 +24,7 @@ struct Cell<T> {
     dweight: [[T; 3]; 8],
 }
 
-#[inline]
+#[inline(always)]
 fn vertex_index(lay: &LevelLayout, x: u32, y: u32, z: u32) -> usize {
     if lay.dense {
         let n = lay.resolution as usize + 1;
@@ -35,7 +35,7 @@ fn vertex_index(lay: &LevelLayout, x: u32, y: u32, z: u32) -> usize {
     }
 }
 
-#[inline]
+#[inline(always)]
 fn cell<T: Float>(p: [T; 3], lay: &LevelLayout, bound: T, with_grad: bool) -> Cell<T> {
     let one = T::one();
     let two = one + one;
@@ -81,6 +81,169 @@ fn cell<T: Float>(p: [T; 3], lay: &LevelLayout, bound: T, with_grad: bool) -> Ce
     out
 }
 
+#[inline(always)]
+fn forward_chunk<T: Float>(
+    layout: &GridLayout,
+    table: &[T],
+    window: &[T],
+    bound: T,
+    pos: &[T],
+    o: &mut [T],
+) {
+    let nf = layout.features;
+    let dim = layout.levels.len() * nf;
+    for (k, p) in pos.chunks_exact(3).enumerate() {
+        let p = [p[0], p[1], p[2]];
+        let row = &mut o[k * dim..(k + 1) * dim];
+        for (l, lay) in layout.levels.iter().enumerate() {
+            let m = window[l];
+            if m == T::zero() {
+                continue;
+            }
+            let c = cell(p, lay, bound, false);
+            for f in 0..nf {
+                let mut acc = T::zero();
+                for v in 0..8 {
+                    acc = acc + c.weight[v] * table[(lay.offset + c.index[v]) * nf + f];
+                }
+                row[l * nf + f] = m * acc;
+            }
+        }
+    }
+}
+
+#[inline(always)]
+fn backward_table_level<T: Float>(
+    lay: &LevelLayout,
+    l: usize,
+    nf: usize,
+    dim: usize,
+    m: T,
+    bound: T,
+    positions: &[T],
+    grad_out: &[T],
+    g: &mut [T],
+) {
+    for (k, p) in positions.chunks_exact(3).enumerate() {
+        let go = &grad_out[k * dim + l * nf..k * dim + (l + 1) * nf];
+        if go.iter().all(|v| *v == T::zero()) {
+            continue;
+        }
+        let c = cell([p[0], p[1], p[2]], lay, bound, false);
+        for v in 0..8 {
+            let w = m * c.weight[v];
+            let base = c.index[v] * nf;
+            for f in 0..nf {
+                g[base + f] = g[base + f] + w * go[f];
+            }
+        }
+    }
+}
+
+#[inline(always)]
+fn backward_positions_chunk<T: Float>(
+    layout: &GridLayout,
+    table: &[T],
+    window: &[T],
+    bound: T,
+    pos: &[T],
+    go: &[T],
+    gp: &mut [T],
+) {
+    let nf = layout.features;
+    let dim = layout.levels.len() * nf;
+    for (k, p) in pos.chunks_exact(3).enumerate() {
+        let mut acc = [T::zero(); 3];
+        for (l, lay) in layout.levels.iter().enumerate() {
+            let m = window[l];
+            if m == T::zero() {
+                continue;
+            }
+            let g = &go[k * dim + l * nf..k * dim + (l + 1) * nf];
+            let c = cell([p[0], p[1], p[2]], lay, bound, true);
+            for v in 0..8 {
+                let mut dot = T::zero();
+                let base = (lay.offset + c.index[v]) * nf;
+                for f in 0..nf {
+                    dot = dot + table[base + f] * g[f];
+                }
+                let dot = dot * m;
+                for a in 0..3 {
+                    acc[a] = acc[a] + c.dweight[v][a] * dot;
+                }
+            }
+        }
+        gp[k * 3..k * 3 + 3].copy_from_slice(&acc);
+    }
+}
+
+/// Calls an `#[inline(always)]` kernel through a copy compiled for AVX2 + FMA when the CPU
+/// has them (wider vectors and a hardware `floor`; no fused multiply-adds, so the results are
+/// the same as the baseline build's).
+macro_rules! dispatch {
+    ($f:ident($($arg:expr),*)) => {{
+        #[cfg(target_arch = "x86_64")]
+        {
+            if crate::mlp::kernels::has_avx2() {
+                // SAFETY: the CPU supports AVX2 and FMA (checked just above).
+                unsafe { avx2::$f($($arg),*) }
+            } else {
+                $f($($arg),*)
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            $f($($arg),*)
+        }
+    }};
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::*;
+
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn forward_chunk<T: Float>(
+        layout: &GridLayout,
+        table: &[T],
+        window: &[T],
+        bound: T,
+        pos: &[T],
+        o: &mut [T],
+    ) {
+        super::forward_chunk(layout, table, window, bound, pos, o)
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn backward_table_level<T: Float>(
+        lay: &LevelLayout,
+        l: usize,
+        nf: usize,
+        dim: usize,
+        m: T,
+        bound: T,
+        positions: &[T],
+        grad_out: &[T],
+        g: &mut [T],
+    ) {
+        super::backward_table_level(lay, l, nf, dim, m, bound, positions, grad_out, g)
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn backward_positions_chunk<T: Float>(
+        layout: &GridLayout,
+        table: &[T],
+        window: &[T],
+        bound: T,
+        pos: &[T],
+        go: &[T],
+        gp: &mut [T],
+    ) {
+        super::backward_positions_chunk(layout, table, window, bound, pos, go, gp)
+    }
+}
+
 /// Encodes `positions` (`[N, 3]` flat): returns `[N, L·F]` features, level `l`'s scaled by
 /// `window[l]`.
 pub fn forward<T: Float + Send + Sync>(
@@ -97,26 +260,7 @@ pub fn forward<T: Float + Send + Sync>(
     let mut out = vec![T::zero(); n * dim];
     out.par_chunks_mut(CHUNK * dim)
         .zip(positions.par_chunks(CHUNK * 3))
-        .for_each(|(o, pos)| {
-            for (k, p) in pos.chunks_exact(3).enumerate() {
-                let p = [p[0], p[1], p[2]];
-                let row = &mut o[k * dim..(k + 1) * dim];
-                for (l, lay) in layout.levels.iter().enumerate() {
-                    let m = window[l];
-                    if m == T::zero() {
-                        continue;
-                    }
-                    let c = cell(p, lay, bound, false);
-                    for f in 0..nf {
-                        let mut acc = T::zero();
-                        for v in 0..8 {
-                            acc = acc + c.weight[v] * table[(lay.offset + c.index[v]) * nf + f];
-                        }
-                        row[l * nf + f] = m * acc;
-                    }
-                }
-            }
-        });
+        .for_each(|(o, pos)| dispatch!(forward_chunk(layout, table, window, bound, pos, o)));
     out
 }
 
@@ -141,22 +285,10 @@ pub fn backward_table<T: Float + Send + Sync>(
     }
     slices.into_par_iter().for_each(|(l, lay, g)| {
         let m = window[l];
-        if m == T::zero() {
-            return;
-        }
-        for (k, p) in positions.chunks_exact(3).enumerate() {
-            let go = &grad_out[k * dim + l * nf..k * dim + (l + 1) * nf];
-            if go.iter().all(|v| *v == T::zero()) {
-                continue;
-            }
-            let c = cell([p[0], p[1], p[2]], lay, bound, false);
-            for v in 0..8 {
-                let w = m * c.weight[v];
-                let base = c.index[v] * nf;
-                for f in 0..nf {
-                    g[base + f] = g[base + f] + w * go[f];
-                }
-            }
+        if m != T::zero() {
+            dispatch!(backward_table_level(
+                lay, l, nf, dim, m, bound, positions, grad_out, g
+            ));
         }
     });
     grad
@@ -178,29 +310,9 @@ pub fn backward_positions<T: Float + Send + Sync>(
         .zip(positions.par_chunks(CHUNK * 3))
         .zip(grad_out.par_chunks(CHUNK * dim))
         .for_each(|((gp, pos), go)| {
-            for (k, p) in pos.chunks_exact(3).enumerate() {
-                let mut acc = [T::zero(); 3];
-                for (l, lay) in layout.levels.iter().enumerate() {
-                    let m = window[l];
-                    if m == T::zero() {
-                        continue;
-                    }
-                    let g = &go[k * dim + l * nf..k * dim + (l + 1) * nf];
-                    let c = cell([p[0], p[1], p[2]], lay, bound, true);
-                    for v in 0..8 {
-                        let mut dot = T::zero();
-                        let base = (lay.offset + c.index[v]) * nf;
-                        for f in 0..nf {
-                            dot = dot + table[base + f] * g[f];
-                        }
-                        let dot = dot * m;
-                        for a in 0..3 {
-                            acc[a] = acc[a] + c.dweight[v][a] * dot;
-                        }
-                    }
-                }
-                gp[k * 3..k * 3 + 3].copy_from_slice(&acc);
-            }
+            dispatch!(backward_positions_chunk(
+                layout, table, window, bound, pos, go, gp
+            ))
         });
     grad
 }

@@ -13,7 +13,7 @@ use super::{Activation, MlpSpec};
 /// Rows per parallel work item.
 const ROWS: usize = 256;
 
-#[inline]
+#[inline(always)]
 fn act<T: Float>(a: Activation, z: T) -> T {
     match a {
         Activation::None => z,
@@ -32,7 +32,7 @@ fn act<T: Float>(a: Activation, z: T) -> T {
 }
 
 /// `d act / d z` written in terms of the output `y = act(z)`.
-#[inline]
+#[inline(always)]
 fn dact<T: Float>(a: Activation, y: T) -> T {
     match a {
         Activation::None => T::one(),
@@ -49,6 +49,7 @@ fn dact<T: Float>(a: Activation, y: T) -> T {
     }
 }
 
+#[inline(always)]
 /// Forward of one row; `acts` receives every layer's output (input first), `acts[k]` of width
 /// `dims[k]`.
 fn row_forward<T: Float>(spec: &MlpSpec, params: &[T], input: &[T], acts: &mut [Vec<T>]) {
@@ -64,14 +65,12 @@ fn row_forward<T: Float>(spec: &MlpSpec, params: &[T], input: &[T], acts: &mut [
         let x = &lo[k];
         let y = &mut hi[0];
         y.copy_from_slice(b);
-        for i in 0..din {
-            let xi = x[i];
+        for (&xi, wr) in x.iter().zip(w.chunks_exact(dout)) {
             if xi == T::zero() {
                 continue;
             }
-            let wr = &w[i * dout..(i + 1) * dout];
-            for j in 0..dout {
-                y[j] = y[j] + xi * wr[j];
+            for (yj, &wj) in y.iter_mut().zip(wr) {
+                *yj = *yj + xi * wj;
             }
         }
         let a = if k + 1 == n_layers {
@@ -96,14 +95,40 @@ pub fn forward<T: Float + Send + Sync>(spec: &MlpSpec, params: &[T], input: &[T]
     let mut out = vec![T::zero(); n * dout];
     out.par_chunks_mut(ROWS * dout)
         .zip(input.par_chunks(ROWS * din))
-        .for_each(|(o, x)| {
-            let mut acts = buffers::<T>(spec);
-            for (r, xr) in x.chunks_exact(din).enumerate() {
-                row_forward(spec, params, xr, &mut acts);
-                o[r * dout..(r + 1) * dout].copy_from_slice(acts.last().unwrap());
-            }
-        });
+        .for_each(|(o, x)| forward_block_best(spec, params, x, o));
     out
+}
+
+#[inline(always)]
+fn forward_block<T: Float>(spec: &MlpSpec, params: &[T], x: &[T], o: &mut [T]) {
+    let (din, dout) = (spec.dims[0], *spec.dims.last().unwrap());
+    let mut acts = buffers::<T>(spec);
+    for (r, xr) in x.chunks_exact(din).enumerate() {
+        row_forward(spec, params, xr, &mut acts);
+        o[r * dout..(r + 1) * dout].copy_from_slice(acts.last().unwrap());
+    }
+}
+
+/// Whether the CPU runs the AVX2 + FMA builds of the kernels (same results: no fused
+/// multiply-adds are introduced, only wider vectors).
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn has_avx2() -> bool {
+    std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+}
+
+fn forward_block_best<T: Float>(spec: &MlpSpec, params: &[T], x: &[T], o: &mut [T]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx2,fma")]
+        fn avx2<T: Float>(spec: &MlpSpec, params: &[T], x: &[T], o: &mut [T]) {
+            forward_block(spec, params, x, o)
+        }
+        if has_avx2() {
+            // SAFETY: the CPU supports AVX2 and FMA (checked just above).
+            return unsafe { avx2(spec, params, x, o) };
+        }
+    }
+    forward_block(spec, params, x, o)
 }
 
 /// Gradients `(d input [N, dims[0]], d params [P])` given `grad_out [N, dims.last()]`.
@@ -124,6 +149,20 @@ pub fn backward<T: Float + Send + Sync>(
         offsets.push(off);
         off += spec.dims[k] * spec.dims[k + 1] + spec.dims[k + 1];
     }
+    // Transposed weights, so the input gradient `W g` vectorises over the inputs.
+    let transposed: Vec<Vec<T>> = (0..n_layers)
+        .map(|k| {
+            let (kin, kout) = (spec.dims[k], spec.dims[k + 1]);
+            let w = &params[offsets[k]..offsets[k] + kin * kout];
+            let mut t = vec![T::zero(); kin * kout];
+            for i in 0..kin {
+                for j in 0..kout {
+                    t[j * kin + i] = w[i * kout + j];
+                }
+            }
+            t
+        })
+        .collect();
     let mut grad_in = vec![T::zero(); if want_input { n * din } else { 0 }];
     let blocks = n.div_ceil(ROWS);
     let block_grads: Vec<(usize, Vec<T>, Vec<T>)> = (0..blocks)
@@ -132,61 +171,20 @@ pub fn backward<T: Float + Send + Sync>(
             let rows = blk * ROWS..((blk + 1) * ROWS).min(n);
             let mut gp = vec![T::zero(); params.len()];
             let mut gin = vec![T::zero(); if want_input { rows.len() * din } else { 0 }];
-            let mut acts = buffers::<T>(spec);
-            let mut g: Vec<Vec<T>> = buffers::<T>(spec);
-            for (r, row) in rows.clone().enumerate() {
-                row_forward(spec, params, &input[row * din..(row + 1) * din], &mut acts);
-                g[n_layers].copy_from_slice(&grad_out[row * dout..(row + 1) * dout]);
-                for k in (0..n_layers).rev() {
-                    let (kin, kout) = (spec.dims[k], spec.dims[k + 1]);
-                    let a = if k + 1 == n_layers {
-                        spec.output
-                    } else {
-                        spec.hidden
-                    };
-                    // g[k+1] ← g[k+1] ⊙ act'(pre).
-                    {
-                        let y = &acts[k + 1];
-                        let gk = &mut g[k + 1];
-                        for j in 0..kout {
-                            gk[j] = gk[j] * dact(a, y[j]);
-                        }
-                    }
-                    let o = offsets[k];
-                    let (gw, rest) = gp[o..].split_at_mut(kin * kout);
-                    let gb = &mut rest[..kout];
-                    let x = &acts[k];
-                    let (glo, ghi) = g.split_at_mut(k + 1);
-                    let gz = &ghi[0];
-                    for j in 0..kout {
-                        gb[j] = gb[j] + gz[j];
-                    }
-                    for i in 0..kin {
-                        let xi = x[i];
-                        if xi != T::zero() {
-                            let row_w = &mut gw[i * kout..(i + 1) * kout];
-                            for j in 0..kout {
-                                row_w[j] = row_w[j] + xi * gz[j];
-                            }
-                        }
-                    }
-                    if k > 0 || want_input {
-                        let w = &params[o..o + kin * kout];
-                        let gx = &mut glo[k];
-                        for i in 0..kin {
-                            let wr = &w[i * kout..(i + 1) * kout];
-                            let mut s = T::zero();
-                            for j in 0..kout {
-                                s = s + wr[j] * gz[j];
-                            }
-                            gx[i] = s;
-                        }
-                    }
-                }
-                if want_input {
-                    gin[r * din..(r + 1) * din].copy_from_slice(&g[0]);
-                }
-            }
+            let ctx = BackwardCtx {
+                spec,
+                params,
+                offsets: &offsets,
+                transposed: &transposed,
+                want_input,
+            };
+            backward_block_best(
+                &ctx,
+                &input[rows.start * din..rows.end * din],
+                &grad_out[rows.start * dout..rows.end * dout],
+                &mut gp,
+                &mut gin,
+            );
             (blk, gp, gin)
         })
         .collect();
@@ -201,6 +199,112 @@ pub fn backward<T: Float + Send + Sync>(
         }
     }
     (grad_in, grad_params)
+}
+
+/// Shared inputs of the backward blocks.
+struct BackwardCtx<'a, T> {
+    spec: &'a MlpSpec,
+    params: &'a [T],
+    offsets: &'a [usize],
+    transposed: &'a [Vec<T>],
+    want_input: bool,
+}
+
+#[inline(always)]
+fn backward_block<T: Float>(
+    ctx: &BackwardCtx<T>,
+    input: &[T],
+    grad_out: &[T],
+    gp: &mut [T],
+    gin: &mut [T],
+) {
+    let BackwardCtx {
+        spec,
+        params,
+        offsets,
+        transposed,
+        want_input,
+    } = *ctx;
+    let (din, dout) = (spec.dims[0], *spec.dims.last().unwrap());
+    let n_layers = spec.dims.len() - 1;
+    let rows = input.len() / din;
+    let mut acts = buffers::<T>(spec);
+    let mut g: Vec<Vec<T>> = buffers::<T>(spec);
+    for r in 0..rows {
+        row_forward(spec, params, &input[r * din..(r + 1) * din], &mut acts);
+        g[n_layers].copy_from_slice(&grad_out[r * dout..(r + 1) * dout]);
+        for k in (0..n_layers).rev() {
+            let (kin, kout) = (spec.dims[k], spec.dims[k + 1]);
+            let a = if k + 1 == n_layers {
+                spec.output
+            } else {
+                spec.hidden
+            };
+            // g[k+1] ← g[k+1] ⊙ act'(pre).
+            for (gj, &yj) in g[k + 1].iter_mut().zip(&acts[k + 1]) {
+                *gj = *gj * dact(a, yj);
+            }
+            let o = offsets[k];
+            let (gw, rest) = gp[o..].split_at_mut(kin * kout);
+            let gb = &mut rest[..kout];
+            let x = &acts[k];
+            let (glo, ghi) = g.split_at_mut(k + 1);
+            let gz = &ghi[0];
+            for (b, &z) in gb.iter_mut().zip(gz) {
+                *b = *b + z;
+            }
+            for (&xi, row_w) in x.iter().zip(gw.chunks_exact_mut(kout)) {
+                if xi != T::zero() {
+                    for (w, &z) in row_w.iter_mut().zip(gz) {
+                        *w = *w + xi * z;
+                    }
+                }
+            }
+            if k > 0 || want_input {
+                let wt = &transposed[k];
+                let gx = &mut glo[k];
+                gx.fill(T::zero());
+                for (&gj, col) in gz.iter().zip(wt.chunks_exact(kin)) {
+                    if gj == T::zero() {
+                        continue;
+                    }
+                    for (x, &c) in gx.iter_mut().zip(col) {
+                        *x = *x + gj * c;
+                    }
+                }
+            }
+        }
+        if want_input {
+            gin[r * din..(r + 1) * din].copy_from_slice(&g[0]);
+        }
+    }
+}
+
+fn backward_block_best<T: Float>(
+    ctx: &BackwardCtx<T>,
+    input: &[T],
+    grad_out: &[T],
+    gp: &mut [T],
+    gin: &mut [T],
+) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx2,fma")]
+        fn avx2<T: Float>(
+            ctx: &BackwardCtx<T>,
+            input: &[T],
+            grad_out: &[T],
+            gp: &mut [T],
+            gin: &mut [T],
+        ) {
+            backward_block(ctx, input, grad_out, gp, gin)
+        }
+        if has_avx2() {
+            // SAFETY: the CPU supports AVX2 and FMA (checked just above).
+            return unsafe { avx2(ctx, input, grad_out, gp, gin) };
+        }
+    }
+    backward_block(ctx, input, grad_out, gp, gin)
 }
 
 #[cfg(test)]
