@@ -2,9 +2,12 @@
 
 pub mod bench;
 pub mod error;
+pub mod lpips;
 pub mod pose_error;
 pub mod psnr;
 pub mod ssim;
+pub mod study;
+pub mod temporal;
 
 pub use error::MetricsError;
 pub use psnr::{mse, psnr, psnr_from_mse, psnr_masked};

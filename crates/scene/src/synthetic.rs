@@ -59,7 +59,7 @@ struct Scene {
 /// The back wall is the plane y = WALL_Y; ground and wall span |x| ≤ HALF_WIDTH.
 const WALL_Y: f64 = 2.5;
 const HALF_WIDTH: f64 = 3.5;
-const WALL_HEIGHT: f64 = 3.0;
+const WALL_HEIGHT: f64 = 6.0;
 const EPS: f64 = 1e-9;
 
 impl Scene {
@@ -179,7 +179,7 @@ pub fn demo_dataset(opts: &DemoOptions) -> Dataset {
         } else {
             0.5
         };
-        let azimuth = (-50.0 + 100.0 * s).to_radians();
+        let azimuth = (-25.0 + 50.0 * s).to_radians();
         let elevation = (18.0 + 8.0 * (s * std::f64::consts::PI).sin()).to_radians();
         let radius = 4.2;
         let eye = target

@@ -220,3 +220,61 @@ pub fn raster_bench(n: usize, width: usize, height: usize, runs: usize) -> Raste
         forward_vs_reference: per_core(out.pairs, forward_cpu_seconds) / reference_pairs_per_sec,
     }
 }
+
+/// Training-step throughput on a dataset (the default sparse-view run's first iterations).
+#[derive(Clone, Debug, Serialize)]
+pub struct TrainStepBench {
+    pub dataset: String,
+    pub width: usize,
+    pub height: usize,
+    pub gaussians: usize,
+    pub iterations: usize,
+    pub seconds: f64,
+    pub cpu_seconds: f64,
+    pub iterations_per_second: f64,
+    /// Iterations per CPU-second (per core).
+    pub iterations_per_cpu_second: f64,
+}
+
+/// Times `iterations` training steps (after 2 warm-up steps) of the default run on `ds`, from
+/// its default initialisation.
+pub fn train_step_bench(
+    ds: &fewview_scene::Dataset,
+    iterations: usize,
+) -> Result<TrainStepBench, crate::pipeline::PipelineError> {
+    use crate::pipeline::{RunConfig, initial_model};
+    use crate::raster::RenderCamera;
+    use crate::train::{TrainConfig, TrainView, Trainer};
+    let mut cfg = RunConfig::new(TrainConfig::sparse_view(3000));
+    cfg.train.background = ds.background;
+    let model = initial_model(ds, &cfg)?;
+    let device = burn::tensor::Device::flex().autodiff();
+    let views: Vec<TrainView> = ds
+        .train_views()
+        .map(|v| TrainView::new(&v.name, RenderCamera::from(&v.camera), &v.image, &device))
+        .collect();
+    let (_, extent) = ds.camera_extent();
+    let first = &ds.views[ds.train[0]].image;
+    let gaussians = model.len();
+    let mut trainer = Trainer::new(cfg.train, model, views, extent as f32, device)?;
+    trainer.step()?;
+    trainer.step()?;
+    let (result, seconds, cpu_seconds) = measure(|| {
+        for _ in 0..iterations {
+            trainer.step()?;
+        }
+        Ok::<(), crate::train::TrainError>(())
+    });
+    result?;
+    Ok(TrainStepBench {
+        dataset: ds.name.clone(),
+        width: first.width,
+        height: first.height,
+        gaussians,
+        iterations,
+        seconds,
+        cpu_seconds,
+        iterations_per_second: iterations as f64 / seconds,
+        iterations_per_cpu_second: iterations as f64 / cpu_seconds,
+    })
+}

@@ -8,6 +8,14 @@ use fewview_scene::load::LoadOptions;
 use fewview_scene::split::parse_view_list;
 use fewview_scene::{Dataset, DatasetFormat, load_dataset};
 
+/// A list of view indices (one flag value, so clap does not treat it as repeated values).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewList(pub Vec<usize>);
+
+fn parse_views(s: &str) -> Result<ViewList, String> {
+    parse_view_list(s).map(ViewList)
+}
+
 /// Which dataset and which views.
 #[derive(Debug, Clone, Args)]
 pub struct DatasetArgs {
@@ -27,11 +35,11 @@ pub struct DatasetArgs {
     #[arg(long, value_name = "N")]
     pub n_train: Option<usize>,
     /// Explicit training views, e.g. `22,25,28` (indices in the dataset's view order).
-    #[arg(long, value_name = "LIST", value_parser = parse_view_list)]
-    pub train_views: Option<Vec<usize>>,
+    #[arg(long, value_name = "LIST", value_parser = parse_views)]
+    pub train_views: Option<ViewList>,
     /// Explicit held-out views, e.g. `0,8,16`.
-    #[arg(long, value_name = "LIST", value_parser = parse_view_list)]
-    pub test_views: Option<Vec<usize>>,
+    #[arg(long, value_name = "LIST", value_parser = parse_views)]
+    pub test_views: Option<ViewList>,
     /// DTU: camera file inside the scene folder (e.g. `cameras_linear_init.npz`).
     #[arg(long, value_name = "FILE")]
     pub cameras_file: Option<String>,
@@ -43,8 +51,8 @@ impl DatasetArgs {
             format: self.format,
             downscale: self.downscale,
             n_train: self.n_train,
-            train_views: self.train_views.clone(),
-            test_views: self.test_views.clone(),
+            train_views: self.train_views.clone().map(|v| v.0),
+            test_views: self.test_views.clone().map(|v| v.0),
             cameras_file: self.cameras_file.clone(),
             ..LoadOptions::default()
         }

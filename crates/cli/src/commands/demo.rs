@@ -12,8 +12,10 @@ use fewview_splat::raster::RenderSettings;
 use super::train::{print_summary, train_with_progress};
 use super::train_args::TrainArgs;
 
-/// Build a small textured scene in-process, ray-trace 24 ground-truth views of it (an independent
-/// renderer), train 3D Gaussians from 3 of them, and report PSNR/SSIM on the other 21.
+/// Run the whole pipeline on a scene built in-process (no data needed).
+///
+/// Builds a small textured scene, ray-traces 24 ground-truth views of it (an independent
+/// renderer), trains 3D Gaussians from 3 of them, and reports PSNR/SSIM on the other 21.
 ///
 /// Writes `point_cloud.ply`, `renders/test/*.png`, `metrics.json`, the ground-truth images
 /// (`ground_truth/`) and a camera path through the training views (`path.mp4`).
@@ -51,7 +53,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for v in &ds.views {
         v.image.save_png(&gt.join(format!("{}.png", v.name)))?;
     }
-    let cfg = args.train.run_config(ds.background)?;
+    let cfg = args.train.run_config(ds.background, 2000)?;
     eprintln!(
         "training from views {:?}, holding out {} views",
         ds.train,

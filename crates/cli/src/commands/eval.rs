@@ -10,7 +10,9 @@ use fewview_splat::raster::RenderSettings;
 
 use super::dataset_args::DatasetArgs;
 
-/// Render a trained model (Inria PLY) at a dataset's held-out views and report PSNR and SSIM
+/// Score a trained model on a dataset's held-out views.
+///
+/// Renders a trained model (Inria PLY) at a dataset's held-out views and reports PSNR and SSIM
 /// (scikit-image SSIM: 11×11 Gaussian window, σ = 1.5, data range 1), masked too when the
 /// dataset has masks.
 #[derive(Debug, ClapArgs)]

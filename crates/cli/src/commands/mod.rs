@@ -1,5 +1,6 @@
 //! Subcommands: one module each, exposing `Args` (clap) and `run`.
 
+mod bench;
 mod blend;
 mod chamfer;
 mod dataset_args;
@@ -7,6 +8,7 @@ mod demo;
 mod depth_mesh;
 mod depth_points;
 mod eval;
+pub mod eval_video;
 mod geom_common;
 mod mcubes;
 mod pose_error;
@@ -14,6 +16,7 @@ mod progress;
 mod register;
 mod render;
 mod surface;
+pub mod study;
 mod train;
 mod train_args;
 
@@ -26,6 +29,7 @@ pub enum Command {
     Train(train::Args),
     Render(render::Args),
     Eval(eval::Args),
+    Bench(bench::Args),
     Blend(blend::Args),
     DepthMesh(depth_mesh::Args),
     DepthPoints(depth_points::Args),
@@ -34,6 +38,10 @@ pub enum Command {
     Chamfer(chamfer::Args),
     PoseError(pose_error::Args),
     Surface(surface::Args),
+    /// Temporal-coherence metrics of a rendered frame sequence against ground truth.
+    EvalVideo(eval_video::Args),
+    /// Pairwise 2AFC user study: serve the page, analyse the answers.
+    Study(study::Args),
 }
 
 pub fn run(command: Command) -> anyhow::Result<()> {
@@ -42,6 +50,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Train(a) => train::run(a),
         Command::Render(a) => render::run(a),
         Command::Eval(a) => eval::run(a),
+        Command::Bench(a) => bench::run(a),
         Command::Blend(a) => blend::run(a),
         Command::DepthMesh(a) => depth_mesh::run(a),
         Command::DepthPoints(a) => depth_points::run(a),
@@ -50,5 +59,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Chamfer(a) => chamfer::run(a),
         Command::PoseError(a) => pose_error::run(a),
         Command::Surface(a) => surface::run(a),
+        Command::EvalVideo(args) => eval_video::run(args),
+        Command::Study(args) => study::run(args),
     }
 }

@@ -25,7 +25,9 @@ pub enum Which {
     None,
 }
 
-/// Render a trained model (Inria PLY) at a dataset's cameras to PNG, and optionally along a smooth
+/// Render a trained model at dataset cameras and along a camera path.
+///
+/// Renders a trained model (Inria PLY) at a dataset's cameras to PNG, and optionally along a smooth
 /// camera path through the training views (rotations by SLERP, centres linearly) to a video.
 #[derive(Debug, ClapArgs)]
 pub struct Args {

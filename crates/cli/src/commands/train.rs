@@ -31,7 +31,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let ds = args.dataset.load()?;
-    let cfg = args.train.run_config(ds.background)?;
+    let cfg = args.train.run_config(ds.background, 3000)?;
     let out = args.out.clone().unwrap_or_else(|| {
         let name = args
             .dataset

@@ -9,10 +9,10 @@ use fewview_splat::train::TrainConfig;
 
 #[derive(Debug, Clone, Args)]
 pub struct TrainArgs {
-    /// Training iterations. The densification schedule is rescaled to the run length (see
-    /// `TrainConfig::sparse_view` and the README).
-    #[arg(long, default_value_t = 3000)]
-    pub iterations: usize,
+    /// Training iterations (default: 3000 for `train`, 2000 for `demo`). The densification
+    /// schedule is rescaled to the run length (see `TrainConfig::sparse_view` and the README).
+    #[arg(long)]
+    pub iterations: Option<usize>,
     /// Seed of every random choice (initialisation, view order, splits of Gaussians).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -36,8 +36,12 @@ pub struct TrainArgs {
 }
 
 impl TrainArgs {
-    pub fn run_config(&self, background: [f32; 3]) -> anyhow::Result<RunConfig> {
-        let mut train = TrainConfig::sparse_view(self.iterations);
+    pub fn run_config(
+        &self,
+        background: [f32; 3],
+        default_iterations: usize,
+    ) -> anyhow::Result<RunConfig> {
+        let mut train = TrainConfig::sparse_view(self.iterations.unwrap_or(default_iterations));
         train.seed = self.seed;
         train.sh_degree = self.sh_degree;
         train.lambda_dssim = self.lambda_dssim;

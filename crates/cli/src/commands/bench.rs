@@ -1,0 +1,191 @@
+//! `fewview bench`: speed and memory figures, each beside a reference measured in the same run.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args as ClapArgs;
+use fewview_scene::load::{LoadOptions, load_dataset};
+use fewview_scene::synthetic::{DemoOptions, demo_dataset};
+use serde::Serialize;
+
+/// Measure speed and memory, beside references measured in the same run.
+///
+/// Measures the rasterizer (forward and backward splat–pixel pairs per CPU-second at 100k
+/// Gaussians and 504×378, beside a plain single-threaded blend loop), training iterations per
+/// second (the demo scene, and LLFF fern 3-view when the data is available), the SSIM loss, the
+/// occlusion-aware Poisson blend at 1024², and peak memory. Prints a table and writes JSON.
+///
+/// Throughput is reported per CPU-second (CPU time summed over threads), which does not change
+/// when other programs load the machine; wall-clock seconds are reported too.
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    /// Where to write the JSON report.
+    #[arg(long, default_value = "runs/bench.json", value_name = "FILE")]
+    pub json: PathBuf,
+    /// LLFF fern folder for the training-step figure (default: `$FEWVIEW_DATA/llff/fern`).
+    #[arg(long, value_name = "DIR")]
+    pub fern: Option<PathBuf>,
+    /// Gaussians in the rasterizer benchmark.
+    #[arg(long, default_value_t = 100_000)]
+    pub gaussians: usize,
+    /// Training steps timed per dataset.
+    #[arg(long, default_value_t = 20)]
+    pub train_steps: usize,
+    /// Repetitions of each rasterizer measurement (median reported).
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
+}
+
+#[derive(Serialize)]
+struct Report {
+    machine: Machine,
+    raster: fewview_splat::bench::RasterBench,
+    train_demo: fewview_splat::bench::TrainStepBench,
+    train_fern: Option<fewview_splat::bench::TrainStepBench>,
+    ssim: fewview_metrics::bench::SsimBench,
+    blend: Option<fewview_geom::bench::BlendBench>,
+    peak_memory_mib: Option<f64>,
+}
+
+#[derive(Serialize)]
+struct Machine {
+    threads: usize,
+    avx2_fma: bool,
+}
+
+/// Peak resident memory of this process (VmHWM), in MiB.
+fn peak_memory_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    #[cfg(target_arch = "x86_64")]
+    let avx2_fma =
+        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma");
+    #[cfg(not(target_arch = "x86_64"))]
+    let avx2_fma = false;
+    let machine = Machine {
+        threads: rayon::current_num_threads(),
+        avx2_fma,
+    };
+    eprintln!("rasterizer: {} Gaussians at 504x378 ...", args.gaussians);
+    let raster = fewview_splat::bench::raster_bench(args.gaussians, 504, 378, args.runs.max(1));
+    eprintln!("training steps: demo scene ...");
+    let demo = demo_dataset(&DemoOptions::default());
+    let train_demo = fewview_splat::bench::train_step_bench(&demo, args.train_steps)?;
+    let fern_dir = args
+        .fern
+        .clone()
+        .or_else(|| std::env::var_os("FEWVIEW_DATA").map(|d| PathBuf::from(d).join("llff/fern")));
+    let train_fern = match fern_dir {
+        Some(dir) if dir.exists() => {
+            eprintln!("training steps: {} ...", dir.display());
+            let ds = load_dataset(&dir, &LoadOptions::default())
+                .with_context(|| format!("cannot load {}", dir.display()))?;
+            Some(fewview_splat::bench::train_step_bench(
+                &ds,
+                args.train_steps,
+            )?)
+        }
+        _ => {
+            eprintln!("training steps: fern skipped (pass --fern or set FEWVIEW_DATA)");
+            None
+        }
+    };
+    eprintln!("SSIM loss ...");
+    let ssim = fewview_metrics::bench::ssim_bench(504, 378, 10);
+    eprintln!("Poisson blend 1024x1024x3 ...");
+    let blend = fewview_geom::bench::blend_1024().ok();
+    let report = Report {
+        machine,
+        raster,
+        train_demo,
+        train_fern,
+        ssim,
+        blend,
+        peak_memory_mib: peak_memory_mib(),
+    };
+    print_table(&report);
+    if let Some(parent) = args.json.parent() {
+        std::fs::create_dir_all(parent)?;
+    }
+    fewview_scene::atomic::write_bytes(&args.json, &serde_json::to_vec_pretty(&report)?)?;
+    println!("\nJSON report: {}", args.json.display());
+    Ok(())
+}
+
+fn print_table(r: &Report) {
+    let g = |v: f64| format!("{:.3e}", v);
+    println!("{:<46} {:>14} {:>14}", "figure", "value", "reference");
+    let rb = &r.raster;
+    println!(
+        "{:<46} {:>14} {:>14}",
+        format!(
+            "raster fwd pairs/s/core ({}k, {}x{})",
+            rb.gaussians / 1000,
+            rb.width,
+            rb.height
+        ),
+        g(rb.forward_pairs_per_sec_per_core),
+        g(rb.reference_pairs_per_sec)
+    );
+    println!(
+        "{:<46} {:>14} {:>14}",
+        "raster bwd pairs/s/core",
+        g(rb.backward_pairs_per_sec_per_core),
+        ""
+    );
+    println!(
+        "{:<46} {:>14.1} {:>14}",
+        "raster fwd ms (wall)",
+        rb.forward_seconds * 1e3,
+        ""
+    );
+    println!(
+        "{:<46} {:>14.1} {:>14}",
+        "raster bwd ms (wall)",
+        rb.backward_seconds * 1e3,
+        ""
+    );
+    println!(
+        "{:<46} {:>14.2} {:>14}",
+        "raster fwd speed-up vs plain loop (per core)", rb.forward_vs_reference, "1"
+    );
+    for t in [Some(&r.train_demo), r.train_fern.as_ref()]
+        .into_iter()
+        .flatten()
+    {
+        println!(
+            "{:<46} {:>14.2} {:>14}",
+            format!(
+                "train it/s {} {}x{} ({} G)",
+                t.dataset, t.width, t.height, t.gaussians
+            ),
+            t.iterations_per_second,
+            ""
+        );
+        println!(
+            "{:<46} {:>14.2} {:>14}",
+            "  it per CPU-second", t.iterations_per_cpu_second, ""
+        );
+    }
+    println!(
+        "{:<46} {:>14.2} {:>14.2}",
+        "SSIM value+grad ms 504x378 (vs PSNR)", r.ssim.value_grad_ms, r.ssim.psnr_ms
+    );
+    if let Some(b) = &r.blend {
+        println!(
+            "{:<46} {:>14.2} {:>14.2}",
+            "Poisson blend 1024^2x3 s (vs direct, half size)", b.seconds, b.reference_seconds
+        );
+        if let Some(c) = b.cpu_seconds {
+            println!("{:<46} {:>14.2} {:>14}", "  CPU seconds", c, "");
+        }
+    }
+    if let Some(m) = r.peak_memory_mib {
+        println!("{:<46} {:>14.0} {:>14}", "peak memory MiB", m, "");
+    }
+}

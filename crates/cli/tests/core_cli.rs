@@ -1,0 +1,314 @@
+//! The core commands end to end on small LLFF-format folders written here: a short `train`, then
+//! `eval` and `render` of its PLY agree with the run's own figures; and every listed kind of bad
+//! input gives a one-line error and a non-zero exit, never a panic.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn fewview(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fewview"))
+        .args(args)
+        .output()
+        .expect("run fewview")
+}
+
+/// Writes a `.npy` file of f64 values (NumPy format 1.0, C order).
+fn write_npy(path: &Path, rows: usize, cols: usize, values: &[f64]) {
+    let mut header =
+        format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({rows}, {cols}), }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    for v in values {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// A 10-view forward-facing capture in the LLFF layout (`poses_bounds.npy` + `images_8/`),
+/// 48×36 images of a textured plane seen from cameras on a line.
+fn write_llff(dir: &Path, tweak: impl Fn(usize, &mut [f64; 17])) -> PathBuf {
+    let (w, h, f) = (48usize, 36usize, 40.0f64);
+    std::fs::create_dir_all(dir.join("images_8")).unwrap();
+    let mut rows = Vec::new();
+    for i in 0..10 {
+        let x = -0.5 + 0.1 * i as f64;
+        // LLFF columns of R: (down, right, back) = (-y, +x, +z) for a camera looking along -z.
+        let r = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
+        let t = [x, 0.0, 0.0];
+        let hwf = [h as f64 * 8.0, w as f64 * 8.0, f * 8.0];
+        let mut row = [0.0; 17];
+        for k in 0..3 {
+            row[k * 5..k * 5 + 3].copy_from_slice(&r[k]);
+            row[k * 5 + 3] = t[k];
+            row[k * 5 + 4] = hwf[k];
+        }
+        row[15] = 2.0;
+        row[16] = 6.0;
+        tweak(i, &mut row);
+        rows.extend_from_slice(&row);
+        // A plane at depth 4 with a texture that moves with the camera's x.
+        let mut img = fewview_scene::Image::new(w, h, 3);
+        for py in 0..h {
+            for px in 0..w {
+                let u = (px as f64 + 0.5 - w as f64 / 2.0) / f * 4.0 + x;
+                let v = (py as f64 + 0.5 - h as f64 / 2.0) / f * 4.0;
+                let c = [
+                    0.5 + 0.4 * (5.0 * u).sin(),
+                    0.5 + 0.4 * (4.0 * v).cos(),
+                    0.5 + 0.3 * (3.0 * (u + v)).sin(),
+                ];
+                for k in 0..3 {
+                    img.set(px, py, k, c[k] as f32);
+                }
+            }
+        }
+        img.save_png(&dir.join("images_8").join(format!("image{i:03}.png")))
+            .unwrap();
+    }
+    write_npy(&dir.join("poses_bounds.npy"), 10, 17, &rows);
+    dir.to_path_buf()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Asserts a failed run with one line on stderr that contains every needle, and no panic.
+fn assert_clean_error(out: &Output, needles: &[&str]) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success(),
+        "expected failure, got success; stderr: {err}"
+    );
+    assert!(!err.contains("panicked"), "panic: {err}");
+    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+    let error_lines: Vec<&&str> = lines.iter().filter(|l| l.starts_with("error")).collect();
+    assert_eq!(error_lines.len(), 1, "want one error line, got: {err}");
+    for n in needles {
+        assert!(
+            error_lines[0].contains(n),
+            "`{n}` not in: {}",
+            error_lines[0]
+        );
+    }
+}
+
+#[test]
+fn train_then_eval_and_render_agree_with_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = write_llff(&dir.path().join("scene"), |_, _| {});
+    let run = dir.path().join("run");
+    let out = fewview(&[
+        "train",
+        "--data",
+        s(&data),
+        "--iterations",
+        "30",
+        "--init-points",
+        "1500",
+        "--out",
+        s(&run),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("held-out PSNR"), "{stdout}");
+    let metrics: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("metrics.json")).unwrap()).unwrap();
+    let psnr = metrics["test"]["mean_psnr"].as_f64().unwrap();
+    assert!(psnr.is_finite());
+
+    // `eval` of the written PLY reproduces the run's held-out scores exactly.
+    let json = dir.path().join("eval.json");
+    let ply = run.join("point_cloud.ply");
+    let out = fewview(&[
+        "eval",
+        "--ply",
+        s(&ply),
+        "--data",
+        s(&data),
+        "--json",
+        s(&json),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let eval: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert_eq!(eval["mean_psnr"].as_f64().unwrap(), psnr);
+
+    // `render` of the PLY gives the same images the run saved.
+    let renders = dir.path().join("renders");
+    let video = dir.path().join("path.gif");
+    let out = fewview(&[
+        "render",
+        "--ply",
+        s(&ply),
+        "--data",
+        s(&data),
+        "--out",
+        s(&renders),
+        "--depth",
+        "--path",
+        s(&video),
+        "--frames-per-segment",
+        "3",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for entry in std::fs::read_dir(run.join("renders/test")).unwrap() {
+        let p = entry.unwrap().path();
+        let a = fewview_scene::Image::load(&p).unwrap();
+        let b = fewview_scene::Image::load(&renders.join(p.file_name().unwrap())).unwrap();
+        assert_eq!(a, b, "{}", p.display());
+    }
+    let (frames, _) = fewview_scene::video::read_video(&video).unwrap();
+    assert_eq!(frames.len(), 2 * 3 + 1);
+}
+
+#[test]
+fn resume_without_a_checkpoint_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = write_llff(&dir.path().join("scene"), |_, _| {});
+    let run = dir.path().join("run");
+    let out = fewview(&[
+        "train",
+        "--data",
+        s(&data),
+        "--iterations",
+        "5",
+        "--out",
+        s(&run),
+        "--resume",
+    ]);
+    assert_clean_error(&out, &["checkpoint.bin", "no checkpoint"]);
+}
+
+#[test]
+fn bad_inputs_give_one_line_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    let good = write_llff(&root.join("good"), |_, _| {});
+
+    // Missing dataset folder.
+    let missing = root.join("nope");
+    assert_clean_error(
+        &fewview(&["train", "--data", s(&missing), "--iterations", "2"]),
+        &["nope"],
+    );
+
+    // Corrupt poses file.
+    let corrupt = write_llff(&root.join("corrupt"), |_, _| {});
+    std::fs::write(corrupt.join("poses_bounds.npy"), b"definitely not numpy").unwrap();
+    assert_clean_error(
+        &fewview(&["train", "--data", s(&corrupt), "--iterations", "2"]),
+        &["poses_bounds.npy"],
+    );
+
+    // NaN in a pose.
+    let nan = write_llff(&root.join("nan"), |i, row| {
+        if i == 3 {
+            row[3] = f64::NAN;
+        }
+    });
+    assert_clean_error(
+        &fewview(&["train", "--data", s(&nan), "--iterations", "2"]),
+        &["poses_bounds.npy"],
+    );
+
+    // An image whose size disagrees with the cameras.
+    let sized = write_llff(&root.join("sized"), |_, _| {});
+    fewview_scene::Image::new(20, 20, 3)
+        .save_png(&sized.join("images_8/image004.png"))
+        .unwrap();
+    assert_clean_error(
+        &fewview(&["train", "--data", s(&sized), "--iterations", "2"]),
+        &["image004.png"],
+    );
+
+    // View index out of range.
+    assert_clean_error(
+        &fewview(&[
+            "train",
+            "--data",
+            s(&good),
+            "--train-views",
+            "1,2,42",
+            "--iterations",
+            "2",
+        ]),
+        &["42"],
+    );
+
+    // Missing or corrupt model file.
+    let bad_ply = root.join("bad.ply");
+    std::fs::write(
+        &bad_ply,
+        b"ply\nformat ascii 1.0\nelement vertex 1\nend_header\n",
+    )
+    .unwrap();
+    assert_clean_error(
+        &fewview(&["eval", "--ply", s(&bad_ply), "--data", s(&good)]),
+        &["bad.ply"],
+    );
+    assert_clean_error(
+        &fewview(&[
+            "eval",
+            "--ply",
+            s(&root.join("absent.ply")),
+            "--data",
+            s(&good),
+        ]),
+        &["absent.ply"],
+    );
+
+    // A diverging loss is reported with its iteration: initial colours at the edge of f32.
+    let mut model = fewview_splat::model::GaussianModel::new(3);
+    for k in 0..50 {
+        model.push_isotropic([0.02 * k as f32 - 0.5, 0.0, -4.0], 0.3, [0.5; 3], 0.9);
+    }
+    for (i, v) in model.sh.iter_mut().enumerate() {
+        if i % 48 < 3 {
+            *v = 3.0e38;
+        }
+    }
+    let huge = root.join("huge.ply");
+    fewview_splat::ply::write_ply(&huge, &model).unwrap();
+    let init = format!("ply:{}", huge.display());
+    assert_clean_error(
+        &fewview(&[
+            "train",
+            "--data",
+            s(&good),
+            "--init",
+            &init,
+            "--iterations",
+            "5",
+            "--out",
+            s(&root.join("div")),
+        ]),
+        &["diverged at iteration 1"],
+    );
+
+    // Bad flag values.
+    assert_clean_error(
+        &fewview(&["train", "--data", s(&good), "--iterations", "0"]),
+        &["iterations"],
+    );
+    assert_clean_error(
+        &fewview(&["train", "--data", s(&good), "--init", "sphere"]),
+        &["--init sphere"],
+    );
+}

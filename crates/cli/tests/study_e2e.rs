@@ -1,0 +1,155 @@
+//! The user study end to end: `fewview study serve` on loopback, a participant in headless
+//! Chromium (answers half, reloads, finishes), 24 concurrent simulated participants through the
+//! API, then the server is killed (SIGKILL) and `fewview study analyze` must find every answer
+//! and count the wins right. Needs `scripts/setup-browser.sh` (the test command runs it).
+
+use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn write_study(dir: &Path) -> PathBuf {
+    let methods = ["FreeNeRF", "MVPGS", "Ours"];
+    let scenes = ["truck", "train"];
+    let mut videos = String::new();
+    for (s, scene) in scenes.iter().enumerate() {
+        videos += &format!("[videos.{scene}]\n");
+        for (m, method) in methods.iter().enumerate() {
+            let img = fewview_scene::Image::filled(32, 24, &[0.2 * m as f32, 0.5, 0.3 * s as f32]);
+            let name = format!("{scene}_{method}.png");
+            img.save_png(&dir.join(&name)).unwrap();
+            videos += &format!("{method} = \"{name}\"\n");
+        }
+    }
+    let config = format!(
+        "title = \"e2e study\"\nseed = 5\ndatabase = \"answers.sqlite\"\nmethods = [\"FreeNeRF\", \"MVPGS\", \"Ours\"]\nscenes = [\"truck\", \"train\"]\n{videos}"
+    );
+    let path = dir.join("study.toml");
+    std::fs::write(&path, config).unwrap();
+    path
+}
+
+#[test]
+fn browser_session_reload_concurrency_and_analysis() {
+    let node_modules = repo().join(".cache/browser/node_modules");
+    assert!(
+        node_modules.join("playwright-core").exists() && Path::new("/usr/bin/chromium").exists(),
+        "headless browser missing: run scripts/setup-browser.sh (scripts/test.sh does)"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let config = write_study(dir.path());
+    let exe = env!("CARGO_BIN_EXE_fewview");
+    let mut server = Command::new(exe)
+        .args(["study", "serve", "--config"])
+        .arg(&config)
+        .args(["--addr", "127.0.0.1:0"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(server.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let url = line
+        .split_whitespace()
+        .nth(1)
+        .expect("server prints its URL")
+        .trim_end_matches('/')
+        .to_string();
+    assert!(url.starts_with("http://127.0.0.1:"), "{line}");
+
+    let result = dir.path().join("e2e.json");
+    let status = Command::new("node")
+        .arg(repo().join("web/tests/study_e2e.cjs"))
+        .env("NODE_PATH", &node_modules)
+        .env("STUDY_URL", &url)
+        .env("STUDY_RESULT", &result)
+        .env("SIMULATED", "24")
+        .status()
+        .unwrap();
+    // A crash: no graceful shutdown. Everything acknowledged must already be on disk.
+    server.kill().unwrap();
+    server.wait().unwrap();
+    assert!(status.success(), "node end-to-end script failed");
+
+    // What the participants chose, resolved to methods through the stored plans.
+    let result: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&result).unwrap()).unwrap();
+    let db = rusqlite::Connection::open(dir.path().join("answers.sqlite")).unwrap();
+    let mut expected: BTreeMap<(String, String, String), u64> = BTreeMap::new(); // (question, winner, loser)
+    let mut answers = 0;
+    let sessions = result["sessions"].as_array().unwrap();
+    assert_eq!(sessions.len(), 25);
+    for s in sessions {
+        let participant = s["participant"].as_str().unwrap();
+        let choices = s["choices"].as_array().unwrap();
+        assert_eq!(choices.len() as u64, s["total"].as_u64().unwrap());
+        assert_eq!(choices.len(), 6, "2 scenes × 3 method pairs");
+        for c in choices {
+            let index = c["index"].as_i64().unwrap();
+            let (left, right): (String, String) = db
+                .query_row("SELECT left_method, right_method FROM trials WHERE participant = ?1 AND idx = ?2", rusqlite::params![participant, index], |r| Ok((r.get(0)?, r.get(1)?)))
+                .unwrap();
+            for (q, side) in c["answers"].as_object().unwrap() {
+                let (w, l) = if side == "left" {
+                    (&left, &right)
+                } else {
+                    (&right, &left)
+                };
+                *expected
+                    .entry((q.clone(), w.clone(), l.clone()))
+                    .or_default() += 1;
+                answers += 1;
+            }
+        }
+    }
+    let stored: i64 = db
+        .query_row("SELECT COUNT(*) FROM responses", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(
+        stored, answers,
+        "every acknowledged answer is stored, none twice"
+    );
+
+    // The analysis of the stored answers counts exactly those wins.
+    let out = dir.path().join("analysis");
+    let status = Command::new(exe)
+        .args(["study", "analyze", "--config"])
+        .arg(&config)
+        .arg("--out")
+        .arg(&out)
+        .args(["--tune", "300", "--draws", "300"])
+        .stdout(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let pairs = std::fs::read_to_string(out.join("pairs.csv")).unwrap();
+    let mut rows = 0;
+    for line in pairs.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let (q, m, o, wins, n) = (
+            f[0],
+            f[1],
+            f[2],
+            f[3].parse::<u64>().unwrap(),
+            f[4].parse::<u64>().unwrap(),
+        );
+        let key = |w: &str, l: &str| {
+            expected
+                .get(&(q.to_string(), w.to_string(), l.to_string()))
+                .copied()
+                .unwrap_or(0)
+        };
+        assert_eq!(wins, key(m, o), "{line}");
+        assert_eq!(n, key(m, o) + key(o, m), "{line}");
+        // 25 participants × 2 scenes compare each pair.
+        assert_eq!(n, 50, "{line}");
+        rows += 1;
+    }
+    assert_eq!(rows, 2 * 3 * 2, "2 questions × 3 pairs × both directions");
+    assert!(out.join("ranking_Q1.png").exists() && out.join("report.md").exists());
+}
