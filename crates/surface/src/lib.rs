@@ -7,6 +7,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod adam;
+pub mod bench;
 pub mod checkpoint;
 pub mod cputime;
 pub mod error;

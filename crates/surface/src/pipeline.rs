@@ -173,12 +173,22 @@ pub struct RunReport {
     pub initial_pose_error: PoseError,
     pub final_pose_error: PoseError,
     pub last_step: StepStats,
+    /// Pose errors at the checkpoints of this invocation (a resumed run lists only its own).
+    pub pose_error_history: Vec<PoseErrorAt>,
     pub test_views: Vec<TestViewMetrics>,
     pub mean_psnr_masked: Option<f64>,
     pub mean_ssim_masked: Option<f64>,
     pub chamfer: Option<ChamferReport>,
     pub mesh_vertices: usize,
     pub mesh_faces: usize,
+}
+
+/// The pose error at one iteration.
+#[derive(Clone, Debug, Serialize)]
+pub struct PoseErrorAt {
+    pub iteration: usize,
+    pub rotation_deg: f64,
+    pub translation: f64,
 }
 
 /// Metrics of one rendered test view.
@@ -206,7 +216,8 @@ pub struct ChamferReport {
 pub enum Event<'a> {
     Matched { matches: usize, precision: Option<&'a MatchPrecision> },
     Step(&'a StepStats),
-    Checkpoint(usize),
+    /// A checkpoint was written; the pose error of the current poses (Alg. 1/2).
+    Checkpoint { iteration: usize, pose_error: &'a PoseError },
     Stage(&'static str),
 }
 
@@ -307,13 +318,23 @@ pub fn run(
     let cpu = crate::cputime::process_cpu_seconds();
     let start_it = trainer.state.iteration;
     let mut last = StepStats::default();
+    let mut history = Vec::new();
     while trainer.state.iteration < config.train.iterations {
         last = trainer.step()?;
         on_event(Event::Step(&last));
         let it = trainer.state.iteration;
         if config.checkpoint_every > 0 && (it % config.checkpoint_every == 0 || it == config.train.iterations) {
             checkpoint::save(&ckpt, &config.train, &trainer.state)?;
-            on_event(Event::Checkpoint(it));
+            let err = pose_error(&trainer.poses(), &prep.ground_truth)?;
+            history.push(PoseErrorAt {
+                iteration: it,
+                rotation_deg: err.rotation_deg,
+                translation: err.translation,
+            });
+            on_event(Event::Checkpoint {
+                iteration: it,
+                pose_error: &err,
+            });
         }
     }
     let train_wall = wall.elapsed().as_secs_f64();
@@ -394,6 +415,7 @@ pub fn run(
         initial_pose_error: initial_err,
         final_pose_error: final_err,
         last_step: last,
+        pose_error_history: history,
         mean_psnr_masked: mean(&|m| m.psnr_masked),
         mean_ssim_masked: mean(&|m| m.ssim_masked),
         test_views: test_metrics,

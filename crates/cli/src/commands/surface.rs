@@ -277,7 +277,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     bar.set_message(format!("psnr {:.2}  inv_s {:.0}", s.psnr, s.inv_s));
                 }
             }
-            Event::Checkpoint(_) => {}
+            Event::Checkpoint {
+                iteration,
+                pose_error,
+            } => bar.println(format!(
+                "iteration {iteration}: rotation error {:.3}°, translation error (×100) {:.3}",
+                pose_error.rotation_deg,
+                100.0 * pose_error.translation
+            )),
             Event::Stage(st) => bar.set_message(st.to_string()),
         },
     )
