@@ -80,7 +80,12 @@ pub fn train_step_bench(
     iterations: usize,
     reference_iterations: usize,
 ) -> Result<SurfaceStepBench> {
-    train_step_bench_with(dataset, &RunConfig::default(), iterations, reference_iterations)
+    train_step_bench_with(
+        dataset,
+        &RunConfig::default(),
+        iterations,
+        reference_iterations,
+    )
 }
 
 /// [`train_step_bench`] with another configuration (its encoder is replaced by the NeuS MLP for
@@ -140,7 +145,8 @@ mod tests {
         assert_eq!((b.width, b.height), (48, 36));
         assert_eq!(b.hash_grid.iterations, 2);
         assert!(b.hash_grid.iterations_per_second > 0.0 && b.hash_grid.seconds > 0.0);
-        let ratio = b.hash_grid.iterations_per_cpu_second / b.reference_neus_mlp.iterations_per_cpu_second;
+        let ratio =
+            b.hash_grid.iterations_per_cpu_second / b.reference_neus_mlp.iterations_per_cpu_second;
         assert!((b.speedup_vs_reference - ratio).abs() < 1e-12);
     }
 }

@@ -120,11 +120,17 @@ pub fn prepare(dataset: &Dataset, truth: Option<&Dataset>, config: &RunConfig) -
     let initial = match &config.initial_poses {
         InitialPoses::NoisyGroundTruth { sigma } => {
             if !(sigma.is_finite() && *sigma >= 0.0) {
-                return Err(SurfaceError::invalid("pose noise", format!("σ = {sigma} must be ≥ 0")));
+                return Err(SurfaceError::invalid(
+                    "pose noise",
+                    format!("σ = {sigma} must be ≥ 0"),
+                ));
             }
             perturb_poses(&ground_truth, *sigma, config.train.seed)
         }
-        InitialPoses::AsLoaded => dataset.train_views().map(|v| v.camera.world_to_camera).collect(),
+        InitialPoses::AsLoaded => dataset
+            .train_views()
+            .map(|v| v.camera.world_to_camera)
+            .collect(),
     };
     let (matches, match_precision) = match &config.matcher {
         None => (Vec::new(), None),
@@ -133,7 +139,11 @@ pub fn prepare(dataset: &Dataset, truth: Option<&Dataset>, config: &RunConfig) -
                 .train_views()
                 .map(|v| MatchInput {
                     image: &v.image,
-                    mask: if config.train.use_masks { v.mask.as_ref() } else { None },
+                    mask: if config.train.use_masks {
+                        v.mask.as_ref()
+                    } else {
+                        None
+                    },
                 })
                 .collect();
             let m = match_all_pairs(
@@ -214,10 +224,16 @@ pub struct ChamferReport {
 
 /// Progress callback events.
 pub enum Event<'a> {
-    Matched { matches: usize, precision: Option<&'a MatchPrecision> },
+    Matched {
+        matches: usize,
+        precision: Option<&'a MatchPrecision>,
+    },
     Step(&'a StepStats),
     /// A checkpoint was written; the pose error of the current poses (Alg. 1/2).
-    Checkpoint { iteration: usize, pose_error: &'a PoseError },
+    Checkpoint {
+        iteration: usize,
+        pose_error: &'a PoseError,
+    },
     Stage(&'static str),
 }
 
@@ -227,14 +243,20 @@ fn pose_error(est: &[Se3], gt: &[Se3]) -> Result<PoseError> {
 }
 
 fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
-    let text = serde_json::to_string_pretty(value).map_err(|e| SurfaceError::invalid("json", e.to_string()))?;
+    let text = serde_json::to_string_pretty(value)
+        .map_err(|e| SurfaceError::invalid("json", e.to_string()))?;
     fewview_scene::atomic::write_bytes(path, text.as_bytes()).map_err(SurfaceError::Scene)
 }
 
 /// Writes IDR/NeuS `world_mat_i` and `scale_mat_i` for the given (dataset) view indices:
 /// `world_mat = K [R | t] · scale_mat⁻¹`, so `world_mat · scale_mat` is the normalised
 /// projection the loader decomposes.
-pub fn write_idr_cameras(path: &Path, cameras: &[Camera], indices: &[usize], scale_mat: &Matrix4<f64>) -> Result<()> {
+pub fn write_idr_cameras(
+    path: &Path,
+    cameras: &[Camera],
+    indices: &[usize],
+    scale_mat: &Matrix4<f64>,
+) -> Result<()> {
     let inv = scale_mat
         .try_inverse()
         .ok_or_else(|| SurfaceError::invalid("scale_mat", "is singular"))?;
@@ -244,7 +266,10 @@ pub fn write_idr_cameras(path: &Path, cameras: &[Camera], indices: &[usize], sca
         let mut npz = npyz::npz::NpzWriter::new(std::io::BufWriter::new(file));
         let mut put = |name: String, m: &Matrix4<f64>| -> std::io::Result<()> {
             use npyz::WriterBuilder;
-            let data: Vec<f32> = (0..4).flat_map(|r| (0..4).map(move |c| (r, c))).map(|(r, c)| m[(r, c)] as f32).collect();
+            let data: Vec<f32> = (0..4)
+                .flat_map(|r| (0..4).map(move |c| (r, c)))
+                .map(|(r, c)| m[(r, c)] as f32)
+                .collect();
             let mut w = npz
                 .array(&name, Default::default())?
                 .default_dtype()
@@ -255,8 +280,9 @@ pub fn write_idr_cameras(path: &Path, cameras: &[Camera], indices: &[usize], sca
         };
         for (c, &i) in cameras.iter().zip(indices) {
             let mut p = Matrix4::identity();
-            p.fixed_view_mut::<3, 4>(0, 0)
-                .copy_from(&(c.intrinsics.matrix() * c.world_to_camera.to_matrix4().fixed_view::<3, 4>(0, 0)));
+            p.fixed_view_mut::<3, 4>(0, 0).copy_from(
+                &(c.intrinsics.matrix() * c.world_to_camera.to_matrix4().fixed_view::<3, 4>(0, 0)),
+            );
             let world = p * inv;
             put(format!("world_mat_{i}"), &world).map_err(|e| SurfaceError::io(&tmp, e))?;
             put(format!("scale_mat_{i}"), scale_mat).map_err(|e| SurfaceError::io(&tmp, e))?;
@@ -305,8 +331,16 @@ pub fn run(
             .map(|(v, p)| Camera::new(v.intrinsics, *p))
             .collect()
     };
-    fewview_geom::io::cameras::write_cameras(&out.join("poses_initial.json"), &cams(&prep.initial))?;
-    let mut trainer = Trainer::new(config.train.clone(), prep.views.clone(), &prep.initial, prep.matches.clone())?;
+    fewview_geom::io::cameras::write_cameras(
+        &out.join("poses_initial.json"),
+        &cams(&prep.initial),
+    )?;
+    let mut trainer = Trainer::new(
+        config.train.clone(),
+        prep.views.clone(),
+        &prep.initial,
+        prep.matches.clone(),
+    )?;
     let ckpt = out.join("checkpoint.bin");
     if resume && ckpt.exists() {
         let state = checkpoint::load(&ckpt, &config.train)?;
@@ -323,7 +357,9 @@ pub fn run(
         last = trainer.step()?;
         on_event(Event::Step(&last));
         let it = trainer.state.iteration;
-        if config.checkpoint_every > 0 && (it % config.checkpoint_every == 0 || it == config.train.iterations) {
+        if config.checkpoint_every > 0
+            && (it % config.checkpoint_every == 0 || it == config.train.iterations)
+        {
             checkpoint::save(&ckpt, &config.train, &trainer.state)?;
             let err = pose_error(&trainer.poses(), &prep.ground_truth)?;
             history.push(PoseErrorAt {
@@ -347,8 +383,17 @@ pub fn run(
     let final_err = pose_error(&refined, &prep.ground_truth)?;
     let refined_cams = cams(&refined);
     fewview_geom::io::cameras::write_cameras(&out.join("poses_refined.json"), &refined_cams)?;
-    if let Some(scale) = dataset.to_source_world.as_ref().filter(|_| config.idr_output) {
-        write_idr_cameras(&out.join("cameras_refined.npz"), &refined_cams, &prep.view_indices, scale)?;
+    if let Some(scale) = dataset
+        .to_source_world
+        .as_ref()
+        .filter(|_| config.idr_output)
+    {
+        write_idr_cameras(
+            &out.join("cameras_refined.npz"),
+            &refined_cams,
+            &prep.view_indices,
+            scale,
+        )?;
     }
     let (field, params) = trainer.field_params();
     let masks: Option<Vec<Image>> = prep.views.iter().map(|v| v.mask.clone()).collect();
@@ -359,7 +404,10 @@ pub fn run(
             resolution: config.mesh_resolution,
             chunk: 32,
         },
-        masks.as_ref().filter(|_| config.train.use_masks).map(|m| (refined_cams.as_slice(), m.as_slice())),
+        masks
+            .as_ref()
+            .filter(|_| config.train.use_masks)
+            .map(|m| (refined_cams.as_slice(), m.as_slice())),
     )?;
     fewview_geom::io::write_mesh(&out.join("mesh.ply"), &mesh)?;
 
@@ -377,19 +425,42 @@ pub fn run(
             mask = mask.map(|m| m.downscale(k));
             cam = cam.resized(image.width as u32, image.height as u32);
         }
-        let r = render_view(field, params, &cam, &config.train.sample, config.train.background, 4096);
+        let r = render_view(
+            field,
+            params,
+            &cam,
+            &config.train.sample,
+            config.train.background,
+            4096,
+        );
         let name = |s: &str| renders.join(format!("{:03}_{s}.png", vi));
         r.rgb.save_png(&name("rgb"))?;
-        let dmax = r.depth.data.iter().copied().fold(0.0f32, f32::max).max(1e-6);
-        Image::from_vec(r.depth.width, r.depth.height, 1, r.depth.data.iter().map(|d| d / dmax).collect()).save_png(&name("depth"))?;
+        let dmax = r
+            .depth
+            .data
+            .iter()
+            .copied()
+            .fold(0.0f32, f32::max)
+            .max(1e-6);
+        Image::from_vec(
+            r.depth.width,
+            r.depth.height,
+            1,
+            r.depth.data.iter().map(|d| d / dmax).collect(),
+        )
+        .save_png(&name("depth"))?;
         r.normal.save_png(&name("normal"))?;
         let full = fewview_metrics::psnr::psnr(&r.rgb, &image).unwrap_or(f64::NAN);
         let (pm, sm) = match &mask {
             Some(m) => (
                 fewview_metrics::psnr::psnr_masked(&r.rgb, &image, m).unwrap_or(f64::NAN),
-                fewview_metrics::ssim::ssim_masked(&r.rgb, &image, m, &Default::default()).unwrap_or(f64::NAN),
+                fewview_metrics::ssim::ssim_masked(&r.rgb, &image, m, &Default::default())
+                    .unwrap_or(f64::NAN),
             ),
-            None => (full, fewview_metrics::ssim::ssim(&r.rgb, &image).unwrap_or(f64::NAN)),
+            None => (
+                full,
+                fewview_metrics::ssim::ssim(&r.rgb, &image).unwrap_or(f64::NAN),
+            ),
         };
         test_metrics.push(TestViewMetrics {
             view: vi,
@@ -399,17 +470,24 @@ pub fn run(
         });
     }
     let mean = |f: &dyn Fn(&TestViewMetrics) -> f64| {
-        (!test_metrics.is_empty()).then(|| test_metrics.iter().map(f).sum::<f64>() / test_metrics.len() as f64)
+        (!test_metrics.is_empty())
+            .then(|| test_metrics.iter().map(f).sum::<f64>() / test_metrics.len() as f64)
     };
     let chamfer = match reference {
-        Some(gt) if !mesh.faces.is_empty() => Some(chamfer_after_alignment(&mesh, gt, &final_err.alignment)?),
+        Some(gt) if !mesh.faces.is_empty() => {
+            Some(chamfer_after_alignment(&mesh, gt, &final_err.alignment)?)
+        }
         _ => None,
     };
     let report = RunReport {
         iterations: trainer.state.iteration,
         train_seconds_wall: train_wall,
         train_seconds_cpu: train_cpu,
-        iterations_per_second_wall: if train_wall > 0.0 { done as f64 / train_wall } else { 0.0 },
+        iterations_per_second_wall: if train_wall > 0.0 {
+            done as f64 / train_wall
+        } else {
+            0.0
+        },
         matches: prep.matches.len(),
         match_precision: prep.match_precision.clone(),
         initial_pose_error: initial_err,
@@ -430,18 +508,28 @@ pub fn run(
 /// Paper 001 Alg. 3 then Chamfer-L1: the mesh is pre-aligned with the pose-evaluation
 /// similarity, registered to the reference by FPFH + RANSAC and point-to-point ICP, and scored
 /// with uniform surface samples.
-pub fn chamfer_after_alignment(mesh: &Mesh, reference: &Mesh, alignment: &Similarity) -> Result<ChamferReport> {
+pub fn chamfer_after_alignment(
+    mesh: &Mesh,
+    reference: &Mesh,
+    alignment: &Similarity,
+) -> Result<ChamferReport> {
     use fewview_geom::registration::{RegistrationOptions, register};
     let diag = fewview_geom::mesh::bbox_diagonal(&reference.vertices);
     let voxel = diag / 100.0;
     let src = fewview_geom::Points::from_positions(mesh.vertices.clone());
     let dst = fewview_geom::Points::from_positions(reference.vertices.clone());
-    let reg = register(&src, &dst, Some(alignment), &RegistrationOptions::for_voxel(voxel))?;
+    let reg = register(
+        &src,
+        &dst,
+        Some(alignment),
+        &RegistrationOptions::for_voxel(voxel),
+    )?;
     let aligned = Mesh {
         vertices: reg.transformation.apply_points(&mesh.vertices),
         ..mesh.clone()
     };
-    let m = fewview_geom::chamfer::surface_metrics(&aligned, reference, 200_000, &[0.01 * diag], 0)?;
+    let m =
+        fewview_geom::chamfer::surface_metrics(&aligned, reference, 200_000, &[0.01 * diag], 0)?;
     Ok(ChamferReport {
         chamfer_l1: m.chamfer_l1,
         accuracy: m.accuracy,

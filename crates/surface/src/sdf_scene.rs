@@ -299,7 +299,11 @@ pub fn surface_points(resolution: usize) -> Points {
 /// `[−0.8, 0.8]³` (vertex error O(voxel²) of the curvature, ~10⁻⁵ at 256).
 pub fn surface_mesh(resolution: usize) -> fewview_geom::Result<fewview_geom::Mesh> {
     fewview_geom::mcubes::marching_cubes_chunked(
-        |p: &[[f64; 3]]| p.iter().map(|q| sdf(&Vector3::new(q[0], q[1], q[2])) as f32).collect(),
+        |p: &[[f64; 3]]| {
+            p.iter()
+                .map(|q| sdf(&Vector3::new(q[0], q[1], q[2])) as f32)
+                .collect()
+        },
         ([-0.8; 3], [0.8; 3]),
         [resolution; 3],
         32,

@@ -15,8 +15,8 @@ mod pose_error;
 mod progress;
 mod register;
 mod render;
-mod surface;
 pub mod study;
+mod surface;
 mod train;
 mod train_args;
 

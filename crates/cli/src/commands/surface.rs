@@ -39,9 +39,10 @@ pub struct Args {
     /// Continue the run in `--out` from its checkpoint (same flags as the first time).
     #[arg(long)]
     pub resume: bool,
-    /// Training iterations (the paper: 100k on a GPU; the CPU default converges on DTU scan65
-    /// at 400×300, see the README).
-    #[arg(long, default_value_t = 3000)]
+    /// Training iterations (the paper: 100k on a GPU). The default fits the 40-minute CPU budget
+    /// at about one CPU-second per iteration (scan65, 400×300); see crates/surface/README.md
+    /// for what it reaches.
+    #[arg(long, default_value_t = 2000)]
     pub iterations: usize,
     /// Random rays per iteration.
     #[arg(long, default_value_t = 512)]
@@ -55,6 +56,10 @@ pub struct Args {
     /// `noisy` (perturbed ground truth) or `loaded` (the dataset's poses as the start).
     #[arg(long, default_value = "noisy")]
     pub initial_poses: String,
+    /// Pose learning rate, start and end of the exponential decay (paper 001 §B.1: 1e-3,1e-4
+    /// over 100k iterations; a short CPU schedule needs larger steps to move the poses as far).
+    #[arg(long, value_name = "START,END")]
+    pub pose_lr: Option<String>,
     /// Keep the poses fixed.
     #[arg(long)]
     pub no_pose_refinement: bool,
@@ -131,6 +136,18 @@ fn parse_pair(s: &str) -> anyhow::Result<(f64, f64)> {
     Ok((v[0], v[1]))
 }
 
+fn parse_rates(s: &str) -> anyhow::Result<(f64, f64)> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("--pose-lr {s:?}: expected two numbers like 1e-3,1e-4"))?;
+    if v.len() != 2 || !v.iter().all(|r| r.is_finite() && *r > 0.0) {
+        bail!("--pose-lr {s:?}: expected two positive rates like 1e-3,1e-4");
+    }
+    Ok((v[0], v[1]))
+}
+
 impl Args {
     pub fn config(&self, idr: bool) -> anyhow::Result<RunConfig> {
         let mut c = RunConfig::default();
@@ -177,6 +194,13 @@ impl Args {
         }
         if let Some(s) = &self.c2f {
             t.c2f = parse_pair(s)?;
+        }
+        if let Some(s) = &self.pose_lr {
+            let (start, end) = parse_rates(s)?;
+            t.pose_lr = fewview_surface::adam::ExpSchedule {
+                start: start as f32,
+                end: end as f32,
+            };
         }
         c.initial_poses = match self.initial_poses.as_str() {
             "noisy" => InitialPoses::NoisyGroundTruth {
@@ -267,9 +291,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &mut |e| match e {
             Event::Matched { matches, precision } => {
                 let p = precision
-                    .map(|p| format!(" ({:.0} % within 2 px of the true epipolar lines)", 100.0 * p.precision_2px))
+                    .map(|p| {
+                        format!(
+                            " ({:.0} % within 2 px of the true epipolar lines)",
+                            100.0 * p.precision_2px
+                        )
+                    })
                     .unwrap_or_default();
-                bar.println(format!("{matches} correspondences{p}"));
+                bar.suspend(|| eprintln!("{matches} correspondences{p}"));
             }
             Event::Step(s) => {
                 bar.set_position(s.iteration as u64 + 1);
@@ -280,11 +309,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Event::Checkpoint {
                 iteration,
                 pose_error,
-            } => bar.println(format!(
-                "iteration {iteration}: rotation error {:.3}°, translation error (×100) {:.3}",
-                pose_error.rotation_deg,
-                100.0 * pose_error.translation
-            )),
+            } => bar.suspend(|| {
+                eprintln!(
+                    "iteration {iteration}: rotation error {:.3}°, translation error (×100) {:.3}",
+                    pose_error.rotation_deg,
+                    100.0 * pose_error.translation
+                )
+            }),
             Event::Stage(st) => bar.set_message(st.to_string()),
         },
     )
@@ -307,7 +338,10 @@ fn print_report(r: &RunReport, out: &std::path::Path) {
         r.iterations, r.train_seconds_wall, r.iterations_per_second_wall
     );
     if let (Some(p), Some(s)) = (r.mean_psnr_masked, r.mean_ssim_masked) {
-        println!("test views       masked PSNR {p:.2} dB, SSIM {s:.3} ({} views)", r.test_views.len());
+        println!(
+            "test views       masked PSNR {p:.2} dB, SSIM {s:.3} ({} views)",
+            r.test_views.len()
+        );
     }
     if let Some(c) = &r.chamfer {
         println!(
@@ -316,6 +350,9 @@ fn print_report(r: &RunReport, out: &std::path::Path) {
             100.0 * c.relative
         );
     }
-    println!("mesh             {} vertices, {} faces", r.mesh_vertices, r.mesh_faces);
+    println!(
+        "mesh             {} vertices, {} faces",
+        r.mesh_vertices, r.mesh_faces
+    );
     println!("written to       {}", out.display());
 }
