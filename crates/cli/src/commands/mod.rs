@@ -16,6 +16,7 @@ mod progress;
 mod register;
 mod render;
 pub mod study;
+mod surface;
 mod train;
 mod train_args;
 
@@ -36,6 +37,7 @@ pub enum Command {
     Register(register::Args),
     Chamfer(chamfer::Args),
     PoseError(pose_error::Args),
+    Surface(surface::Args),
     /// Temporal-coherence metrics of a rendered frame sequence against ground truth.
     EvalVideo(eval_video::Args),
     /// Pairwise 2AFC user study: serve the page, analyse the answers.
@@ -56,6 +58,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Register(a) => register::run(a),
         Command::Chamfer(a) => chamfer::run(a),
         Command::PoseError(a) => pose_error::run(a),
+        Command::Surface(a) => surface::run(a),
         Command::EvalVideo(args) => eval_video::run(args),
         Command::Study(args) => study::run(args),
     }

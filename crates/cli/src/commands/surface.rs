@@ -1,0 +1,358 @@
+//! `fewview surface`: neural implicit surface + pose refinement from a few views with noisy
+//! poses (paper 001).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::Args as ClapArgs;
+use fewview_scene::DatasetFormat;
+use fewview_surface::field::{EncoderKind, FdScheme};
+use fewview_surface::matching::sift::SiftOptions;
+use fewview_surface::pipeline::{Event, InitialPoses, RunConfig, RunReport, run as run_pipeline};
+use fewview_surface::sdf_scene::{SdfSceneOptions, sdf_dataset};
+
+use super::dataset_args::DatasetArgs;
+use super::progress;
+
+/// Reconstruct a surface (NeuS SDF) and refine noisy camera poses from a few views.
+///
+/// The ground-truth poses of the training views are perturbed with se(3) noise N(0, σ²)
+/// (`--pose-noise`, BARF/SPARF protocol) unless `--initial-poses loaded` keeps the loaded
+/// poses (e.g. DTU `--cameras-file cameras_linear_init.npz`). Correspondences come from SIFT
+/// (ratio + mutual check + RANSAC). Writes a run directory: `config.json`, `checkpoint.bin`
+/// (resume with `--resume`), `matches.json`, `poses_initial.json`, `poses_refined.json`
+/// (+ `cameras_refined.npz` for DTU), `mesh.ply`, `renders/`, `metrics.json` (pose errors by
+/// paper 001 Alg. 1/2, masked PSNR/SSIM of test views, Chamfer with `--reference`).
+///
+/// Without `--data`, `--synthetic` runs on the built-in analytic SDF scene and scores the mesh
+/// against its exact surface.
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    #[command(flatten)]
+    pub dataset: Option<DatasetArgs>,
+    /// Use the built-in sphere-traced analytic scene instead of `--data`.
+    #[arg(long)]
+    pub synthetic: bool,
+    /// Run directory. Default: `runs/surface-<dataset folder name>`.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Continue the run in `--out` from its checkpoint (same flags as the first time).
+    #[arg(long)]
+    pub resume: bool,
+    /// Training iterations (the paper: 100k on a GPU). The default fits the 40-minute CPU budget
+    /// at about one CPU-second per iteration (scan65, 400×300); see crates/surface/README.md
+    /// for what it reaches.
+    #[arg(long, default_value_t = 2000)]
+    pub iterations: usize,
+    /// Random rays per iteration.
+    #[arg(long, default_value_t = 512)]
+    pub rays: usize,
+    /// Correspondences per iteration (two rays each).
+    #[arg(long, default_value_t = 128)]
+    pub matches_per_batch: usize,
+    /// σ of the se(3) pose noise (0 = ground-truth poses).
+    #[arg(long, default_value_t = 0.15)]
+    pub pose_noise: f64,
+    /// `noisy` (perturbed ground truth) or `loaded` (the dataset's poses as the start).
+    #[arg(long, default_value = "noisy")]
+    pub initial_poses: String,
+    /// Pose learning rate, start and end of the exponential decay (paper 001 §B.1: 1e-3,1e-4
+    /// over 100k iterations; a short CPU schedule needs larger steps to move the poses as far).
+    #[arg(long, value_name = "START,END")]
+    pub pose_lr: Option<String>,
+    /// Keep the poses fixed.
+    #[arg(long)]
+    pub no_pose_refinement: bool,
+    /// Seed of the noise, sampling and initialisation.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Geometry encoder: `hash-grid` (CPU default) or `neus-mlp` (the paper's 8×256 MLP, slow).
+    #[arg(long, default_value = "hash-grid")]
+    pub encoder: String,
+    /// Finite-difference stencil of the normals: `tetrahedron` (4 taps) or `central` (6).
+    #[arg(long, default_value = "tetrahedron")]
+    pub fd: String,
+    /// Samples per ray: coarse and importance.
+    #[arg(long, default_value_t = 32)]
+    pub coarse: usize,
+    #[arg(long, default_value_t = 32)]
+    pub importance: usize,
+    /// Loss switches for ablations.
+    #[arg(long)]
+    pub no_matching: bool,
+    #[arg(long)]
+    pub no_ncc: bool,
+    #[arg(long)]
+    pub no_gc: bool,
+    #[arg(long)]
+    pub no_uncertainty: bool,
+    #[arg(long)]
+    pub no_psdf: bool,
+    #[arg(long)]
+    pub no_eikonal: bool,
+    /// Do not use object masks (colour loss on all pixels, no mask loss, no culling).
+    #[arg(long)]
+    pub no_masks: bool,
+    /// Loss weights (defaults: paper 001 §B.1; `--lambda-geo` see the README).
+    #[arg(long)]
+    pub lambda_mc: Option<f32>,
+    #[arg(long)]
+    pub lambda_u: Option<f32>,
+    #[arg(long)]
+    pub lambda_gc: Option<f32>,
+    #[arg(long)]
+    pub lambda_geo: Option<f32>,
+    #[arg(long)]
+    pub lambda_psdf: Option<f32>,
+    /// Coarse-to-fine window (α₁, α₂) as fractions of the iterations, e.g. `0.4,0.7`.
+    #[arg(long, value_name = "A1,A2")]
+    pub c2f: Option<String>,
+    /// Marching-cubes resolution over [−1, 1]³.
+    #[arg(long, default_value_t = 256)]
+    pub mesh_resolution: usize,
+    /// Test views rendered and scored.
+    #[arg(long, default_value_t = 5)]
+    pub eval_views: usize,
+    /// Render test views at 1/K of their size.
+    #[arg(long, default_value_t = 1)]
+    pub eval_scale: u32,
+    /// Reference surface (PLY/OBJ, in the dataset's normalised frame) for Chamfer.
+    #[arg(long, value_name = "FILE")]
+    pub reference: Option<PathBuf>,
+    /// Iterations between checkpoints.
+    #[arg(long, default_value_t = 250)]
+    pub checkpoint_every: usize,
+}
+
+fn parse_pair(s: &str) -> anyhow::Result<(f64, f64)> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("--c2f {s:?}: expected two numbers like 0.4,0.7"))?;
+    if v.len() != 2 || !(0.0..=1.0).contains(&v[0]) || !(0.0..=1.0).contains(&v[1]) || v[1] < v[0] {
+        bail!("--c2f {s:?}: expected 0 ≤ α₁ ≤ α₂ ≤ 1");
+    }
+    Ok((v[0], v[1]))
+}
+
+fn parse_rates(s: &str) -> anyhow::Result<(f64, f64)> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("--pose-lr {s:?}: expected two numbers like 1e-3,1e-4"))?;
+    if v.len() != 2 || !v.iter().all(|r| r.is_finite() && *r > 0.0) {
+        bail!("--pose-lr {s:?}: expected two positive rates like 1e-3,1e-4");
+    }
+    Ok((v[0], v[1]))
+}
+
+impl Args {
+    pub fn config(&self, idr: bool) -> anyhow::Result<RunConfig> {
+        let mut c = RunConfig::default();
+        let t = &mut c.train;
+        t.iterations = self.iterations;
+        t.rays_per_batch = self.rays;
+        t.matches_per_batch = self.matches_per_batch;
+        t.seed = self.seed;
+        t.refine_poses = !self.no_pose_refinement;
+        t.use_masks = !self.no_masks;
+        t.sample.n_coarse = self.coarse;
+        t.sample.n_importance = self.importance;
+        t.field.encoder = match self.encoder.as_str() {
+            "hash-grid" => EncoderKind::HashGrid,
+            "neus-mlp" => EncoderKind::NeusMlp,
+            other => bail!("--encoder {other:?}: expected hash-grid or neus-mlp"),
+        };
+        t.field.fd_scheme = match self.fd.as_str() {
+            "tetrahedron" => FdScheme::Tetrahedron,
+            "central" => FdScheme::Central,
+            other => bail!("--fd {other:?}: expected tetrahedron or central"),
+        };
+        let l = &mut t.losses;
+        l.matching = !self.no_matching;
+        l.ncc = !self.no_ncc;
+        l.geometric_consistency = !self.no_gc;
+        l.uncertainty = !self.no_uncertainty;
+        l.psdf = !self.no_psdf;
+        l.eikonal = !self.no_eikonal;
+        if let Some(v) = self.lambda_mc {
+            l.lambda_mc = v;
+        }
+        if let Some(v) = self.lambda_u {
+            l.lambda_u = v;
+        }
+        if let Some(v) = self.lambda_gc {
+            l.lambda_gc = v;
+        }
+        if let Some(v) = self.lambda_geo {
+            l.lambda_geo = v;
+        }
+        if let Some(v) = self.lambda_psdf {
+            l.lambda_psdf = v;
+        }
+        if let Some(s) = &self.c2f {
+            t.c2f = parse_pair(s)?;
+        }
+        if let Some(s) = &self.pose_lr {
+            let (start, end) = parse_rates(s)?;
+            t.pose_lr = fewview_surface::adam::ExpSchedule {
+                start: start as f32,
+                end: end as f32,
+            };
+        }
+        c.initial_poses = match self.initial_poses.as_str() {
+            "noisy" => InitialPoses::NoisyGroundTruth {
+                sigma: self.pose_noise,
+            },
+            "loaded" => InitialPoses::AsLoaded,
+            other => bail!("--initial-poses {other:?}: expected noisy or loaded"),
+        };
+        let needs_matches = !(self.no_matching && self.no_ncc && self.no_gc);
+        c.matcher = needs_matches.then(|| SiftOptions {
+            seed: self.seed,
+            ..Default::default()
+        });
+        c.mesh_resolution = self.mesh_resolution;
+        c.eval_views = self.eval_views;
+        c.eval_scale = self.eval_scale.max(1);
+        c.checkpoint_every = self.checkpoint_every;
+        c.idr_output = idr;
+        Ok(c)
+    }
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let (ds, truth, name, idr, reference) = if args.synthetic {
+        let opts = SdfSceneOptions {
+            width: 320,
+            height: 240,
+            views: 16,
+            train: vec![0, 2, 4, 6, 8, 10, 12, 14],
+            supersample: 2,
+            fov_deg: 30.0,
+            ..Default::default()
+        };
+        let ds = sdf_dataset(&opts);
+        let reference = fewview_surface::sdf_scene::surface_mesh(256)?;
+        (ds, None, "synthetic".to_string(), false, Some(reference))
+    } else {
+        let Some(d) = &args.dataset else {
+            bail!("give --data DIR (or --synthetic)");
+        };
+        let ds = d.load()?;
+        let is_dtu = fewview_scene::detect_format(&d.data).ok() == Some(DatasetFormat::DtuIdr)
+            || d.format == Some(DatasetFormat::DtuIdr);
+        // With other starting poses, the ground truth is the same folder's default cameras.
+        let truth = if args.initial_poses == "loaded" && d.cameras_file.is_some() {
+            let mut t = d.clone();
+            t.cameras_file = None;
+            Some(t.load().context("loading the ground-truth cameras")?)
+        } else {
+            None
+        };
+        let reference = match &args.reference {
+            Some(p) => Some(
+                fewview_geom::io::read_mesh(p)
+                    .with_context(|| format!("reading the reference surface {}", p.display()))?,
+            ),
+            None => None,
+        };
+        let name = d
+            .data
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "run".into());
+        (ds, truth, name, is_dtu, reference)
+    };
+    let cfg = args.config(idr)?;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("runs").join(format!("surface-{name}")));
+    eprintln!(
+        "surface on {} ({} train views, {}x{}, {} iterations) → {}",
+        ds.name,
+        ds.train.len(),
+        ds.views[ds.train[0]].image.width,
+        ds.views[ds.train[0]].image.height,
+        cfg.train.iterations,
+        out.display()
+    );
+    let bar = progress::iterations(cfg.train.iterations as u64, "surface");
+    let report = run_pipeline(
+        &ds,
+        truth.as_ref(),
+        &cfg,
+        &out,
+        args.resume,
+        reference.as_ref(),
+        &mut |e| match e {
+            Event::Matched { matches, precision } => {
+                let p = precision
+                    .map(|p| {
+                        format!(
+                            " ({:.0} % within 2 px of the true epipolar lines)",
+                            100.0 * p.precision_2px
+                        )
+                    })
+                    .unwrap_or_default();
+                bar.suspend(|| eprintln!("{matches} correspondences{p}"));
+            }
+            Event::Step(s) => {
+                bar.set_position(s.iteration as u64 + 1);
+                if s.iteration % 10 == 0 {
+                    bar.set_message(format!("psnr {:.2}  inv_s {:.0}", s.psnr, s.inv_s));
+                }
+            }
+            Event::Checkpoint {
+                iteration,
+                pose_error,
+            } => bar.suspend(|| {
+                eprintln!(
+                    "iteration {iteration}: rotation error {:.3}°, translation error (×100) {:.3}",
+                    pose_error.rotation_deg,
+                    100.0 * pose_error.translation
+                )
+            }),
+            Event::Stage(st) => bar.set_message(st.to_string()),
+        },
+    )
+    .with_context(|| format!("surface run in {}", out.display()))?;
+    bar.finish_and_clear();
+    print_report(&report, &out);
+    Ok(())
+}
+
+fn print_report(r: &RunReport, out: &std::path::Path) {
+    println!(
+        "poses            R {:.3}° → {:.3}°   t(×100) {:.2} → {:.2}",
+        r.initial_pose_error.rotation_deg,
+        r.final_pose_error.rotation_deg,
+        100.0 * r.initial_pose_error.translation,
+        100.0 * r.final_pose_error.translation
+    );
+    println!(
+        "training         {} iterations, {:.0} s ({:.2} it/s)",
+        r.iterations, r.train_seconds_wall, r.iterations_per_second_wall
+    );
+    if let (Some(p), Some(s)) = (r.mean_psnr_masked, r.mean_ssim_masked) {
+        println!(
+            "test views       masked PSNR {p:.2} dB, SSIM {s:.3} ({} views)",
+            r.test_views.len()
+        );
+    }
+    if let Some(c) = &r.chamfer {
+        println!(
+            "chamfer-L1       {:.5} ({:.2} % of the bounding-box diagonal)",
+            c.chamfer_l1,
+            100.0 * c.relative
+        );
+    }
+    println!(
+        "mesh             {} vertices, {} faces",
+        r.mesh_vertices, r.mesh_faces
+    );
+    println!("written to       {}", out.display());
+}

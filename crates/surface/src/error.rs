@@ -1,0 +1,54 @@
+//! Errors of the surface pipeline: one line naming the input and the problem.
+
+use std::path::PathBuf;
+
+/// Result with [`SurfaceError`].
+pub type Result<T> = std::result::Result<T, SurfaceError>;
+
+#[derive(Debug, thiserror::Error)]
+pub enum SurfaceError {
+    /// A configuration or argument that cannot work.
+    #[error("{what}: {message}")]
+    Invalid { what: String, message: String },
+    /// A file that cannot be read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    /// A file whose contents are not what they should be.
+    #[error("{}: {message}", path.display())]
+    Format { path: PathBuf, message: String },
+    /// An error of the scene crate (datasets, images).
+    #[error(transparent)]
+    Scene(#[from] fewview_scene::SceneError),
+    /// An error of the geometry crate (meshes, registration).
+    #[error(transparent)]
+    Geom(#[from] fewview_geom::GeomError),
+    /// Training diverged (NaN loss or parameters).
+    #[error("training diverged at iteration {iteration}: {message}")]
+    Diverged { iteration: usize, message: String },
+}
+
+impl SurfaceError {
+    pub fn invalid(what: impl Into<String>, message: impl Into<String>) -> Self {
+        Self::Invalid {
+            what: what.into(),
+            message: message.into(),
+        }
+    }
+
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Self::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
+        Self::Format {
+            path: path.into(),
+            message: message.into(),
+        }
+    }
+}

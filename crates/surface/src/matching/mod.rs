@@ -1,0 +1,175 @@
+//! Correspondences between training views. Paper 001 uses PDC-Net (a learned dense matcher
+//! whose weights cannot be fetched here); [`Matcher`] is the seam where a learned matcher plugs
+//! in, and [`sift::SiftMatcher`] is the classical one used by default: SIFT features, Lowe's
+//! ratio test, a mutual nearest-neighbour check and an optional RANSAC fundamental-matrix
+//! filter (no poses are used: the poses are what is being estimated).
+//!
+//! [`epipolar_precision`] scores matches against ground-truth cameras.
+
+pub mod fundamental;
+pub mod sift;
+
+use fewview_scene::{Camera, Image};
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// One correspondence between two views, in pixel coordinates (pixel centres at
+/// half-integers).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Match {
+    /// Index (into the training views) of the view of `a`.
+    pub view_a: usize,
+    pub view_b: usize,
+    pub a: [f32; 2],
+    pub b: [f32; 2],
+    /// In `[0, 1]`, higher is more reliable.
+    pub confidence: f32,
+}
+
+/// An image and its optional object mask, as matchers see them.
+pub struct MatchInput<'a> {
+    pub image: &'a Image,
+    pub mask: Option<&'a Image>,
+}
+
+/// A two-view matcher.
+pub trait Matcher: Send + Sync {
+    /// Correspondences between `a` and `b` (`view_a`/`view_b` of the results are 0 and 1).
+    fn match_pair(&self, a: &MatchInput, b: &MatchInput) -> Vec<Match>;
+
+    /// Short name for reports.
+    fn name(&self) -> &str;
+}
+
+/// Matches every unordered pair of views (`view_a < view_b`, indices into `views`).
+pub fn match_all_pairs(matcher: &dyn Matcher, views: &[MatchInput]) -> Vec<Match> {
+    let mut out = Vec::new();
+    for i in 0..views.len() {
+        for j in i + 1..views.len() {
+            for m in matcher.match_pair(&views[i], &views[j]) {
+                out.push(Match {
+                    view_a: i,
+                    view_b: j,
+                    ..m
+                });
+            }
+        }
+    }
+    out
+}
+
+/// The fundamental matrix mapping points of `a` to epipolar lines in `b`: `x_bᵀ F x_a = 0`.
+pub fn fundamental_from_cameras(a: &Camera, b: &Camera) -> Matrix3<f64> {
+    let rel = b.world_to_camera.compose(&a.world_to_camera.inverse());
+    let t = rel.translation;
+    let tx = Matrix3::new(0.0, -t.z, t.y, t.z, 0.0, -t.x, -t.y, t.x, 0.0);
+    let e = tx * rel.rotation;
+    let ka = a
+        .intrinsics
+        .matrix()
+        .try_inverse()
+        .unwrap_or_else(Matrix3::identity);
+    let kb = b
+        .intrinsics
+        .matrix()
+        .try_inverse()
+        .unwrap_or_else(Matrix3::identity);
+    kb.transpose() * e * ka
+}
+
+/// Symmetric epipolar distance of one match (pixels): the mean of the distances of each point
+/// to the epipolar line of the other.
+pub fn epipolar_distance(f: &Matrix3<f64>, a: [f32; 2], b: [f32; 2]) -> f64 {
+    let xa = Vector3::new(a[0] as f64, a[1] as f64, 1.0);
+    let xb = Vector3::new(b[0] as f64, b[1] as f64, 1.0);
+    let lb = f * xa;
+    let la = f.transpose() * xb;
+    let r = xb.dot(&lb);
+    let db = r.abs() / (lb.x * lb.x + lb.y * lb.y).sqrt().max(1e-12);
+    let da = r.abs() / (la.x * la.x + la.y * la.y).sqrt().max(1e-12);
+    0.5 * (da + db)
+}
+
+/// Match quality against ground-truth cameras.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MatchPrecision {
+    pub matches: usize,
+    /// Fraction with symmetric epipolar distance below 1, 2 and 5 px.
+    pub precision_1px: f64,
+    pub precision_2px: f64,
+    pub precision_5px: f64,
+    pub median_px: f64,
+}
+
+/// Scores `matches` (indices into `cameras`) by their epipolar distance under the true cameras.
+pub fn epipolar_precision(matches: &[Match], cameras: &[Camera]) -> MatchPrecision {
+    let mut d: Vec<f64> = matches
+        .iter()
+        .map(|m| {
+            let f = fundamental_from_cameras(&cameras[m.view_a], &cameras[m.view_b]);
+            epipolar_distance(&f, m.a, m.b)
+        })
+        .collect();
+    d.sort_by(f64::total_cmp);
+    let n = d.len().max(1) as f64;
+    let frac = |t: f64| d.iter().filter(|x| **x < t).count() as f64 / n;
+    MatchPrecision {
+        matches: d.len(),
+        precision_1px: frac(1.0),
+        precision_2px: frac(2.0),
+        precision_5px: frac(5.0),
+        median_px: if d.is_empty() {
+            f64::NAN
+        } else {
+            d[d.len() / 2]
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use fewview_scene::Intrinsics;
+
+    use super::*;
+
+    #[test]
+    fn true_correspondences_have_zero_epipolar_distance() {
+        let k = Intrinsics::centered(200.0, 160, 120);
+        let a = Camera::look_at(
+            k,
+            Vector3::new(3.0, 0.5, 1.0),
+            Vector3::zeros(),
+            Vector3::z(),
+        );
+        let b = Camera::look_at(
+            k,
+            Vector3::new(1.0, 2.8, 0.7),
+            Vector3::zeros(),
+            Vector3::z(),
+        );
+        let f = fundamental_from_cameras(&a, &b);
+        let mut ms = Vec::new();
+        for p in [Vector3::new(0.1, 0.2, -0.1), Vector3::new(-0.3, 0.0, 0.2)] {
+            let (ua, va, _) = a.project(&p).unwrap();
+            let (ub, vb, _) = b.project(&p).unwrap();
+            let d = epipolar_distance(&f, [ua as f32, va as f32], [ub as f32, vb as f32]);
+            assert!(d < 1e-3, "{d}");
+            ms.push(Match {
+                view_a: 0,
+                view_b: 1,
+                a: [ua as f32, va as f32],
+                b: [ub as f32, vb as f32],
+                confidence: 1.0,
+            });
+        }
+        // A point moved 4 px across the epipolar line is 2–4 px away on average.
+        ms.push(Match {
+            b: [ms[0].b[0] + 4.0, ms[0].b[1] + 4.0],
+            ..ms[0]
+        });
+        let p = epipolar_precision(&ms, &[a, b]);
+        assert_eq!(p.matches, 3);
+        assert!((p.precision_1px - 2.0 / 3.0).abs() < 1e-12);
+        assert_eq!(p.precision_5px, 1.0);
+    }
+}

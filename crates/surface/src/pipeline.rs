@@ -1,0 +1,546 @@
+//! The whole method on a dataset, as the CLI runs it: training views and their ground-truth
+//! poses → perturbed initial poses (BARF/SPARF protocol) → correspondences → joint training
+//! with checkpoints → refined poses, mesh, renders and metrics in one run directory.
+//!
+//! Run directory:
+//! - `config.json` — the resolved configuration;
+//! - `checkpoint.bin` — the training state (resume with the same configuration);
+//! - `matches.json` — correspondence count and precision against the true poses;
+//! - `poses_initial.json`, `poses_refined.json` — cameras (intrinsics + world-to-camera), and
+//!   `cameras_refined.npz` in the IDR format (`world_mat_i`, `scale_mat_i`) for DTU input;
+//! - `mesh.ply` — marching cubes of the SDF, culled by the training masks, coloured;
+//! - `renders/` — colour, depth and normals of the test views (ground-truth cameras mapped into
+//!   the reconstruction's frame by the Alg. 1 alignment);
+//! - `metrics.json` — pose errors (Alg. 1/2) before and after, masked PSNR/SSIM of the test
+//!   views, Chamfer of the mesh against a reference surface (Alg. 3) when one is given.
+
+use std::path::{Path, PathBuf};
+
+use fewview_geom::Mesh;
+use fewview_geom::Similarity;
+use fewview_metrics::pose_error::{PoseError, PoseErrorOptions, pose_error_pairwise};
+use fewview_scene::{Camera, Dataset, Image, Se3};
+use nalgebra::Matrix4;
+use serde::{Deserialize, Serialize};
+
+use crate::checkpoint;
+use crate::error::{Result, SurfaceError};
+use crate::extract::{MeshOptions, final_mesh, render_view};
+use crate::matching::sift::{SiftMatcher, SiftOptions};
+use crate::matching::{Match, MatchInput, MatchPrecision, epipolar_precision, match_all_pairs};
+use crate::pose::perturb_poses;
+use crate::train::{StepStats, TrainConfig, TrainView, Trainer};
+
+/// Where the initial poses come from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum InitialPoses {
+    /// Ground truth perturbed by se(3) noise `N(0, σ²)` from the run's seed (BARF/SPARF).
+    NoisyGroundTruth { sigma: f64 },
+    /// The poses as loaded (e.g. DTU's `cameras_linear_init.npz`); the ground truth for the
+    /// errors then comes from `ground_truth` (a dataset loaded with the true cameras).
+    AsLoaded,
+}
+
+/// Everything about a run besides the dataset.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunConfig {
+    pub train: TrainConfig,
+    pub initial_poses: InitialPoses,
+    /// `None`: no correspondences (colour-only joint optimisation, BARF-like).
+    pub matcher: Option<SiftOptions>,
+    /// Iterations between checkpoints (0: none).
+    pub checkpoint_every: usize,
+    pub mesh_resolution: usize,
+    /// Test views rendered and scored (the first ones of the dataset's test split).
+    pub eval_views: usize,
+    /// Render test views at this fraction of their size (1 = full).
+    pub eval_scale: u32,
+    /// Also write the refined poses as IDR/NeuS `cameras_refined.npz` (DTU input), using the
+    /// dataset's `to_source_world` as `scale_mat`.
+    pub idr_output: bool,
+}
+
+impl Default for RunConfig {
+    fn default() -> Self {
+        Self {
+            train: TrainConfig::default(),
+            initial_poses: InitialPoses::NoisyGroundTruth { sigma: 0.15 },
+            matcher: Some(SiftOptions::default()),
+            checkpoint_every: 500,
+            mesh_resolution: 256,
+            eval_views: 5,
+            eval_scale: 1,
+            idr_output: false,
+        }
+    }
+}
+
+/// Training inputs derived from a dataset.
+pub struct Prepared {
+    pub views: Vec<TrainView>,
+    /// Indices of the training views in the dataset.
+    pub view_indices: Vec<usize>,
+    pub ground_truth: Vec<Se3>,
+    pub initial: Vec<Se3>,
+    pub matches: Vec<Match>,
+    pub match_precision: Option<MatchPrecision>,
+}
+
+/// Builds the training inputs: views, ground-truth and initial poses, correspondences.
+/// `truth` holds the ground-truth cameras of the same views when `dataset` carries other
+/// (initial) poses.
+pub fn prepare(dataset: &Dataset, truth: Option<&Dataset>, config: &RunConfig) -> Result<Prepared> {
+    if dataset.train.len() < 2 {
+        return Err(SurfaceError::invalid(
+            "training views",
+            format!("{} training views; need at least 2", dataset.train.len()),
+        ));
+    }
+    let views: Vec<TrainView> = dataset
+        .train_views()
+        .map(|v| TrainView {
+            image: v.image.clone(),
+            mask: v.mask.clone(),
+            intrinsics: v.camera.intrinsics,
+        })
+        .collect();
+    let gt_source = truth.unwrap_or(dataset);
+    let ground_truth: Vec<Se3> = dataset
+        .train
+        .iter()
+        .map(|&i| {
+            gt_source
+                .views
+                .get(i)
+                .map(|v| v.camera.world_to_camera)
+                .ok_or_else(|| SurfaceError::invalid("ground truth", format!("has no view {i}")))
+        })
+        .collect::<Result<_>>()?;
+    let initial = match &config.initial_poses {
+        InitialPoses::NoisyGroundTruth { sigma } => {
+            if !(sigma.is_finite() && *sigma >= 0.0) {
+                return Err(SurfaceError::invalid(
+                    "pose noise",
+                    format!("σ = {sigma} must be ≥ 0"),
+                ));
+            }
+            perturb_poses(&ground_truth, *sigma, config.train.seed)
+        }
+        InitialPoses::AsLoaded => dataset
+            .train_views()
+            .map(|v| v.camera.world_to_camera)
+            .collect(),
+    };
+    let (matches, match_precision) = match &config.matcher {
+        None => (Vec::new(), None),
+        Some(opts) => {
+            let inputs: Vec<MatchInput> = dataset
+                .train_views()
+                .map(|v| MatchInput {
+                    image: &v.image,
+                    mask: if config.train.use_masks {
+                        v.mask.as_ref()
+                    } else {
+                        None
+                    },
+                })
+                .collect();
+            let m = match_all_pairs(
+                &SiftMatcher {
+                    options: opts.clone(),
+                },
+                &inputs,
+            );
+            let cams: Vec<Camera> = views
+                .iter()
+                .zip(&ground_truth)
+                .map(|(v, p)| Camera::new(v.intrinsics, *p))
+                .collect();
+            let p = epipolar_precision(&m, &cams);
+            (m, Some(p))
+        }
+    };
+    Ok(Prepared {
+        views,
+        view_indices: dataset.train.clone(),
+        ground_truth,
+        initial,
+        matches,
+        match_precision,
+    })
+}
+
+/// What a run reports.
+#[derive(Clone, Debug, Serialize)]
+pub struct RunReport {
+    pub iterations: usize,
+    pub train_seconds_wall: f64,
+    pub train_seconds_cpu: f64,
+    pub iterations_per_second_wall: f64,
+    pub matches: usize,
+    pub match_precision: Option<MatchPrecision>,
+    pub initial_pose_error: PoseError,
+    pub final_pose_error: PoseError,
+    pub last_step: StepStats,
+    /// Pose errors at the checkpoints of this invocation (a resumed run lists only its own).
+    pub pose_error_history: Vec<PoseErrorAt>,
+    pub test_views: Vec<TestViewMetrics>,
+    pub mean_psnr_masked: Option<f64>,
+    pub mean_ssim_masked: Option<f64>,
+    pub chamfer: Option<ChamferReport>,
+    pub mesh_vertices: usize,
+    pub mesh_faces: usize,
+}
+
+/// The pose error at one iteration.
+#[derive(Clone, Debug, Serialize)]
+pub struct PoseErrorAt {
+    pub iteration: usize,
+    pub rotation_deg: f64,
+    pub translation: f64,
+}
+
+/// Metrics of one rendered test view.
+#[derive(Clone, Debug, Serialize)]
+pub struct TestViewMetrics {
+    pub view: usize,
+    pub psnr_masked: f64,
+    pub ssim_masked: f64,
+    pub psnr: f64,
+}
+
+/// Chamfer distance of the mesh to a reference surface after Alg. 3.
+#[derive(Clone, Debug, Serialize)]
+pub struct ChamferReport {
+    pub chamfer_l1: f64,
+    pub accuracy: f64,
+    pub completeness: f64,
+    pub bbox_diagonal: f64,
+    /// `chamfer_l1 / bbox_diagonal`.
+    pub relative: f64,
+    pub fscore_1pct: f64,
+}
+
+/// Progress callback events.
+pub enum Event<'a> {
+    Matched {
+        matches: usize,
+        precision: Option<&'a MatchPrecision>,
+    },
+    Step(&'a StepStats),
+    /// A checkpoint was written; the pose error of the current poses (Alg. 1/2).
+    Checkpoint {
+        iteration: usize,
+        pose_error: &'a PoseError,
+    },
+    Stage(&'static str),
+}
+
+fn pose_error(est: &[Se3], gt: &[Se3]) -> Result<PoseError> {
+    pose_error_pairwise(est, gt, &PoseErrorOptions::default())
+        .map_err(|e| SurfaceError::invalid("pose error", e.to_string()))
+}
+
+fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)
+        .map_err(|e| SurfaceError::invalid("json", e.to_string()))?;
+    fewview_scene::atomic::write_bytes(path, text.as_bytes()).map_err(SurfaceError::Scene)
+}
+
+/// Writes IDR/NeuS `world_mat_i` and `scale_mat_i` for the given (dataset) view indices:
+/// `world_mat = K [R | t] · scale_mat⁻¹`, so `world_mat · scale_mat` is the normalised
+/// projection the loader decomposes.
+pub fn write_idr_cameras(
+    path: &Path,
+    cameras: &[Camera],
+    indices: &[usize],
+    scale_mat: &Matrix4<f64>,
+) -> Result<()> {
+    let inv = scale_mat
+        .try_inverse()
+        .ok_or_else(|| SurfaceError::invalid("scale_mat", "is singular"))?;
+    let tmp = path.with_extension("npz.tmp");
+    {
+        let file = std::fs::File::create(&tmp).map_err(|e| SurfaceError::io(&tmp, e))?;
+        let mut npz = npyz::npz::NpzWriter::new(std::io::BufWriter::new(file));
+        let mut put = |name: String, m: &Matrix4<f64>| -> std::io::Result<()> {
+            use npyz::WriterBuilder;
+            let data: Vec<f32> = (0..4)
+                .flat_map(|r| (0..4).map(move |c| (r, c)))
+                .map(|(r, c)| m[(r, c)] as f32)
+                .collect();
+            let mut w = npz
+                .array(&name, Default::default())?
+                .default_dtype()
+                .shape(&[4, 4])
+                .begin_nd()?;
+            w.extend(data)?;
+            w.finish()
+        };
+        for (c, &i) in cameras.iter().zip(indices) {
+            let mut p = Matrix4::identity();
+            p.fixed_view_mut::<3, 4>(0, 0).copy_from(
+                &(c.intrinsics.matrix() * c.world_to_camera.to_matrix4().fixed_view::<3, 4>(0, 0)),
+            );
+            let world = p * inv;
+            put(format!("world_mat_{i}"), &world).map_err(|e| SurfaceError::io(&tmp, e))?;
+            put(format!("scale_mat_{i}"), scale_mat).map_err(|e| SurfaceError::io(&tmp, e))?;
+        }
+    }
+    std::fs::rename(&tmp, path).map_err(|e| SurfaceError::io(path, e))
+}
+
+/// The cameras of `gt` mapped into the reconstruction's world by the inverse of the Alg. 1
+/// alignment `x_gt = s R x_est + t`.
+pub fn camera_in_estimate_frame(gt: &Camera, alignment: &Similarity) -> Camera {
+    let inv = alignment.inverse();
+    let c2w = gt.world_to_camera.inverse();
+    let r = inv.rotation * c2w.rotation;
+    let c = inv.apply(&c2w.translation);
+    Camera::new(gt.intrinsics, Se3::new(r, c).inverse())
+}
+
+/// Runs everything and writes the run directory. `resume` continues from `checkpoint.bin`
+/// when it exists. `reference` is a surface in the dataset's (normalised) frame for Chamfer.
+pub fn run(
+    dataset: &Dataset,
+    truth: Option<&Dataset>,
+    config: &RunConfig,
+    out: &Path,
+    resume: bool,
+    reference: Option<&Mesh>,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<RunReport> {
+    std::fs::create_dir_all(out).map_err(|e| SurfaceError::io(out, e))?;
+    write_json(&out.join("config.json"), config)?;
+    on_event(Event::Stage("matching"));
+    let prep = prepare(dataset, truth, config)?;
+    on_event(Event::Matched {
+        matches: prep.matches.len(),
+        precision: prep.match_precision.as_ref(),
+    });
+    write_json(
+        &out.join("matches.json"),
+        &serde_json::json!({ "matches": prep.matches.len(), "precision": prep.match_precision }),
+    )?;
+    let cams = |poses: &[Se3]| -> Vec<Camera> {
+        prep.views
+            .iter()
+            .zip(poses)
+            .map(|(v, p)| Camera::new(v.intrinsics, *p))
+            .collect()
+    };
+    fewview_geom::io::cameras::write_cameras(
+        &out.join("poses_initial.json"),
+        &cams(&prep.initial),
+    )?;
+    let mut trainer = Trainer::new(
+        config.train.clone(),
+        prep.views.clone(),
+        &prep.initial,
+        prep.matches.clone(),
+    )?;
+    let ckpt = out.join("checkpoint.bin");
+    if resume && ckpt.exists() {
+        let state = checkpoint::load(&ckpt, &config.train)?;
+        trainer.restore(state)?;
+        trainer.sync_progress();
+    }
+    on_event(Event::Stage("training"));
+    let wall = std::time::Instant::now();
+    let cpu = crate::cputime::process_cpu_seconds();
+    let start_it = trainer.state.iteration;
+    let mut last = StepStats::default();
+    let mut history = Vec::new();
+    while trainer.state.iteration < config.train.iterations {
+        last = trainer.step()?;
+        on_event(Event::Step(&last));
+        let it = trainer.state.iteration;
+        if config.checkpoint_every > 0
+            && (it % config.checkpoint_every == 0 || it == config.train.iterations)
+        {
+            checkpoint::save(&ckpt, &config.train, &trainer.state)?;
+            let err = pose_error(&trainer.poses(), &prep.ground_truth)?;
+            history.push(PoseErrorAt {
+                iteration: it,
+                rotation_deg: err.rotation_deg,
+                translation: err.translation,
+            });
+            on_event(Event::Checkpoint {
+                iteration: it,
+                pose_error: &err,
+            });
+        }
+    }
+    let train_wall = wall.elapsed().as_secs_f64();
+    let train_cpu = crate::cputime::process_cpu_seconds() - cpu;
+    let done = trainer.state.iteration - start_it;
+
+    on_event(Event::Stage("evaluating"));
+    let refined = trainer.poses();
+    let initial_err = pose_error(&prep.initial, &prep.ground_truth)?;
+    let final_err = pose_error(&refined, &prep.ground_truth)?;
+    let refined_cams = cams(&refined);
+    fewview_geom::io::cameras::write_cameras(&out.join("poses_refined.json"), &refined_cams)?;
+    if let Some(scale) = dataset
+        .to_source_world
+        .as_ref()
+        .filter(|_| config.idr_output)
+    {
+        write_idr_cameras(
+            &out.join("cameras_refined.npz"),
+            &refined_cams,
+            &prep.view_indices,
+            scale,
+        )?;
+    }
+    let (field, params) = trainer.field_params();
+    let masks: Option<Vec<Image>> = prep.views.iter().map(|v| v.mask.clone()).collect();
+    let mesh = final_mesh(
+        field,
+        params,
+        &MeshOptions {
+            resolution: config.mesh_resolution,
+            chunk: 32,
+        },
+        masks
+            .as_ref()
+            .filter(|_| config.train.use_masks)
+            .map(|m| (refined_cams.as_slice(), m.as_slice())),
+    )?;
+    fewview_geom::io::write_mesh(&out.join("mesh.ply"), &mesh)?;
+
+    // Test views.
+    let renders = out.join("renders");
+    std::fs::create_dir_all(&renders).map_err(|e| SurfaceError::io(&renders, e))?;
+    let mut test_metrics = Vec::new();
+    for &vi in dataset.test.iter().take(config.eval_views) {
+        let gt_view = &truth.unwrap_or(dataset).views[vi];
+        let mut cam = camera_in_estimate_frame(&gt_view.camera, &final_err.alignment);
+        let (mut image, mut mask) = (gt_view.image.clone(), gt_view.mask.clone());
+        if config.eval_scale > 1 {
+            let k = config.eval_scale as usize;
+            image = image.downscale(k);
+            mask = mask.map(|m| m.downscale(k));
+            cam = cam.resized(image.width as u32, image.height as u32);
+        }
+        let r = render_view(
+            field,
+            params,
+            &cam,
+            &config.train.sample,
+            config.train.background,
+            4096,
+        );
+        let name = |s: &str| renders.join(format!("{:03}_{s}.png", vi));
+        r.rgb.save_png(&name("rgb"))?;
+        let dmax = r
+            .depth
+            .data
+            .iter()
+            .copied()
+            .fold(0.0f32, f32::max)
+            .max(1e-6);
+        Image::from_vec(
+            r.depth.width,
+            r.depth.height,
+            1,
+            r.depth.data.iter().map(|d| d / dmax).collect(),
+        )
+        .save_png(&name("depth"))?;
+        r.normal.save_png(&name("normal"))?;
+        let full = fewview_metrics::psnr::psnr(&r.rgb, &image).unwrap_or(f64::NAN);
+        let (pm, sm) = match &mask {
+            Some(m) => (
+                fewview_metrics::psnr::psnr_masked(&r.rgb, &image, m).unwrap_or(f64::NAN),
+                fewview_metrics::ssim::ssim_masked(&r.rgb, &image, m, &Default::default())
+                    .unwrap_or(f64::NAN),
+            ),
+            None => (
+                full,
+                fewview_metrics::ssim::ssim(&r.rgb, &image).unwrap_or(f64::NAN),
+            ),
+        };
+        test_metrics.push(TestViewMetrics {
+            view: vi,
+            psnr_masked: pm,
+            ssim_masked: sm,
+            psnr: full,
+        });
+    }
+    let mean = |f: &dyn Fn(&TestViewMetrics) -> f64| {
+        (!test_metrics.is_empty())
+            .then(|| test_metrics.iter().map(f).sum::<f64>() / test_metrics.len() as f64)
+    };
+    let chamfer = match reference {
+        Some(gt) if !mesh.faces.is_empty() => {
+            Some(chamfer_after_alignment(&mesh, gt, &final_err.alignment)?)
+        }
+        _ => None,
+    };
+    let report = RunReport {
+        iterations: trainer.state.iteration,
+        train_seconds_wall: train_wall,
+        train_seconds_cpu: train_cpu,
+        iterations_per_second_wall: if train_wall > 0.0 {
+            done as f64 / train_wall
+        } else {
+            0.0
+        },
+        matches: prep.matches.len(),
+        match_precision: prep.match_precision.clone(),
+        initial_pose_error: initial_err,
+        final_pose_error: final_err,
+        last_step: last,
+        pose_error_history: history,
+        mean_psnr_masked: mean(&|m| m.psnr_masked),
+        mean_ssim_masked: mean(&|m| m.ssim_masked),
+        test_views: test_metrics,
+        chamfer,
+        mesh_vertices: mesh.vertices.len(),
+        mesh_faces: mesh.faces.len(),
+    };
+    write_json(&out.join("metrics.json"), &report)?;
+    Ok(report)
+}
+
+/// Paper 001 Alg. 3 then Chamfer-L1: the mesh is pre-aligned with the pose-evaluation
+/// similarity, registered to the reference by FPFH + RANSAC and point-to-point ICP, and scored
+/// with uniform surface samples.
+pub fn chamfer_after_alignment(
+    mesh: &Mesh,
+    reference: &Mesh,
+    alignment: &Similarity,
+) -> Result<ChamferReport> {
+    use fewview_geom::registration::{RegistrationOptions, register};
+    let diag = fewview_geom::mesh::bbox_diagonal(&reference.vertices);
+    let voxel = diag / 100.0;
+    let src = fewview_geom::Points::from_positions(mesh.vertices.clone());
+    let dst = fewview_geom::Points::from_positions(reference.vertices.clone());
+    let reg = register(
+        &src,
+        &dst,
+        Some(alignment),
+        &RegistrationOptions::for_voxel(voxel),
+    )?;
+    let aligned = Mesh {
+        vertices: reg.transformation.apply_points(&mesh.vertices),
+        ..mesh.clone()
+    };
+    let m =
+        fewview_geom::chamfer::surface_metrics(&aligned, reference, 200_000, &[0.01 * diag], 0)?;
+    Ok(ChamferReport {
+        chamfer_l1: m.chamfer_l1,
+        accuracy: m.accuracy,
+        completeness: m.completeness,
+        bbox_diagonal: diag,
+        relative: m.chamfer_l1 / diag,
+        fscore_1pct: m.fscore.first().map(|f| f.fscore).unwrap_or(f64::NAN),
+    })
+}
+
+/// The run directory's checkpoint path.
+pub fn checkpoint_path(out: &Path) -> PathBuf {
+    out.join("checkpoint.bin")
+}

@@ -1,0 +1,220 @@
+//! End-to-end tests of the surface pipeline on the analytic scene (an SDF solid rendered by the
+//! independent sphere tracer of `sdf_scene`): reconstruction accuracy with noisy poses, and
+//! bit-exact resumption from a checkpoint.
+
+use fewview_scene::Dataset;
+use fewview_surface::checkpoint;
+use fewview_surface::pipeline::{InitialPoses, RunConfig, RunReport, prepare, run};
+use fewview_surface::sdf_scene::{SdfSceneOptions, sdf_dataset, surface_mesh};
+use fewview_surface::train::Trainer;
+
+fn tiny_scene() -> Dataset {
+    sdf_dataset(&SdfSceneOptions {
+        width: 64,
+        height: 48,
+        views: 6,
+        train: vec![0, 2, 4],
+        supersample: 1,
+        ..Default::default()
+    })
+}
+
+fn tiny_config(iterations: usize) -> RunConfig {
+    let mut c = RunConfig::default();
+    c.train.iterations = iterations;
+    c.train.rays_per_batch = 96;
+    c.train.matches_per_batch = 16;
+    c.train.sample.n_coarse = 16;
+    c.train.sample.n_importance = 16;
+    c.initial_poses = InitialPoses::NoisyGroundTruth { sigma: 0.05 };
+    c.checkpoint_every = 0;
+    c.mesh_resolution = 48;
+    c.eval_views = 1;
+    c.eval_scale = 4;
+    c
+}
+
+fn silent(_: fewview_surface::pipeline::Event) {}
+
+/// A run interrupted after 4 of 8 iterations and resumed from its checkpoint ends with the
+/// same parameters and poses, bit for bit, as the uninterrupted run; and the pipeline's
+/// `resume` path picks the checkpoint up and reports the same final pose errors.
+#[test]
+fn resume_reproduces_the_uninterrupted_run() {
+    let ds = tiny_scene();
+    let config = tiny_config(8);
+    let prep = prepare(&ds, None, &config).unwrap();
+    let new_trainer = || {
+        Trainer::new(
+            config.train.clone(),
+            prep.views.clone(),
+            &prep.initial,
+            prep.matches.clone(),
+        )
+        .unwrap()
+    };
+    let mut whole = new_trainer();
+    for _ in 0..8 {
+        whole.step().unwrap();
+    }
+
+    let dir = tempfile::tempdir().unwrap();
+    let ckpt = dir.path().join("checkpoint.bin");
+    let mut first = new_trainer();
+    for _ in 0..4 {
+        first.step().unwrap();
+    }
+    checkpoint::save(&ckpt, &config.train, &first.state).unwrap();
+    drop(first);
+    let mut resumed = new_trainer();
+    resumed
+        .restore(checkpoint::load(&ckpt, &config.train).unwrap())
+        .unwrap();
+    resumed.sync_progress();
+    assert_eq!(resumed.state.iteration, 4);
+    for _ in 0..4 {
+        resumed.step().unwrap();
+    }
+    assert_eq!(resumed.state, whole.state, "resumed state differs");
+    // Bit-level check of the floats (PartialEq treats -0.0 == 0.0).
+    let bits = |s: &fewview_surface::train::TrainState| -> Vec<u32> {
+        s.params
+            .iter()
+            .flatten()
+            .chain(&s.poses)
+            .map(|v| v.to_bits())
+            .collect()
+    };
+    assert_eq!(bits(&resumed.state), bits(&whole.state));
+
+    // The pipeline's resume path: it continues from the checkpoint of iteration 4.
+    let uninterrupted: RunReport = run(
+        &ds,
+        None,
+        &config,
+        &dir.path().join("a"),
+        false,
+        None,
+        &mut silent,
+    )
+    .unwrap();
+    let b = dir.path().join("b");
+    std::fs::create_dir_all(&b).unwrap();
+    std::fs::copy(&ckpt, b.join("checkpoint.bin")).unwrap();
+    let mut trained_from = None;
+    let resumed_run = run(&ds, None, &config, &b, true, None, &mut |e| {
+        if let fewview_surface::pipeline::Event::Stage("training") = e {
+            trained_from = Some(());
+        }
+    })
+    .unwrap();
+    assert!(trained_from.is_some());
+    assert_eq!(resumed_run.iterations, 8);
+    assert_eq!(
+        resumed_run.final_pose_error.rotation_deg.to_bits(),
+        uninterrupted.final_pose_error.rotation_deg.to_bits()
+    );
+    assert_eq!(
+        resumed_run.final_pose_error.translation.to_bits(),
+        uninterrupted.final_pose_error.translation.to_bits()
+    );
+    let read = |p: &std::path::Path| std::fs::read(p.join("poses_refined.json")).unwrap();
+    assert_eq!(read(&b), read(&dir.path().join("a")));
+}
+
+/// A checkpoint written under another configuration is refused with a one-line error.
+#[test]
+fn checkpoint_of_another_configuration_is_refused() {
+    let ds = tiny_scene();
+    let config = tiny_config(4);
+    let prep = prepare(&ds, None, &config).unwrap();
+    let t = Trainer::new(
+        config.train.clone(),
+        prep.views.clone(),
+        &prep.initial,
+        prep.matches.clone(),
+    )
+    .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let ckpt = dir.path().join("checkpoint.bin");
+    checkpoint::save(&ckpt, &config.train, &t.state).unwrap();
+    let mut other = config.train.clone();
+    other.seed += 1;
+    let err = checkpoint::load(&ckpt, &other).unwrap_err().to_string();
+    assert!(err.contains("different configuration"), "{err}");
+    assert!(!err.contains('\n'));
+    std::fs::write(&ckpt, b"garbage").unwrap();
+    let err = checkpoint::load(&ckpt, &config.train)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("not a surface checkpoint"), "{err}");
+}
+
+/// The analytic scene from noisy poses, a reduced run that fits the CI budget: 6 views at
+/// 160 × 120, σ = 0.05 se(3) noise, 300 iterations. It bounds the Chamfer-L1 of the extracted
+/// mesh to the true surface (after the Alg. 3 registration) at 8 % of the bounding-box
+/// diagonal (measured: 5.8 %) and checks that the translation error drops (measured
+/// 0.277 → 0.267). This is a regression bound, **not** the acceptance figure (≤ 1 %),
+/// which this schedule does not reach (see the crate README).
+#[test]
+fn analytic_scene_with_noisy_poses_reduced_run() {
+    let ds = sdf_dataset(&SdfSceneOptions {
+        width: 160,
+        height: 120,
+        views: 12,
+        train: vec![0, 2, 4, 6, 8, 10],
+        supersample: 2,
+        ..Default::default()
+    });
+    let mut config = RunConfig::default();
+    config.train.iterations = analytic_iterations();
+    config.train.rays_per_batch = 384;
+    config.train.matches_per_batch = 64;
+    config.initial_poses = InitialPoses::NoisyGroundTruth { sigma: 0.05 };
+    config.checkpoint_every = 0;
+    config.mesh_resolution = 128;
+    config.eval_views = 2;
+    config.eval_scale = 2;
+    let truth = surface_mesh(192).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let report = run(
+        &ds,
+        None,
+        &config,
+        dir.path(),
+        false,
+        Some(&truth),
+        &mut silent,
+    )
+    .unwrap();
+    let chamfer = report.chamfer.clone().expect("chamfer");
+    eprintln!(
+        "analytic: chamfer {:.5} ({:.3} % of diag), R {:.3}° → {:.3}°, t {:.4} → {:.4}, psnr {:?}, {:.0} s",
+        chamfer.chamfer_l1,
+        100.0 * chamfer.relative,
+        report.initial_pose_error.rotation_deg,
+        report.final_pose_error.rotation_deg,
+        report.initial_pose_error.translation,
+        report.final_pose_error.translation,
+        report.mean_psnr_masked,
+        report.train_seconds_wall
+    );
+    assert!(
+        chamfer.relative <= 0.08,
+        "chamfer {:.4} of the diagonal",
+        chamfer.relative
+    );
+    assert!(report.final_pose_error.translation < report.initial_pose_error.translation);
+    for f in [
+        "mesh.ply",
+        "poses_refined.json",
+        "metrics.json",
+        "renders/001_rgb.png",
+    ] {
+        assert!(dir.path().join(f).exists(), "{f} missing");
+    }
+}
+
+fn analytic_iterations() -> usize {
+    300
+}
