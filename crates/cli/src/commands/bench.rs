@@ -12,8 +12,9 @@ use serde::Serialize;
 ///
 /// Measures the rasterizer (forward and backward splat–pixel pairs per CPU-second at 100k
 /// Gaussians and 504×378, beside a plain single-threaded blend loop), training iterations per
-/// second (the demo scene, and LLFF fern 3-view when the data is available), the SSIM loss, the
-/// occlusion-aware Poisson blend at 1024², and peak memory. Prints a table and writes JSON.
+/// second (the demo scene, and LLFF fern 3-view when the data is available), surface training
+/// iterations per second on DTU scan65 3-view (hash grid, beside the NeuS MLP), the SSIM loss,
+/// the occlusion-aware Poisson blend at 1024², and peak memory. Prints a table and writes JSON.
 ///
 /// Throughput is reported per CPU-second (CPU time summed over threads), which does not change
 /// when other programs load the machine; wall-clock seconds are reported too.
@@ -31,6 +32,13 @@ pub struct Args {
     /// Training steps timed per dataset.
     #[arg(long, default_value_t = 20)]
     pub train_steps: usize,
+    /// DTU scan65 folder for the surface training-step figure (default:
+    /// `$FEWVIEW_DATA/dtu/scan65`; views 22, 25, 28 at 400×300).
+    #[arg(long, value_name = "DIR")]
+    pub dtu: Option<PathBuf>,
+    /// Surface training steps timed (the NeuS-MLP reference runs one).
+    #[arg(long, default_value_t = 10)]
+    pub surface_steps: usize,
     /// Repetitions of each rasterizer measurement (median reported).
     #[arg(long, default_value_t = 5)]
     pub runs: usize,
@@ -42,6 +50,7 @@ struct Report {
     raster: fewview_splat::bench::RasterBench,
     train_demo: fewview_splat::bench::TrainStepBench,
     train_fern: Option<fewview_splat::bench::TrainStepBench>,
+    train_surface: Option<fewview_surface::bench::SurfaceStepBench>,
     ssim: fewview_metrics::bench::SsimBench,
     blend: Option<fewview_geom::bench::BlendBench>,
     peak_memory_mib: Option<f64>,
@@ -95,6 +104,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             None
         }
     };
+    let dtu_dir = args
+        .dtu
+        .clone()
+        .or_else(|| std::env::var_os("FEWVIEW_DATA").map(|d| PathBuf::from(d).join("dtu/scan65")));
+    let train_surface = match dtu_dir {
+        Some(dir) if dir.exists() => {
+            eprintln!("surface training steps: {} ...", dir.display());
+            let opts = LoadOptions {
+                downscale: 2,
+                train_views: Some(vec![22, 25, 28]),
+                ..LoadOptions::default()
+            };
+            let ds = load_dataset(&dir, &opts)
+                .with_context(|| format!("cannot load {}", dir.display()))?;
+            Some(fewview_surface::bench::train_step_bench(
+                &ds,
+                args.surface_steps.max(1),
+                1,
+            )?)
+        }
+        _ => {
+            eprintln!("surface training steps: skipped (pass --dtu or set FEWVIEW_DATA)");
+            None
+        }
+    };
     eprintln!("SSIM loss ...");
     let ssim = fewview_metrics::bench::ssim_bench(504, 378, 10);
     eprintln!("Poisson blend 1024x1024x3 ...");
@@ -104,6 +138,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         raster,
         train_demo,
         train_fern,
+        train_surface,
         ssim,
         blend,
         peak_memory_mib: peak_memory_mib(),
@@ -170,6 +205,23 @@ fn print_table(r: &Report) {
         println!(
             "{:<46} {:>14.2} {:>14}",
             "  it per CPU-second", t.iterations_per_cpu_second, ""
+        );
+    }
+    if let Some(s) = &r.train_surface {
+        println!(
+            "{:<46} {:>14.3} {:>14.4}",
+            format!(
+                "surface it/s {} {}x{} (vs NeuS MLP)",
+                s.dataset, s.width, s.height
+            ),
+            s.hash_grid.iterations_per_second,
+            s.reference_neus_mlp.iterations_per_second
+        );
+        println!(
+            "{:<46} {:>14.3} {:>14.4}",
+            "  it per CPU-second",
+            s.hash_grid.iterations_per_cpu_second,
+            s.reference_neus_mlp.iterations_per_cpu_second
         );
     }
     println!(
