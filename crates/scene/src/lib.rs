@@ -24,6 +24,7 @@ pub mod image;
 pub mod llff;
 pub mod load;
 mod numpy;
+pub mod ply_scalar;
 pub mod split;
 pub mod synthetic;
 pub mod transforms;

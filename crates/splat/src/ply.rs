@@ -10,6 +10,7 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::path::Path;
 
 use fewview_scene::SceneError;
+use fewview_scene::ply_scalar::PlyScalar;
 
 use crate::model::GaussianModel;
 
@@ -61,74 +62,6 @@ pub fn write_ply(path: &Path, model: &GaussianModel) -> Result<(), SceneError> {
     })
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Scalar {
-    I8,
-    U8,
-    I16,
-    U16,
-    I32,
-    U32,
-    F32,
-    F64,
-}
-
-impl Scalar {
-    fn parse(s: &str) -> Option<Self> {
-        Some(match s {
-            "char" | "int8" => Self::I8,
-            "uchar" | "uint8" => Self::U8,
-            "short" | "int16" => Self::I16,
-            "ushort" | "uint16" => Self::U16,
-            "int" | "int32" => Self::I32,
-            "uint" | "uint32" => Self::U32,
-            "float" | "float32" => Self::F32,
-            "double" | "float64" => Self::F64,
-            _ => return None,
-        })
-    }
-
-    fn size(self) -> usize {
-        match self {
-            Self::I8 | Self::U8 => 1,
-            Self::I16 | Self::U16 => 2,
-            Self::I32 | Self::U32 | Self::F32 => 4,
-            Self::F64 => 8,
-        }
-    }
-
-    fn decode(self, b: &[u8], little: bool) -> f64 {
-        macro_rules! num {
-            ($t:ty, $n:expr) => {{
-                let a: [u8; $n] = b[..$n].try_into().expect("sized");
-                (if little {
-                    <$t>::from_le_bytes(a)
-                } else {
-                    <$t>::from_be_bytes(a)
-                }) as f64
-            }};
-        }
-        match self {
-            Self::I8 => b[0] as i8 as f64,
-            Self::U8 => b[0] as f64,
-            Self::I16 => num!(i16, 2),
-            Self::U16 => num!(u16, 2),
-            Self::I32 => num!(i32, 4),
-            Self::U32 => num!(u32, 4),
-            Self::F32 => {
-                let a: [u8; 4] = b[..4].try_into().expect("sized");
-                // Keep f32 bits exactly (no detour through f64 rounding issues: f32→f64 is exact).
-                (if little {
-                    f32::from_le_bytes(a)
-                } else {
-                    f32::from_be_bytes(a)
-                }) as f64
-            }
-            Self::F64 => num!(f64, 8),
-        }
-    }
-}
-
 #[derive(Debug)]
 enum Format {
     Ascii,
@@ -160,7 +93,7 @@ pub fn read_ply(path: &Path) -> Result<GaussianModel, SceneError> {
     let mut format = None;
     let mut vertex_count = None;
     let mut in_vertex = false;
-    let mut props: Vec<(String, Scalar)> = Vec::new();
+    let mut props: Vec<(String, PlyScalar)> = Vec::new();
     let mut other_elements_before = false;
     loop {
         read_line(&mut r, &mut line)?;
@@ -187,7 +120,7 @@ pub fn read_ply(path: &Path) -> Result<GaussianModel, SceneError> {
                 return Err(bad("list properties in `vertex` are not supported".into()));
             }
             ["property", ty, name] if in_vertex => {
-                let s = Scalar::parse(ty)
+                let s = PlyScalar::parse(ty)
                     .ok_or_else(|| bad(format!("unknown property type `{ty}`")))?;
                 props.push((name.to_string(), s));
             }

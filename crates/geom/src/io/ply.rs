@@ -9,6 +9,8 @@
 use std::io::Write;
 use std::path::Path;
 
+use fewview_scene::ply_scalar::PlyScalar;
+
 use crate::error::{GeomError, Result};
 use crate::mesh::Mesh;
 
@@ -20,54 +22,19 @@ pub enum PlyEncoding {
     BinaryBigEndian,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Scalar {
-    I8,
-    U8,
-    I16,
-    U16,
-    I32,
-    U32,
-    F32,
-    F64,
-}
-
-impl Scalar {
-    fn parse(s: &str) -> Option<Self> {
-        Some(match s {
-            "char" | "int8" => Self::I8,
-            "uchar" | "uint8" => Self::U8,
-            "short" | "int16" => Self::I16,
-            "ushort" | "uint16" => Self::U16,
-            "int" | "int32" => Self::I32,
-            "uint" | "uint32" => Self::U32,
-            "float" | "float32" => Self::F32,
-            "double" | "float64" => Self::F64,
-            _ => return None,
-        })
-    }
-    fn size(self) -> usize {
-        match self {
-            Self::I8 | Self::U8 => 1,
-            Self::I16 | Self::U16 => 2,
-            Self::I32 | Self::U32 | Self::F32 => 4,
-            Self::F64 => 8,
-        }
-    }
-    /// The value that means "full intensity" for a colour of this type.
-    fn colour_scale(self) -> f64 {
-        match self {
-            Self::U8 | Self::I8 => 255.0,
-            Self::U16 | Self::I16 => 65535.0,
-            _ => 1.0,
-        }
+/// The value that means "full intensity" for a colour stored as `t`.
+fn colour_scale(t: PlyScalar) -> f64 {
+    match t {
+        PlyScalar::U8 | PlyScalar::I8 => 255.0,
+        PlyScalar::U16 | PlyScalar::I16 => 65535.0,
+        _ => 1.0,
     }
 }
 
 #[derive(Clone, Debug)]
 enum PropKind {
-    Scalar(Scalar),
-    List { count: Scalar, item: Scalar },
+    Scalar(PlyScalar),
+    List { count: PlyScalar, item: PlyScalar },
 }
 
 #[derive(Clone, Debug)]
@@ -94,7 +61,7 @@ enum Body<'a> {
 }
 
 impl Body<'_> {
-    fn read(&mut self, t: Scalar) -> std::result::Result<f64, String> {
+    fn read(&mut self, t: PlyScalar) -> std::result::Result<f64, String> {
         match self {
             Body::Ascii(tokens) => {
                 let tok = tokens.next().ok_or("file ends early")?;
@@ -105,21 +72,7 @@ impl Body<'_> {
                 let n = t.size();
                 let b = bytes.get(*pos..*pos + n).ok_or("file ends early")?;
                 *pos += n;
-                let mut a = [0u8; 8];
-                a[..n].copy_from_slice(b);
-                if *big {
-                    a[..n].reverse();
-                }
-                Ok(match t {
-                    Scalar::I8 => a[0] as i8 as f64,
-                    Scalar::U8 => a[0] as f64,
-                    Scalar::I16 => i16::from_le_bytes([a[0], a[1]]) as f64,
-                    Scalar::U16 => u16::from_le_bytes([a[0], a[1]]) as f64,
-                    Scalar::I32 => i32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
-                    Scalar::U32 => u32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
-                    Scalar::F32 => f32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
-                    Scalar::F64 => f64::from_le_bytes(a),
-                })
+                Ok(t.decode(b, !*big))
             }
         }
     }
@@ -152,8 +105,8 @@ fn parse_header(text: &str) -> std::result::Result<(PlyEncoding, Vec<Element>), 
             }),
             ["property", "list", c, i, name] => {
                 let el = elements.last_mut().ok_or("property before any element")?;
-                let count = Scalar::parse(c).ok_or(format!("unknown type '{c}'"))?;
-                let item = Scalar::parse(i).ok_or(format!("unknown type '{i}'"))?;
+                let count = PlyScalar::parse(c).ok_or(format!("unknown type '{c}'"))?;
+                let item = PlyScalar::parse(i).ok_or(format!("unknown type '{i}'"))?;
                 el.props.push(Property {
                     name: name.to_string(),
                     kind: PropKind::List { count, item },
@@ -161,7 +114,7 @@ fn parse_header(text: &str) -> std::result::Result<(PlyEncoding, Vec<Element>), 
             }
             ["property", t, name] => {
                 let el = elements.last_mut().ok_or("property before any element")?;
-                let t = Scalar::parse(t).ok_or(format!("unknown type '{t}'"))?;
+                let t = PlyScalar::parse(t).ok_or(format!("unknown type '{t}'"))?;
                 el.props.push(Property {
                     name: name.to_string(),
                     kind: PropKind::Scalar(t),
@@ -267,7 +220,7 @@ fn parse(bytes: &[u8]) -> std::result::Result<Mesh, String> {
                     let PropKind::Scalar(t) = el.props[rgb[0].unwrap_or(0)].kind else {
                         return Err("colour is a list".into());
                     };
-                    let s = t.colour_scale() as f32;
+                    let s = colour_scale(t) as f32;
                     colors.push(g(rgb).map(|v| v / s));
                 }
             } else if is_face && idx.is_some() {
