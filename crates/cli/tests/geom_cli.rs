@@ -405,4 +405,59 @@ fn register_the_bunny_fixture() {
         read_mesh(&out).unwrap().vertices.len() as u64,
         fixture["source_points"].as_u64().unwrap()
     );
+
+    // With the local-plane denoising the rotation lands within the 0.5°.
+    let args = |radius: &'static str| {
+        vec![
+            "register".to_string(),
+            "--source".into(),
+            s(&fx.join("source.ply")).into(),
+            "--target".into(),
+            s(&fx.join("target.ply")).into(),
+            "--voxel".into(),
+            "0.008".into(),
+            "--prealign".into(),
+            s(&pre).into(),
+            "--icp-threshold=0.02".into(),
+            "--icp-threshold=0.01".into(),
+            "--icp-threshold=0.005".into(),
+            "--icp-threshold=0.003".into(),
+            "--denoise-radius".into(),
+            radius.into(),
+            "--report".into(),
+            s(&report).into(),
+        ]
+    };
+    let run = |radius| {
+        let a = args(radius);
+        fewview(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let (ok, _, err) = run("0.016");
+    assert!(ok, "{err}");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    // The angle of R_est R_trueᵀ: its trace is Σ R_est[i][j] R_true[i][j].
+    let rows = |m: &serde_json::Value| -> [[f64; 3]; 3] {
+        std::array::from_fn(|i| std::array::from_fn(|j| m[i][j].as_f64().unwrap()))
+    };
+    let (est, truth) = (
+        rows(&r["transformation"]),
+        rows(&fixture["true_source_to_target"]),
+    );
+    let norm = |m: &[[f64; 3]; 3]| m.iter().flatten().map(|x| x * x).sum::<f64>().sqrt();
+    let dot: f64 = (0..3)
+        .flat_map(|i| (0..3).map(move |j| (i, j)))
+        .map(|(i, j)| est[i][j] * truth[i][j])
+        .sum();
+    // Both are s·R with ‖s·R‖_F = s·√3.
+    let trace = 3.0 * dot / (norm(&est) * norm(&truth));
+    let cos = ((trace - 1.0) / 2.0).clamp(-1.0, 1.0);
+    let degrees = cos.acos().to_degrees();
+    assert!(degrees < 0.5, "rotation error {degrees}°");
+
+    let (ok, _, err) = run("0");
+    assert!(
+        !ok && err.contains("--denoise-radius must be positive"),
+        "{err}"
+    );
 }

@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use fewview_geom::io::{read_mesh, read_points};
-use fewview_geom::registration::{IcpCriteria, RegistrationOptions, register};
+use fewview_geom::registration::{DenoiseOptions, IcpCriteria, RegistrationOptions, register};
 use fewview_geom::similarity::{Similarity, rotation_angle_deg};
 use nalgebra::{Matrix4, Vector3};
 use serde_json::Value;
@@ -34,8 +34,9 @@ fn errors(est: &Similarity, truth: &Similarity, points: &[Vector3<f64>]) -> (f64
     (rot, ms.sqrt())
 }
 
-/// Runs Alg. 3 on a fixture; returns ((ours rotation °, displacement / diagonal), (Open3D's)).
-fn run_fixture(dir: &std::path::Path) -> ((f64, f64), (f64, f64)) {
+/// Runs Alg. 3 on a fixture (with the local-plane denoising before ICP when `denoise`);
+/// returns ((ours rotation °, displacement / diagonal), (Open3D's)).
+fn run_fixture(dir: &std::path::Path, denoise: bool, seed: u64) -> ((f64, f64), (f64, f64)) {
     let fx: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("fixture.json")).unwrap()).unwrap();
     let source = read_points(&dir.join("source.ply")).unwrap();
@@ -64,7 +65,8 @@ fn run_fixture(dir: &std::path::Path) -> ((f64, f64), (f64, f64)) {
         max_iteration: 100,
         ..Default::default()
     };
-    options.ransac.seed = 0;
+    options.ransac.seed = seed;
+    options.icp_denoise = denoise.then(|| DenoiseOptions::for_voxel(voxel));
     let result = register(&source, &target, Some(&pre), &options).unwrap();
     let (ours_rot, ours_disp) = errors(&result.transformation, &truth, &reference);
     let (o3d_rot, o3d_disp) = errors(&o3d, &truth, &reference);
@@ -75,7 +77,7 @@ fn run_fixture(dir: &std::path::Path) -> ((f64, f64), (f64, f64)) {
         &reference,
     );
     eprintln!(
-        "pre-alignment: {pre_rot:.3}°, {:.3} % of the diagonal\n\
+        "denoise {denoise}, seed {seed}; pre-alignment: {pre_rot:.3}°, {:.3} % of the diagonal\n\
          ours   (RANSAC {g_rot:.2}°): {ours_rot:.3}°, {:.3} % (fitness {:.3}, rmse {:.5})\n\
          Open3D (RANSAC {:.2}°): {o3d_rot:.3}°, {:.3} %",
         100.0 * pre_disp / diag,
@@ -90,12 +92,13 @@ fn run_fixture(dir: &std::path::Path) -> ((f64, f64), (f64, f64)) {
     ((ours_rot, ours_disp / diag), (o3d_rot, o3d_disp / diag))
 }
 
-/// The issue's setting: σ = 1 % of the diagonal. Neither Open3D (≈ 1°) nor we reach 0.5° here:
-/// with this much noise and 30 % unmatched points, ICP's minimum itself sits about a degree
-/// from the truth. Both stay within 1 % of the diagonal.
+/// The issue's setting, σ = 1 % of the diagonal, with the paper's pipeline as it is: neither
+/// Open3D (≈ 1°) nor we reach 0.5°, because with this much noise on both clouds and 30 %
+/// unmatched points, point-to-point ICP's minimum itself sits about a degree from the truth.
+/// Both stay within 1 % of the diagonal.
 #[test]
 fn alg3_at_one_percent_noise_matches_open3d() {
-    let ((rot, disp), (o3d_rot, _)) = run_fixture(&fixture_dir());
+    let ((rot, disp), (o3d_rot, _)) = run_fixture(&fixture_dir(), false, 0);
     assert!(disp < 0.01, "displacement {disp} of the diagonal");
     assert!(
         rot < o3d_rot.max(0.5) + 0.5,
@@ -103,14 +106,31 @@ fn alg3_at_one_percent_noise_matches_open3d() {
     );
 }
 
-/// σ = 0.2 % of the diagonal: the < 0.5° and < 1 % targets hold.
+/// The issue's setting with the local-plane denoising before ICP (`--denoise-radius`): the
+/// < 0.5° and < 1 % targets hold (measured 0.29°, 0.12 % with RANSAC seed 0), whatever
+/// RANSAC's seed.
+#[test]
+fn denoised_alg3_at_one_percent_noise_meets_the_targets() {
+    for seed in 0..3 {
+        let ((rot, disp), (o3d_rot, o3d_disp)) = run_fixture(&fixture_dir(), true, seed);
+        assert!(
+            rot < 0.5 && disp < 0.01,
+            "seed {seed}: ours {rot}°, {disp}; Open3D {o3d_rot}°, {o3d_disp}"
+        );
+        assert!(rot < 0.5 * o3d_rot, "ours {rot}° vs Open3D {o3d_rot}°");
+    }
+}
+
+/// σ = 0.2 % of the diagonal: the < 0.5° and < 1 % targets hold with and without denoising.
 #[test]
 fn alg3_at_low_noise_recovers_the_similarity() {
-    let ((rot, disp), (o3d_rot, o3d_disp)) = run_fixture(&low_noise_dir());
-    assert!(
-        rot < 0.5 && disp < 0.01,
-        "ours {rot}°, {disp}; Open3D {o3d_rot}°, {o3d_disp}"
-    );
+    for denoise in [false, true] {
+        let ((rot, disp), (o3d_rot, o3d_disp)) = run_fixture(&low_noise_dir(), denoise, 0);
+        assert!(
+            rot < 0.5 && disp < 0.01,
+            "denoise {denoise}: ours {rot}°, {disp}; Open3D {o3d_rot}°, {o3d_disp}"
+        );
+    }
 }
 
 #[test]

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::{Args as ClapArgs, ValueEnum};
 use fewview_geom::io::{cameras::read_poses, read_points, write_points};
-use fewview_geom::registration::{IcpMethod, RegistrationOptions, register};
+use fewview_geom::registration::{DenoiseOptions, IcpMethod, RegistrationOptions, register};
 use fewview_geom::similarity::Similarity;
 use fewview_metrics::pose_error::{PoseErrorOptions, pose_error_pairwise};
 
@@ -49,6 +49,11 @@ pub struct Args {
     pub icp_threshold: Vec<f64>,
     #[arg(long, value_enum, default_value = "point-to-point")]
     pub icp: IcpArg,
+    /// Deviation from Alg. 3 for noisy scans: project both clouds onto their local planes
+    /// (≤ 100 neighbours within this radius, e.g. 2·voxel) and run point-to-plane ICP on them.
+    /// Off by default (the paper's Open3D pipeline).
+    #[arg(long)]
+    pub denoise_radius: Option<f64>,
     /// Estimate a scale in point-to-point ICP too.
     #[arg(long)]
     pub with_scaling: bool,
@@ -117,6 +122,15 @@ pub fn run(args: Args) -> Result<()> {
         },
         IcpArg::PointToPlane => IcpMethod::PointToPlane,
     };
+    if let Some(radius) = args.denoise_radius {
+        if !(radius > 0.0 && radius.is_finite()) {
+            bail!("--denoise-radius must be positive, got {radius}");
+        }
+        options.icp_denoise = Some(DenoiseOptions {
+            radius,
+            max_nn: DenoiseOptions::DEFAULT_MAX_NN,
+        });
+    }
     options.ransac.seed = args.seed;
     let result = register(&source, &target, pre.as_ref(), &options).with_context(|| {
         format!(

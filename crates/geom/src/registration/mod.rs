@@ -9,6 +9,7 @@
 //! paper's input; `0.4v` in the tutorial; a coarse-to-fine list runs multi-scale ICP). Alg. 3 writes the pre-alignment as
 //! `V ← s(R V + t)`; [`Similarity`] applies `x ↦ s R x + t'` (so `t' = s t`).
 
+pub mod denoise;
 pub mod features;
 pub mod icp;
 pub mod ransac;
@@ -41,6 +42,30 @@ pub struct RegistrationOptions {
     pub icp_thresholds: Vec<f64>,
     pub icp_method: IcpMethod,
     pub icp_criteria: IcpCriteria,
+    /// Deviation from Alg. 3, off by default: before ICP, project both full clouds onto
+    /// their local planes (≤ `max_nn` neighbours within `radius`) and run point-to-plane ICP
+    /// against those planes (see [`denoise`]). For scans with noise comparable to `thr_icp`.
+    pub icp_denoise: Option<DenoiseOptions>,
+}
+
+/// Neighbourhood of the local-plane projection of [`RegistrationOptions::icp_denoise`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct DenoiseOptions {
+    pub radius: f64,
+    pub max_nn: usize,
+}
+
+impl DenoiseOptions {
+    /// Neighbour cap: enough points for a stable plane at noise of about `radius / 4`.
+    pub const DEFAULT_MAX_NN: usize = 100;
+
+    /// Radius `2v`, the normal-estimation radius of the pipeline.
+    pub fn for_voxel(v: f64) -> Self {
+        Self {
+            radius: 2.0 * v,
+            max_nn: Self::DEFAULT_MAX_NN,
+        }
+    }
 }
 
 impl RegistrationOptions {
@@ -62,6 +87,7 @@ impl RegistrationOptions {
                 with_scaling: false,
             },
             icp_criteria: IcpCriteria::default(),
+            icp_denoise: None,
         }
     }
 }
@@ -121,13 +147,33 @@ pub fn register(
         &ft,
         &options.ransac,
     )?;
-    let target_normals = match options.icp_method {
-        IcpMethod::PointToPlane => Some(estimate_normals(
-            target,
-            options.normal_radius,
-            options.normal_max_nn,
-        )),
-        IcpMethod::PointToPoint { .. } => None,
+    let (icp_source, icp_target, icp_method, target_normals) = match options.icp_denoise {
+        Some(d) => {
+            let s = denoise::project_to_local_planes(&scaled.positions, d.radius, d.max_nn);
+            let t = denoise::project_to_local_planes(&target.positions, d.radius, d.max_nn);
+            (
+                s.positions,
+                t.positions,
+                IcpMethod::PointToPlane,
+                Some(t.normals),
+            )
+        }
+        None => {
+            let normals = match options.icp_method {
+                IcpMethod::PointToPlane => Some(estimate_normals(
+                    target,
+                    options.normal_radius,
+                    options.normal_max_nn,
+                )),
+                IcpMethod::PointToPoint { .. } => None,
+            };
+            (
+                scaled.positions.clone(),
+                target.positions.clone(),
+                options.icp_method,
+                normals,
+            )
+        }
     };
     if options.icp_thresholds.is_empty() {
         return Err(GeomError::invalid(
@@ -139,12 +185,12 @@ pub fn register(
     let mut refined = None;
     for &thr in &options.icp_thresholds {
         let r = icp(
-            &scaled.positions,
-            &target.positions,
+            &icp_source,
+            &icp_target,
             target_normals.as_deref(),
             thr,
             &current,
-            options.icp_method,
+            icp_method,
             &options.icp_criteria,
         )?;
         current = r.transformation;
