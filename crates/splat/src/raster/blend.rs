@@ -113,6 +113,29 @@ fn tile_blocks<F>(s: &Splat<F>, geo: &TileGeometry) -> (usize, usize) {
     (c0 / BLOCK, (c1 - 1) / BLOCK + 1)
 }
 
+/// How many list entries ahead the blending loops prefetch splats. A tile's list is a sparse,
+/// scattered subset of all splats, so without it nearly every splat is a cache miss that the
+/// loop waits for (measured: ~12 % of the forward kernel's time on the load of one splat).
+const PREFETCH_AHEAD: usize = 8;
+
+/// Asks the CPU to bring `value` (both cache lines it may straddle) into L1.
+#[inline(always)]
+fn prefetch<T>(value: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let start = value as *const T as *const i8;
+        // SAFETY: prefetching is a hint with no architectural effect; both addresses lie
+        // within (or one line past the start of) the referenced value.
+        unsafe {
+            _mm_prefetch::<_MM_HINT_T0>(start);
+            _mm_prefetch::<_MM_HINT_T0>(start.wrapping_add(std::mem::size_of::<T>() - 1));
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = value;
+}
+
 /// Blends `list` (indices into `splats`, front to back) into `state`. Returns the number of
 /// splat–pixel pairs evaluated.
 #[inline(always)]
@@ -131,15 +154,20 @@ pub fn forward_tile<F: Real, M: MulAdd>(
         }
     }
     let mut n_alive = geo.width * geo.height;
+    // `state.last`, kept in floats while blending (see the update below).
+    let mut last_rank = [[F::zero(); TILE]; TILE];
     let (amin, tmin) = (F::c(ALPHA_MIN), F::c(T_MIN));
     let zero = F::zero();
     let px = geo.column_centres::<F>();
     let mut pairs = 0u64;
     for (j, &si) in list.iter().enumerate() {
+        if let Some(&ahead) = list.get(j + PREFETCH_AHEAD) {
+            prefetch(&splats[ahead as usize]);
+        }
         let s = &splats[si as usize];
         let (r0, r1) = tile_rows(s, geo);
         let (b0, b1) = tile_blocks(s, geo);
-        let rank = j as u32 + 1;
+        let rank = F::c((j + 1) as f64);
         let mut stopped = 0u32;
         for r in r0..r1 {
             let dy = F::c((geo.y0 + r) as f64 + 0.5) - s.mean[1];
@@ -154,8 +182,7 @@ pub fn forward_tile<F: Real, M: MulAdd>(
                 let cg: &mut [F; BLOCK] = (&mut c1[r][cols.clone()]).try_into().unwrap();
                 let cb: &mut [F; BLOCK] = (&mut c2[r][cols.clone()]).try_into().unwrap();
                 let dd: &mut [F; BLOCK] = (&mut state.depth[r][cols.clone()]).try_into().unwrap();
-                let last: &mut [u32; BLOCK] =
-                    (&mut state.last[r][cols.clone()]).try_into().unwrap();
+                let last: &mut [F; BLOCK] = (&mut last_rank[r][cols.clone()]).try_into().unwrap();
                 let al: &mut [F; BLOCK] = (&mut alive[r][cols.clone()]).try_into().unwrap();
                 let x: &[F; BLOCK] = (&px[cols]).try_into().unwrap();
                 for c in 0..BLOCK {
@@ -170,8 +197,15 @@ pub fn forward_tile<F: Real, M: MulAdd>(
                     cg[c] = M::madd(w, s.color[1], cg[c]);
                     cb[c] = M::madd(w, s.color[2], cb[c]);
                     dd[c] = M::madd(w, s.depth, dd[c]);
-                    t[c] = if contrib { test_t } else { t[c] };
-                    last[c] = if contrib { rank } else { last[c] };
+                    // Both updates are written as arithmetic on every lane: as selects, LLVM
+                    // turns them into masked loads and stores, which are microcoded and slow
+                    // on AMD Zen (they took a fifth of the kernel's time). `t − w` is `T(1 − α)`
+                    // when the splat contributes (w = αT) and `T` otherwise (w = 0).
+                    // The rank is tracked in floats (exact below 2²⁴ entries) for the same
+                    // reason: `last + 1·(rank − last)` is `rank`, `last + 0·(…)` is `last`.
+                    t[c] = t[c] - w;
+                    let on = if contrib { F::one() } else { zero };
+                    last[c] = M::madd(on, rank - last[c], last[c]);
                     al[c] = if stop { zero } else { al[c] };
                     stopped += stop as u32;
                 }
@@ -181,6 +215,11 @@ pub fn forward_tile<F: Real, M: MulAdd>(
         n_alive -= stopped as usize;
         if n_alive == 0 {
             break;
+        }
+    }
+    for (dst, src) in state.last.iter_mut().zip(&last_rank) {
+        for (d, s) in dst.iter_mut().zip(src) {
+            *d = s.to_u32().unwrap_or(0);
         }
     }
     pairs
@@ -236,6 +275,9 @@ pub fn backward_tile<F: Real, M: MulAdd>(
     out.iter_mut().for_each(|v| *v = zero);
     let mut pairs = 0u64;
     for j in (0..max_last.min(list.len())).rev() {
+        if let Some(ahead) = j.checked_sub(PREFETCH_AHEAD) {
+            prefetch(&splats[list[ahead] as usize]);
+        }
         let s = &splats[list[j] as usize];
         let (r0, r1) = tile_rows(s, geo);
         let rank = j as u32;
