@@ -93,18 +93,27 @@ pub struct RasterBench {
     pub gaussians: usize,
     pub width: usize,
     pub height: usize,
+    /// Threads of the wall-clock measurement (all of rayon's pool).
     pub threads: usize,
-    /// Median wall-clock seconds of one render / one backward pass.
+    /// Median wall-clock seconds of one render / one backward pass on all threads.
     pub forward_seconds: f64,
     pub backward_seconds: f64,
     /// Median CPU seconds (summed over threads) of the same.
     pub forward_cpu_seconds: f64,
     pub backward_cpu_seconds: f64,
+    /// Median CPU seconds of one render / backward pass on a one-thread pool: the per-core
+    /// measurement, free of the contention between threads that share a physical core.
+    pub forward_single_thread_cpu_seconds: f64,
+    pub backward_single_thread_cpu_seconds: f64,
     pub forward_pairs: u64,
     pub backward_pairs: u64,
-    /// Splat–pixel pairs per CPU-second (per core).
+    /// Splat–pixel pairs per CPU-second on one thread (per core).
     pub forward_pairs_per_sec_per_core: f64,
     pub backward_pairs_per_sec_per_core: f64,
+    /// Splat–pixel pairs per CPU-second with all threads running (per CPU-second summed over
+    /// threads; lower than per core when the threads share cores or memory bandwidth).
+    pub forward_pairs_per_cpu_sec_all_threads: f64,
+    pub backward_pairs_per_cpu_sec_all_threads: f64,
     /// The yardstick: a plain single-threaded per-pixel blend loop (library `exp`, scalar) over
     /// the same tile lists, pairs per CPU-second on one core.
     pub reference_pairs_per_sec: f64,
@@ -176,31 +185,46 @@ fn reference_blend(
     (checksum, pairs)
 }
 
-/// Measures forward and backward throughput on a [`SyntheticScene`].
+/// Measures forward and backward throughput on a [`SyntheticScene`]: per core on a one-thread
+/// pool, and wall-clock on all threads.
 pub fn raster_bench(n: usize, width: usize, height: usize, runs: usize) -> RasterBench {
     let scene = SyntheticScene::new(n, width, height, 1);
     let settings = RenderSettings::default();
     let g = scene.refs();
     let threads = rayon::current_num_threads();
     let (out, ctx) = forward(&g, &scene.camera, &settings);
-    let (forward_seconds, forward_cpu_seconds) = median_seconds(runs, || {
-        std::hint::black_box(forward(&g, &scene.camera, &settings));
-    });
     let grad_out: Vec<f32> = (0..out.data.len())
         .into_par_iter()
         .map(|i| if i % OUT_CHANNELS < 3 { 1e-3 } else { 0.0 })
         .collect();
     let grads = backward(&g, &ctx, &grad_out);
-    let (backward_seconds, backward_cpu_seconds) = median_seconds(runs, || {
-        std::hint::black_box(backward(&g, &ctx, &grad_out));
-    });
+    let time_both = || {
+        let fwd = median_seconds(runs, || {
+            std::hint::black_box(forward(&g, &scene.camera, &settings));
+        });
+        let bwd = median_seconds(runs, || {
+            std::hint::black_box(backward(&g, &ctx, &grad_out));
+        });
+        (fwd, bwd)
+    };
+    let ((forward_seconds, forward_cpu_seconds), (backward_seconds, backward_cpu_seconds)) =
+        time_both();
+    let ((_, forward_single), (_, backward_single)) =
+        match rayon::ThreadPoolBuilder::new().num_threads(1).build() {
+            Ok(pool) => pool.install(time_both),
+            // No second pool (should not happen): fall back to the all-threads figures.
+            Err(_) => (
+                (forward_seconds, forward_cpu_seconds),
+                (backward_seconds, backward_cpu_seconds),
+            ),
+        };
     let mut ref_pairs = 0;
     let (reference_seconds, reference_cpu_seconds) = median_seconds(runs.min(3), || {
         let (sum, pairs) = reference_blend(&ctx.splats, &ctx.bins, width, height);
         std::hint::black_box(sum);
         ref_pairs = pairs;
     });
-    let per_core = |pairs: u64, cpu_secs: f64| pairs as f64 / cpu_secs;
+    let rate = |pairs: u64, cpu_secs: f64| pairs as f64 / cpu_secs;
     let reference_pairs_per_sec = ref_pairs as f64 / reference_cpu_seconds;
     RasterBench {
         gaussians: n,
@@ -211,13 +235,17 @@ pub fn raster_bench(n: usize, width: usize, height: usize, runs: usize) -> Raste
         backward_seconds,
         forward_cpu_seconds,
         backward_cpu_seconds,
+        forward_single_thread_cpu_seconds: forward_single,
+        backward_single_thread_cpu_seconds: backward_single,
         forward_pairs: out.pairs,
         backward_pairs: grads.pairs,
-        forward_pairs_per_sec_per_core: per_core(out.pairs, forward_cpu_seconds),
-        backward_pairs_per_sec_per_core: per_core(grads.pairs, backward_cpu_seconds),
+        forward_pairs_per_sec_per_core: rate(out.pairs, forward_single),
+        backward_pairs_per_sec_per_core: rate(grads.pairs, backward_single),
+        forward_pairs_per_cpu_sec_all_threads: rate(out.pairs, forward_cpu_seconds),
+        backward_pairs_per_cpu_sec_all_threads: rate(grads.pairs, backward_cpu_seconds),
         reference_pairs_per_sec,
         reference_seconds,
-        forward_vs_reference: per_core(out.pairs, forward_cpu_seconds) / reference_pairs_per_sec,
+        forward_vs_reference: rate(out.pairs, forward_single) / reference_pairs_per_sec,
     }
 }
 

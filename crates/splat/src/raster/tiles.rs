@@ -50,14 +50,16 @@ fn tile_span(px: [u32; 2]) -> [usize; 2] {
 /// (chunk, tile) a disjoint range of its tile's entries, then fill those ranges (each in depth
 /// order, so every tile's list is depth-sorted).
 pub fn bin<F: Real>(splats: &[Splat<F>], tiles_x: usize, tiles_y: usize) -> TileBins {
-    let mut order: Vec<u32> = (0..splats.len() as u32).collect();
-    order.par_sort_unstable_by(|&a, &b| {
-        splats[a as usize]
-            .depth
-            .partial_cmp(&splats[b as usize].depth)
-            .unwrap_or(std::cmp::Ordering::Equal)
-            .then(a.cmp(&b))
-    });
+    // Depths are positive (splats lie beyond the near plane), so the bit patterns of their f64
+    // values order like the values; sorting plain (bits, index) keys avoids an indirect float
+    // comparison per step.
+    let mut keys: Vec<(u64, u32)> = splats
+        .par_iter()
+        .enumerate()
+        .map(|(i, s)| (s.depth.to_f64_lossy().max(0.0).to_bits(), i as u32))
+        .collect();
+    keys.par_sort_unstable();
+    let order: Vec<u32> = keys.into_par_iter().map(|(_, i)| i).collect();
     let num_tiles = tiles_x * tiles_y;
     let spans: Vec<([usize; 2], [usize; 2])> = order
         .par_iter()
