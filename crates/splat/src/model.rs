@@ -119,11 +119,11 @@ impl GaussianModel {
     pub fn retain(&mut self, keep: &[bool]) {
         assert_eq!(keep.len(), self.len());
         let k3 = self.sh_coeffs * 3;
-        retain_rows(&mut self.means, 3, keep);
-        retain_rows(&mut self.log_scales, 3, keep);
-        retain_rows(&mut self.quats, 4, keep);
-        retain_rows(&mut self.opacity_logits, 1, keep);
-        retain_rows(&mut self.sh, k3, keep);
+        fewview_optim::retain_rows(&mut self.means, 3, keep);
+        fewview_optim::retain_rows(&mut self.log_scales, 3, keep);
+        fewview_optim::retain_rows(&mut self.quats, 4, keep);
+        fewview_optim::retain_rows(&mut self.opacity_logits, 1, keep);
+        fewview_optim::retain_rows(&mut self.sh, k3, keep);
     }
 
     pub fn refs(&self) -> GaussianRefs<'_, f32> {
@@ -198,20 +198,6 @@ impl GaussianModel {
         }
         Some((lo, hi))
     }
-}
-
-/// Keeps the rows (of `width` values) whose flag is set.
-pub(crate) fn retain_rows<T: Copy>(v: &mut Vec<T>, width: usize, keep: &[bool]) {
-    let mut w = 0;
-    for (r, &k) in keep.iter().enumerate() {
-        if k {
-            if w != r {
-                v.copy_within(r * width..(r + 1) * width, w * width);
-            }
-            w += 1;
-        }
-    }
-    v.truncate(w * width);
 }
 
 #[cfg(test)]

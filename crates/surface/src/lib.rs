@@ -6,7 +6,8 @@
 // Numeric kernels index several parallel arrays with one loop variable.
 #![allow(clippy::needless_range_loop)]
 
-pub mod adam;
+/// Adam and the learning-rate schedule live in `fewview-optim`, shared with the Gaussian trainer.
+pub use fewview_optim as adam;
 pub mod bench;
 pub mod checkpoint;
 pub use fewview_scene::cputime;

@@ -276,12 +276,12 @@ impl Trainer {
         let field =
             Field::new(config.field.clone()).map_err(|e| SurfaceError::invalid("field", e))?;
         let params = field.init_params(config.seed);
-        let adam = params.iter().map(|p| AdamState::new(p.len())).collect();
+        let adam = params.iter().map(|p| AdamState::new(1, p.len())).collect();
         let poses: Vec<f32> = initial_poses
             .iter()
             .flat_map(|p| pose_to_d9(p).map(|v| v as f32))
             .collect();
-        let pose_adam = AdamState::new(poses.len());
+        let pose_adam = AdamState::new(1, poses.len());
         let mut gray = Vec::with_capacity(views.len() * width * height);
         for v in &views {
             for p in 0..width * height {

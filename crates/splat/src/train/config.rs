@@ -94,7 +94,7 @@ impl TrainConfig {
             sh_degree: 3,
             sh_increase_interval: 1000,
             lr: LearningRates::default(),
-            adam: AdamConfig::default(),
+            adam: AdamConfig::inria_3dgs(),
             lambda_dssim: 0.2,
             densify: DensifyConfig {
                 from_iter: 500,

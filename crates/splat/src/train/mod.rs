@@ -1,6 +1,7 @@
 //! Sparse-view training of 3D Gaussians.
 
-pub mod adam;
+/// Adam lives in `fewview-optim`, shared with the surface trainer.
+pub use fewview_optim::adam;
 pub mod config;
 pub mod densify;
 pub mod trainer;

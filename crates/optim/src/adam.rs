@@ -1,6 +1,8 @@
 //! Adam (Kingma & Ba 2015) on host parameter arrays whose rows can be appended and removed
-//! (densification), as the reference code's `cat_tensors_to_optimizer` / `_prune_optimizer`:
-//! new rows start with zero moments, removed rows take their moments with them.
+//! (3DGS densification), as the reference code's `cat_tensors_to_optimizer` /
+//! `_prune_optimizer`: new rows start with zero moments, removed rows take their moments with
+//! them. One implementation for the Gaussian trainer (rows of a Gaussian's parameters) and the
+//! surface trainer (rows of width 1).
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -15,7 +17,8 @@ pub struct AdamState {
     pub step: u64,
 }
 
-/// Adam constants (PyTorch defaults except `eps`, which the reference 3DGS code sets to 1e-15).
+/// Adam constants. `Default` is PyTorch's (β = 0.9, 0.999, eps = 1e-8);
+/// [`AdamConfig::inria_3dgs`] is the reference 3DGS code's, which sets eps to 1e-15.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AdamConfig {
     pub beta1: f32,
@@ -28,7 +31,17 @@ impl Default for AdamConfig {
         Self {
             beta1: 0.9,
             beta2: 0.999,
+            eps: 1e-8,
+        }
+    }
+}
+
+impl AdamConfig {
+    /// The reference 3DGS code's optimiser (`torch.optim.Adam(..., eps=1e-15)`).
+    pub fn inria_3dgs() -> Self {
+        Self {
             eps: 1e-15,
+            ..Self::default()
         }
     }
 }
@@ -89,8 +102,8 @@ impl AdamState {
 
     /// Keeps the rows whose flag is set.
     pub fn retain(&mut self, keep: &[bool]) {
-        crate::model::retain_rows(&mut self.m, self.width, keep);
-        crate::model::retain_rows(&mut self.v, self.width, keep);
+        crate::retain_rows(&mut self.m, self.width, keep);
+        crate::retain_rows(&mut self.v, self.width, keep);
     }
 
     /// Appends `rows` rows of zero moments.
@@ -127,10 +140,7 @@ mod tests {
 
     #[test]
     fn matches_the_paper_algorithm() {
-        let cfg = AdamConfig {
-            eps: 1e-8,
-            ..Default::default()
-        };
+        let cfg = AdamConfig::default();
         let grads: Vec<f64> = (0..50)
             .map(|i| ((i * 37 % 11) as f64 - 5.0) * 0.1)
             .collect();
