@@ -24,5 +24,6 @@ pub mod rays;
 pub mod render;
 pub mod sdf_scene;
 pub mod train;
+pub mod warmup;
 
 pub use error::{Result, SurfaceError};

@@ -30,6 +30,7 @@ use crate::matching::sift::{SiftMatcher, SiftOptions};
 use crate::matching::{Match, MatchInput, MatchPrecision, epipolar_precision, match_all_pairs};
 use crate::pose::perturb_poses;
 use crate::train::{StepStats, TrainConfig, TrainView, Trainer};
+use crate::warmup::{WarmupOptions, WarmupReport, epipolar_warmup};
 
 /// Where the initial poses come from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -59,6 +60,10 @@ pub struct RunConfig {
     /// Also write the refined poses as IDR/NeuS `cameras_refined.npz` (DTU input), using the
     /// dataset's `to_source_world` as `scale_mat`.
     pub idr_output: bool,
+    /// Deviation, off by default: refine the initial poses on the matches' epipolar
+    /// constraints alone before the joint optimisation ([`crate::warmup`]).
+    #[serde(default)]
+    pub pose_warmup: Option<WarmupOptions>,
 }
 
 impl Default for RunConfig {
@@ -72,6 +77,7 @@ impl Default for RunConfig {
             eval_views: 5,
             eval_scale: 1,
             idr_output: false,
+            pose_warmup: None,
         }
     }
 }
@@ -82,7 +88,12 @@ pub struct Prepared {
     /// Indices of the training views in the dataset.
     pub view_indices: Vec<usize>,
     pub ground_truth: Vec<Se3>,
+    /// The initial (noisy) poses: the "initial" of the reported pose errors.
     pub initial: Vec<Se3>,
+    /// The poses the joint optimisation starts from: `initial`, or `initial` after the
+    /// epipolar warm-up.
+    pub start: Vec<Se3>,
+    pub warmup: Option<WarmupReport>,
     pub matches: Vec<Match>,
     pub match_precision: Option<MatchPrecision>,
 }
@@ -161,11 +172,21 @@ pub fn prepare(dataset: &Dataset, truth: Option<&Dataset>, config: &RunConfig) -
             (m, Some(p))
         }
     };
+    let (start, warmup) = match &config.pose_warmup {
+        None => (initial.clone(), None),
+        Some(opts) => {
+            let k: Vec<_> = views.iter().map(|v| v.intrinsics).collect();
+            let (poses, report) = epipolar_warmup(&initial, &k, &matches, opts);
+            (poses, Some(report))
+        }
+    };
     Ok(Prepared {
         views,
         view_indices: dataset.train.clone(),
         ground_truth,
         initial,
+        start,
+        warmup,
         matches,
         match_precision,
     })
@@ -181,6 +202,9 @@ pub struct RunReport {
     pub matches: usize,
     pub match_precision: Option<MatchPrecision>,
     pub initial_pose_error: PoseError,
+    /// After the epipolar warm-up, when it ran.
+    pub warmup: Option<WarmupReport>,
+    pub warmup_pose_error: Option<PoseError>,
     pub final_pose_error: PoseError,
     pub last_step: StepStats,
     /// Pose errors at the checkpoints of this invocation (a resumed run lists only its own).
@@ -227,6 +251,11 @@ pub enum Event<'a> {
     Matched {
         matches: usize,
         precision: Option<&'a MatchPrecision>,
+    },
+    /// The epipolar warm-up finished; the pose error of its poses.
+    WarmedUp {
+        report: &'a WarmupReport,
+        pose_error: &'a PoseError,
     },
     Step(&'a StepStats),
     /// A checkpoint was written; the pose error of the current poses (Alg. 1/2).
@@ -335,10 +364,21 @@ pub fn run(
         &out.join("poses_initial.json"),
         &cams(&prep.initial),
     )?;
+    let warmup_pose_error = match &prep.warmup {
+        Some(report) => {
+            let err = pose_error(&prep.start, &prep.ground_truth)?;
+            on_event(Event::WarmedUp {
+                report,
+                pose_error: &err,
+            });
+            Some(err)
+        }
+        None => None,
+    };
     let mut trainer = Trainer::new(
         config.train.clone(),
         prep.views.clone(),
-        &prep.initial,
+        &prep.start,
         prep.matches.clone(),
     )?;
     let ckpt = out.join("checkpoint.bin");
@@ -491,6 +531,8 @@ pub fn run(
         matches: prep.matches.len(),
         match_precision: prep.match_precision.clone(),
         initial_pose_error: initial_err,
+        warmup: prep.warmup.clone(),
+        warmup_pose_error,
         final_pose_error: final_err,
         last_step: last,
         pose_error_history: history,

@@ -68,3 +68,65 @@ fn dtu_scan65_short_run_end_to_end() {
         assert!(out.path().join(f).exists(), "{f} missing");
     }
 }
+
+/// The epipolar warm-up (`--pose-warmup`, a deviation) on the narrow triplet 22, 23, 24 at
+/// 400 × 300 from σ = 0.15 noise, three seeds: the matches alone bring the rotation error from
+/// about 12° to under 1° (measured 0.59°, 0.72°, 0.64°; t×100 3.6, 4.1, 3.8). On the wide
+/// triplet (17 matches per pair) it declines to run.
+#[test]
+#[ignore = "needs FEWVIEW_DATA (dataset tests)"]
+fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
+    use fewview_metrics::pose_error::{PoseErrorOptions, pose_error_pairwise};
+    use fewview_surface::pipeline::prepare;
+    use fewview_surface::warmup::WarmupOptions;
+    let root = std::env::var("FEWVIEW_DATA")
+        .expect("set FEWVIEW_DATA to the data folder (e.g. /work/shared/data)");
+    let dir = std::path::Path::new(&root).join("dtu/scan65");
+    let load = |views: Vec<usize>| {
+        load_dataset(
+            &dir,
+            &LoadOptions {
+                downscale: 2,
+                train_views: Some(views),
+                test_views: Some(vec![0]),
+                ..LoadOptions::default()
+            },
+        )
+        .unwrap_or_else(|e| panic!("{e}"))
+    };
+    let error = |est: &[fewview_scene::Se3], gt: &[fewview_scene::Se3]| {
+        pose_error_pairwise(est, gt, &PoseErrorOptions::default()).unwrap()
+    };
+    let narrow = load(vec![22, 23, 24]);
+    for seed in 0..3 {
+        let mut config = RunConfig::default();
+        config.train.seed = seed;
+        config.initial_poses = InitialPoses::NoisyGroundTruth { sigma: 0.15 };
+        config.pose_warmup = Some(WarmupOptions::default());
+        // As the CLI: the matcher's RANSAC takes the run's seed too.
+        config.matcher = Some(fewview_surface::matching::sift::SiftOptions {
+            seed,
+            ..Default::default()
+        });
+        let prep = prepare(&narrow, None, &config).unwrap();
+        let before = error(&prep.initial, &prep.ground_truth);
+        let after = error(&prep.start, &prep.ground_truth);
+        eprintln!(
+            "seed {seed}: R {:.3}° → {:.3}°, t×100 {:.2} → {:.2}",
+            before.rotation_deg,
+            after.rotation_deg,
+            100.0 * before.translation,
+            100.0 * after.translation
+        );
+        assert!(prep.warmup.as_ref().unwrap().skipped.is_none());
+        assert!(before.rotation_deg > 5.0, "{before:?}");
+        assert!(after.rotation_deg < 1.0, "seed {seed}: {after:?}");
+        assert!(after.translation < 0.06, "seed {seed}: {after:?}");
+    }
+    let wide = load(vec![22, 25, 28]);
+    let mut config = RunConfig::default();
+    config.pose_warmup = Some(WarmupOptions::default());
+    let prep = prepare(&wide, None, &config).unwrap();
+    assert!(prep.warmup.unwrap().skipped.is_some());
+    assert_eq!(prep.start, prep.initial);
+}

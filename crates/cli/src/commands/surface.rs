@@ -63,6 +63,12 @@ pub struct Args {
     /// Keep the poses fixed.
     #[arg(long)]
     pub no_pose_refinement: bool,
+    /// Deviation from paper 001: before the joint optimisation, refine the initial poses on the
+    /// correspondences' epipolar constraints alone (robust Sampson distance, Levenberg–
+    /// Marquardt). Helps when the classical matcher finds too few matches to pull the poses
+    /// back during training.
+    #[arg(long)]
+    pub pose_warmup: bool,
     /// Seed of the noise, sampling and initialisation.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -209,7 +215,10 @@ impl Args {
             "loaded" => InitialPoses::AsLoaded,
             other => bail!("--initial-poses {other:?}: expected noisy or loaded"),
         };
-        let needs_matches = !(self.no_matching && self.no_ncc && self.no_gc);
+        c.pose_warmup = self
+            .pose_warmup
+            .then(fewview_surface::warmup::WarmupOptions::default);
+        let needs_matches = self.pose_warmup || !(self.no_matching && self.no_ncc && self.no_gc);
         c.matcher = needs_matches.then(|| SiftOptions {
             seed: self.seed,
             ..Default::default()
@@ -316,6 +325,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     100.0 * pose_error.translation
                 )
             }),
+            Event::WarmedUp { report, pose_error } => bar.suspend(|| match &report.skipped {
+                Some(why) => eprintln!("epipolar warm-up skipped: {why}"),
+                None => eprintln!(
+                    "epipolar warm-up ({} iterations, median Sampson distance {:.2} → {:.2} px): \
+                     rotation error {:.3}°, translation error (×100) {:.3}",
+                    report.iterations,
+                    report.initial_median_px,
+                    report.final_median_px,
+                    pose_error.rotation_deg,
+                    100.0 * pose_error.translation
+                ),
+            }),
             Event::Stage(st) => bar.set_message(st.to_string()),
         },
     )
@@ -333,6 +354,13 @@ fn print_report(r: &RunReport, out: &std::path::Path) {
         100.0 * r.initial_pose_error.translation,
         100.0 * r.final_pose_error.translation
     );
+    if let Some(w) = &r.warmup_pose_error {
+        println!(
+            "  after warm-up  R {:.3}°   t(×100) {:.2}",
+            w.rotation_deg,
+            100.0 * w.translation
+        );
+    }
     println!(
         "training         {} iterations, {:.0} s ({:.2} it/s)",
         r.iterations, r.train_seconds_wall, r.iterations_per_second_wall
