@@ -101,6 +101,11 @@ pub struct TrainConfig {
     /// Learning rate of the poses (paper: 10⁻³ → 10⁻⁴).
     pub pose_lr: ExpSchedule,
     pub refine_poses: bool,
+    /// Deviation, 0 by default (the paper optimises the poses from the first iteration): hold
+    /// the poses for this fraction of the iterations while the field forms. Early on the
+    /// colour loss of a field fitted to wrong poses drags good (e.g. warmed-up) poses away.
+    #[serde(default)]
+    pub pose_start: f64,
     /// BARF/SPARF coarse-to-fine window `(α₁, α₂)` as fractions of the iterations (SPARF DTU:
     /// 0.4, 0.7). The hash levels (or frequencies) open over it and the pSDF loss is active
     /// within it (Eq. 13).
@@ -132,6 +137,7 @@ impl Default for TrainConfig {
                 end: 1e-4,
             },
             refine_poses: true,
+            pose_start: 0.0,
             c2f: (0.4, 0.7),
             cos_anneal_end: 1.0 / 6.0,
             use_masks: true,
@@ -657,6 +663,7 @@ impl Trainer {
             self.state.adam[k].step(&mut self.state.params[k], &g, lr * f, &cfg.adam);
         }
         if cfg.refine_poses
+            && (it as f64) >= cfg.pose_start * cfg.iterations as f64
             && let Some(g) = d9.grad(&grads)
         {
             let g = g.into_data().try_to_vec::<f32>().unwrap_or_default();

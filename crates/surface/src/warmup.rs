@@ -159,7 +159,9 @@ pub fn epipolar_warmup(
         .map(|(a, b)| per_pair[a * n + b])
         .min()
         .unwrap_or(0);
-    report.skipped = if poses.len() != intrinsics.len() || !(options.cauchy_px > 0.0) {
+    report.skipped = if poses.len() != intrinsics.len()
+        || options.cauchy_px.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+    {
         Some("bad input (pose/intrinsics counts or Cauchy scale)".into())
     } else if matches.len() < unknowns || fewest < options.min_matches_per_pair {
         Some(format!(

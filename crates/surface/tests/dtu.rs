@@ -124,8 +124,10 @@ fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
         assert!(after.translation < 0.06, "seed {seed}: {after:?}");
     }
     let wide = load(vec![22, 25, 28]);
-    let mut config = RunConfig::default();
-    config.pose_warmup = Some(WarmupOptions::default());
+    let config = RunConfig {
+        pose_warmup: Some(WarmupOptions::default()),
+        ..Default::default()
+    };
     let prep = prepare(&wide, None, &config).unwrap();
     assert!(prep.warmup.unwrap().skipped.is_some());
     assert_eq!(prep.start, prep.initial);

@@ -69,6 +69,10 @@ pub struct Args {
     /// back during training.
     #[arg(long)]
     pub pose_warmup: bool,
+    /// Deviation from paper 001 (which starts at 0): hold the poses fixed for this fraction of
+    /// the iterations while the field forms, then refine them.
+    #[arg(long, default_value_t = 0.0, value_name = "FRACTION")]
+    pub pose_start: f64,
     /// Seed of the noise, sampling and initialisation.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -163,6 +167,13 @@ impl Args {
         t.matches_per_batch = self.matches_per_batch;
         t.seed = self.seed;
         t.refine_poses = !self.no_pose_refinement;
+        if !(0.0..=1.0).contains(&self.pose_start) {
+            bail!(
+                "--pose-start {}: expected a fraction in [0, 1]",
+                self.pose_start
+            );
+        }
+        t.pose_start = self.pose_start;
         t.use_masks = !self.no_masks;
         t.sample.n_coarse = self.coarse;
         t.sample.n_importance = self.importance;
