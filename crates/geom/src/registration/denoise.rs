@@ -10,9 +10,10 @@
 //! The projection is applied to both clouds, so the small curvature bias it introduces is the
 //! same on both sides and cancels in the alignment.
 
-use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use nalgebra::Vector3;
 use rayon::prelude::*;
 
+use super::features::least_squares_plane;
 use crate::knn::PointTree;
 use crate::mesh::v3;
 
@@ -36,17 +37,7 @@ pub fn project_to_local_planes(points: &[[f32; 3]], radius: f64, max_nn: usize) 
                 return (*p, [0.0; 3]);
             }
             let pts: Vec<Vector3<f64>> = nb.iter().map(|&(i, _)| v3(&points[i])).collect();
-            let mean = pts.iter().sum::<Vector3<f64>>() / pts.len() as f64;
-            let mut cov = Matrix3::zeros();
-            for x in &pts {
-                let d = x - mean;
-                cov += d * d.transpose();
-            }
-            let eig = SymmetricEigen::new(cov);
-            let imin = (0..3)
-                .min_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]))
-                .unwrap_or(0);
-            let n: Vector3<f64> = eig.eigenvectors.column(imin).into_owned();
+            let (mean, n) = least_squares_plane(&pts);
             let projected = q - n * (q - mean).dot(&n);
             (
                 [projected.x as f32, projected.y as f32, projected.z as f32],

@@ -19,6 +19,22 @@ use crate::mesh::{Points, v3};
 /// Number of FPFH bins.
 pub const FPFH_BINS: usize = 33;
 
+/// The least-squares plane of `points`: their mean and the unit eigenvector of the smallest
+/// eigenvalue of their covariance (the plane's normal, sign arbitrary).
+pub fn least_squares_plane(points: &[Vector3<f64>]) -> (Vector3<f64>, Vector3<f64>) {
+    let mean = points.iter().sum::<Vector3<f64>>() / points.len().max(1) as f64;
+    let mut cov = Matrix3::zeros();
+    for x in points {
+        let d = x - mean;
+        cov += d * d.transpose();
+    }
+    let eig = SymmetricEigen::new(cov);
+    let imin = (0..3)
+        .min_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]))
+        .unwrap_or(0);
+    (mean, eig.eigenvectors.column(imin).into_owned())
+}
+
 /// Unit normals from local PCA, oriented away from the centroid.
 pub fn estimate_normals(points: &Points, radius: f64, max_nn: usize) -> Vec<[f32; 3]> {
     let tree = PointTree::new(&points.positions);
@@ -35,17 +51,7 @@ pub fn estimate_normals(points: &Points, radius: f64, max_nn: usize) -> Vec<[f32
             }
             let pts: Vec<Vector3<f64>> =
                 nb.iter().map(|&(i, _)| v3(&points.positions[i])).collect();
-            let mean = pts.iter().sum::<Vector3<f64>>() / pts.len() as f64;
-            let mut cov = Matrix3::zeros();
-            for x in &pts {
-                let d = x - mean;
-                cov += d * d.transpose();
-            }
-            let eig = SymmetricEigen::new(cov);
-            let imin = (0..3)
-                .min_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]))
-                .unwrap_or(0);
-            let mut n: Vector3<f64> = eig.eigenvectors.column(imin).into_owned();
+            let (_, mut n) = least_squares_plane(&pts);
             if n.dot(&(q - centroid)) < 0.0 {
                 n = -n;
             }
