@@ -66,8 +66,10 @@ pub struct WarmupReport {
     /// Why the poses were left as they were, when they were.
     pub skipped: Option<String>,
     pub iterations: usize,
-    /// Scales of the Cauchy loss, in the order used.
+    /// Scales of the Cauchy loss of the chosen run, in the order used.
     pub scales_px: Vec<f64>,
+    /// Fraction of the matches whose rays meet in front of both cameras, for the result.
+    pub in_front: f64,
     /// Median absolute Sampson distance (pixels) before and after.
     pub initial_median_px: f64,
     pub final_median_px: f64,
@@ -130,8 +132,8 @@ fn median_abs(d: &[f64]) -> f64 {
 }
 
 /// Refines world-to-camera `poses` (one per view, `intrinsics` alike) so that `matches`
-/// (view indices into them) satisfy their epipolar constraints. Returns the poses unchanged
-/// when there are fewer matches than unknowns.
+/// (view indices into them) satisfy their epipolar constraints. Returns the poses unchanged,
+/// with the reason in the report, when the input is inconsistent or the matches too few.
 pub fn epipolar_warmup(
     poses: &[Se3],
     intrinsics: &[Intrinsics],
@@ -139,55 +141,169 @@ pub fn epipolar_warmup(
     options: &WarmupOptions,
 ) -> (Vec<Se3>, WarmupReport) {
     let unknowns = 6 * poses.len();
-    let d0 = distances(poses, intrinsics, matches);
+    let n = poses.len();
     let mut report = WarmupReport {
         skipped: None,
         iterations: 0,
         scales_px: Vec::new(),
-        initial_median_px: median_abs(&d0),
-        final_median_px: median_abs(&d0),
+        in_front: 0.0,
+        initial_median_px: f64::NAN,
+        final_median_px: f64::NAN,
     };
-    let n = poses.len();
+    let views_ok = matches
+        .iter()
+        .all(|m| m.view_a < n && m.view_b < n && m.view_a != m.view_b);
+    if n != intrinsics.len()
+        || !views_ok
+        || options.cauchy_px.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+    {
+        report.skipped =
+            Some("bad input (pose/intrinsics counts, match views or Cauchy scale)".into());
+        return (poses.to_vec(), report);
+    }
+    let d0 = distances(poses, intrinsics, matches);
+    report.in_front = in_front_fraction(poses, intrinsics, matches);
+    report.initial_median_px = median_abs(&d0);
+    report.final_median_px = report.initial_median_px;
     let mut per_pair = vec![0usize; n * n];
     for m in matches {
-        if m.view_a < n && m.view_b < n {
-            per_pair[m.view_a.min(m.view_b) * n + m.view_a.max(m.view_b)] += 1;
-        }
+        per_pair[m.view_a.min(m.view_b) * n + m.view_a.max(m.view_b)] += 1;
     }
     let fewest = (0..n)
         .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
         .map(|(a, b)| per_pair[a * n + b])
         .min()
         .unwrap_or(0);
-    report.skipped = if poses.len() != intrinsics.len()
-        || options.cauchy_px.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
-    {
-        Some("bad input (pose/intrinsics counts or Cauchy scale)".into())
-    } else if matches.len() < unknowns || fewest < options.min_matches_per_pair {
-        Some(format!(
+    if matches.len() < unknowns || fewest < options.min_matches_per_pair {
+        report.skipped = Some(format!(
             "too few matches: {fewest} for the weakest pair of views (need {})",
             options.min_matches_per_pair
-        ))
-    } else {
-        None
-    };
-    if report.skipped.is_some() {
+        ));
         return (poses.to_vec(), report);
     }
-    let mut scale = (2.0 * report.initial_median_px)
-        .max(options.start_px)
-        .max(options.cauchy_px);
-    loop {
-        report.scales_px.push(scale);
-        if scale <= options.cauchy_px {
+    // Two annealing runs, from a wide and from a narrow starting scale. The epipolar
+    // constraint cannot tell a relative translation `t` from `−t`, and a wide start can carry a
+    // camera over to that mirrored solution (same cost, points behind the cameras); a narrow
+    // start can stop in a worse minimum. The run whose triangulated matches lie in front of
+    // both cameras wins; between two that do, the lower final cost.
+    let starts = [
+        (2.0 * report.initial_median_px)
+            .max(options.start_px)
+            .max(options.cauchy_px),
+        (2.0 * report.initial_median_px).max(options.cauchy_px),
+    ];
+    let mut best: Option<Candidate> = None;
+    for (k, &start) in starts.iter().enumerate() {
+        if k > 0 && start == starts[0] {
             break;
         }
-        scale = (0.5 * scale).max(options.cauchy_px);
+        let scales = halving_scales(start, options.cauchy_px);
+        let (candidate, d, iterations) = anneal(poses, intrinsics, matches, &scales, options);
+        report.iterations += iterations;
+        let front = in_front_fraction(&candidate, intrinsics, matches);
+        let cost: f64 = d
+            .iter()
+            .zip(matches)
+            .map(|(x, m)| m.confidence.max(0.0) as f64 * cauchy(*x, options.cauchy_px).0)
+            .sum();
+        let better = match &best {
+            None => true,
+            Some(b) => {
+                let (ok, best_ok) = (front >= 0.75, b.in_front >= 0.75);
+                (ok && !best_ok)
+                    || (ok == best_ok && (cost < b.cost || (!ok && front > b.in_front)))
+            }
+        };
+        if better {
+            best = Some(Candidate {
+                in_front: front,
+                cost,
+                poses: candidate,
+                distances: d,
+                scales,
+            });
+        }
     }
+    let Some(best) = best else {
+        return (poses.to_vec(), report);
+    };
+    report.scales_px = best.scales;
+    report.in_front = best.in_front;
+    report.final_median_px = median_abs(&best.distances);
+    (best.poses, report)
+}
+
+/// One annealing run's result, as [`epipolar_warmup`] compares them.
+struct Candidate {
+    in_front: f64,
+    /// Robust cost at the final scale.
+    cost: f64,
+    poses: Vec<Se3>,
+    distances: Vec<f64>,
+    scales: Vec<f64>,
+}
+
+/// `start, start/2, …` down to `end`.
+fn halving_scales(start: f64, end: f64) -> Vec<f64> {
+    let mut scales = vec![start];
+    while let Some(&s) = scales.last() {
+        if s <= end {
+            break;
+        }
+        scales.push((0.5 * s).max(end));
+    }
+    scales
+}
+
+/// Fraction of matches whose two rays meet (closest approach) in front of both cameras.
+fn in_front_fraction(poses: &[Se3], intrinsics: &[Intrinsics], matches: &[Match]) -> f64 {
+    let ray = |view: usize, uv: [f32; 2]| {
+        let k = &intrinsics[view];
+        let dir_cam = Vector3::new(
+            (uv[0] as f64 - k.cx) / k.fx,
+            (uv[1] as f64 - k.cy) / k.fy,
+            1.0,
+        );
+        let r = poses[view].rotation;
+        let centre = -(r.transpose() * poses[view].translation);
+        (centre, r.transpose() * dir_cam)
+    };
+    let front = matches
+        .iter()
+        .filter(|m| {
+            let (ca, da) = ray(m.view_a, m.a);
+            let (cb, db) = ray(m.view_b, m.b);
+            // Least squares for s·da − t·db = cb − ca.
+            let (aa, ab, bb) = (da.dot(&da), da.dot(&db), db.dot(&db));
+            let rhs = cb - ca;
+            let (ra, rb) = (da.dot(&rhs), db.dot(&rhs));
+            let det = aa * bb - ab * ab;
+            if det.abs() < 1e-12 {
+                return false;
+            }
+            let s = (ra * bb - ab * rb) / det;
+            let t = (ab * ra - aa * rb) / det;
+            s > 0.0 && t > 0.0
+        })
+        .count();
+    front as f64 / matches.len().max(1) as f64
+}
+
+/// Levenberg–Marquardt on the Cauchy-weighted Sampson distances, one scale after the other.
+/// Returns the poses, their distances and the iterations taken.
+fn anneal(
+    poses: &[Se3],
+    intrinsics: &[Intrinsics],
+    matches: &[Match],
+    scales: &[f64],
+    options: &WarmupOptions,
+) -> (Vec<Se3>, Vec<f64>, usize) {
+    let unknowns = 6 * poses.len();
     let mut current = poses.to_vec();
-    let mut d = d0;
+    let mut d = distances(poses, intrinsics, matches);
+    let mut iterations = 0;
     const STEP: f64 = 1e-6;
-    for &s in &report.scales_px.clone() {
+    for &s in scales {
         let cost_of = |d: &[f64]| -> f64 {
             d.iter()
                 .zip(matches)
@@ -238,14 +354,13 @@ pub fn epipolar_warmup(
                 }
                 lambda *= 10.0;
             }
-            report.iterations += 1;
+            iterations += 1;
             if !improved {
                 break;
             }
         }
     }
-    report.final_median_px = median_abs(&d);
-    (current, report)
+    (current, d, iterations)
 }
 
 #[cfg(test)]
@@ -339,6 +454,30 @@ mod tests {
             r1 < 0.1 * r0 && t1 < 0.2 * t0,
             "{r0}° → {r1}°, t×100 {t0} → {t1}; {report:?}"
         );
+        assert!(report.in_front > 0.75, "{report:?}");
+    }
+
+    #[test]
+    fn the_mirrored_solution_has_the_same_distances_but_points_behind() {
+        // Negating every translation reflects the camera centres through the origin: the
+        // relative translations flip sign, the epipolar constraints do not change, and the
+        // triangulated points land behind the cameras (the signed distances flip sign with F).
+        let (truth, k, matches) = scene(0.0, 0.0);
+        let mirrored: Vec<Se3> = truth
+            .iter()
+            .map(|p| Se3::new(p.rotation, -p.translation))
+            .collect();
+        let (a, b) = (
+            distances(&truth, &k, &matches),
+            distances(&mirrored, &k, &matches),
+        );
+        assert!(
+            a.iter()
+                .zip(&b)
+                .all(|(x, y)| (x.abs() - y.abs()).abs() < 1e-6)
+        );
+        assert_eq!(in_front_fraction(&truth, &k, &matches), 1.0);
+        assert_eq!(in_front_fraction(&mirrored, &k, &matches), 0.0);
     }
 
     #[test]
