@@ -22,9 +22,10 @@
 //! three views; a few hundred residuals).
 
 use fewview_scene::{Intrinsics, Se3};
-use nalgebra::{DMatrix, DVector, Vector3};
+use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
+use crate::matching::fundamental::sampson_signed;
 use crate::matching::{Match, fundamental_from_cameras};
 use crate::pose::se3_exp;
 
@@ -75,20 +76,6 @@ pub struct WarmupReport {
     pub final_median_px: f64,
 }
 
-/// Signed Sampson distance (pixels) of `m` under `F` mapping view-a points to view-b lines.
-fn sampson(f: &nalgebra::Matrix3<f64>, m: &Match) -> f64 {
-    let xa = Vector3::new(m.a[0] as f64, m.a[1] as f64, 1.0);
-    let xb = Vector3::new(m.b[0] as f64, m.b[1] as f64, 1.0);
-    let fa = f * xa;
-    let fb = f.transpose() * xb;
-    let denom = (fa.x * fa.x + fa.y * fa.y + fb.x * fb.x + fb.y * fb.y).sqrt();
-    if denom > 0.0 {
-        xb.dot(&fa) / denom
-    } else {
-        0.0
-    }
-}
-
 /// Poses after the update `ξ` (6 numbers per view).
 fn apply(poses: &[Se3], xi: &[f64]) -> Vec<Se3> {
     poses
@@ -114,7 +101,11 @@ fn distances(poses: &[Se3], intrinsics: &[Intrinsics], matches: &[Match]) -> Vec
                 let cb = fewview_scene::Camera::new(intrinsics[m.view_b], poses[m.view_b]);
                 fundamental_from_cameras(&ca, &cb)
             });
-            sampson(&f, m)
+            sampson_signed(
+                &f,
+                [m.a[0] as f64, m.a[1] as f64],
+                [m.b[0] as f64, m.b[1] as f64],
+            )
         })
         .collect()
 }
@@ -258,15 +249,7 @@ fn halving_scales(start: f64, end: f64) -> Vec<f64> {
 /// Fraction of matches whose two rays meet (closest approach) in front of both cameras.
 fn in_front_fraction(poses: &[Se3], intrinsics: &[Intrinsics], matches: &[Match]) -> f64 {
     let ray = |view: usize, uv: [f32; 2]| {
-        let k = &intrinsics[view];
-        let dir_cam = Vector3::new(
-            (uv[0] as f64 - k.cx) / k.fx,
-            (uv[1] as f64 - k.cy) / k.fy,
-            1.0,
-        );
-        let r = poses[view].rotation;
-        let centre = -(r.transpose() * poses[view].translation);
-        (centre, r.transpose() * dir_cam)
+        fewview_scene::Camera::new(intrinsics[view], poses[view]).ray(uv[0] as f64, uv[1] as f64)
     };
     let front = matches
         .iter()
@@ -369,6 +352,7 @@ mod tests {
     use crate::pose::perturb_poses;
     use fewview_metrics::pose_error::{PoseErrorOptions, pose_error_pairwise};
     use fewview_scene::Camera;
+    use nalgebra::Vector3;
     use rand::{RngExt, SeedableRng};
 
     /// Three cameras around a cloud of points filling most of their images (as a DTU object

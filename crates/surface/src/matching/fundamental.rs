@@ -68,14 +68,31 @@ pub fn eight_point(a: &[[f64; 2]], b: &[[f64; 2]]) -> Option<Matrix3<f64>> {
     (norm > 0.0 && norm.is_finite()).then(|| f / norm)
 }
 
-/// Sampson distance (first-order geometric error, pixels²) of one correspondence.
-pub fn sampson(f: &Matrix3<f64>, a: [f64; 2], b: [f64; 2]) -> f64 {
+/// The epipolar residual `x_bᵀ F x_a` of one correspondence and the squared norm of its
+/// gradient, `(F x_a)₁² + (F x_a)₂² + (Fᵀ x_b)₁² + (Fᵀ x_b)₂²`: the Sampson distance is
+/// their ratio.
+fn sampson_parts(f: &Matrix3<f64>, a: [f64; 2], b: [f64; 2]) -> (f64, f64) {
     let xa = Vector3::new(a[0], a[1], 1.0);
     let xb = Vector3::new(b[0], b[1], 1.0);
     let fa = f * xa;
     let fb = f.transpose() * xb;
-    let r = xb.dot(&fa);
-    r * r / (fa.x * fa.x + fa.y * fa.y + fb.x * fb.x + fb.y * fb.y).max(1e-300)
+    (
+        xb.dot(&fa),
+        fa.x * fa.x + fa.y * fa.y + fb.x * fb.x + fb.y * fb.y,
+    )
+}
+
+/// Sampson distance (first-order geometric error, pixels²) of one correspondence.
+pub fn sampson(f: &Matrix3<f64>, a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (r, g2) = sampson_parts(f, a, b);
+    r * r / g2.max(1e-300)
+}
+
+/// The signed square root of [`sampson`] (pixels), 0 where `F` has no gradient: a residual
+/// for least squares over the poses that `F` comes from.
+pub fn sampson_signed(f: &Matrix3<f64>, a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (r, g2) = sampson_parts(f, a, b);
+    if g2 > 0.0 { r / g2.sqrt() } else { 0.0 }
 }
 
 /// RANSAC over eight-point samples: the inlier flags of the model with most inliers
