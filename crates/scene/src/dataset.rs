@@ -17,6 +17,11 @@ pub struct View {
     pub image: Image,
     /// Foreground mask (1 channel, 0 or 1) when the dataset has one.
     pub mask: Option<Image>,
+    /// The mask is the photo's own alpha channel, so `image = rgb·mask + (1 − mask)·background`
+    /// (with the dataset's `background`) and the image can be re-composited over any other
+    /// colour. False for masks read from separate files (DTU), which outline an object in
+    /// front of a real background.
+    pub mask_is_alpha: bool,
     /// Near/far depth bounds of this view when the format gives them (LLFF).
     pub depth_bounds: Option<(f64, f64)>,
 }

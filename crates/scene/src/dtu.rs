@@ -257,6 +257,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
                 image: load::downscale_image(&photo.rgb, k, file)?,
                 mask,
                 depth_bounds: None,
+                mask_is_alpha: false,
             })
         })
         .collect::<Result<Vec<_>>>()?;

@@ -258,6 +258,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
                 name: load::stem(file),
                 camera,
                 image,
+                mask_is_alpha: mask.is_some(),
                 mask,
                 depth_bounds: Some(bounds[i]),
             })

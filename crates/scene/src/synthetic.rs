@@ -196,6 +196,7 @@ pub fn demo_dataset(opts: &DemoOptions) -> Dataset {
             image,
             mask: None,
             depth_bounds: Some((near * 0.9, far * 1.1)),
+            mask_is_alpha: false,
         });
     }
     let train: Vec<usize> = opts

@@ -241,11 +241,13 @@ fn load_frame(frame: &Frame, background: [f32; 3], k: u32) -> Result<View> {
         Some(m) => Some(load::downscale_mask(&m, k, binary, &frame.image)?),
         None => None,
     };
+    let mask_is_alpha = mask.is_some() && !binary;
     Ok(View {
         name: load::stem(&frame.image),
         camera: load::downscale_camera(&camera, k),
         image: load::downscale_image(&photo.rgb, k, &frame.image)?,
         mask,
+        mask_is_alpha,
         depth_bounds: None,
     })
 }

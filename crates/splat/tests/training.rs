@@ -208,3 +208,77 @@ fn training_learns_the_demo_scene() {
         ds.test.len()
     );
 }
+
+/// Trains one white Gaussian, half opaque, against an empty RGBA view composited over white
+/// (every pixel white, alpha 0), and returns the rendered alpha summed over the image before
+/// and after.
+fn train_white_floater(random_background: bool) -> (f64, f64) {
+    use fewview_scene::{Camera, Intrinsics};
+    use fewview_splat::model::GaussianModel;
+    use fewview_splat::train::AlphaImage;
+    use nalgebra::Vector3;
+
+    let camera = Camera::look_at(
+        Intrinsics::centered(40.0, 32, 32),
+        Vector3::new(0.0, 0.0, -3.0),
+        Vector3::zeros(),
+        Vector3::new(0.0, -1.0, 0.0),
+    );
+    let white = [1.0f32; 3];
+    let image = Image::filled(32, 32, &white);
+    let alpha = Image::filled(32, 32, &[0.0]);
+    let mut model = GaussianModel::new(0);
+    model.push_isotropic([0.0; 3], 0.3, white, 0.5);
+
+    let mut train = TrainConfig::sparse_view(100);
+    train.sh_degree = 0;
+    train.background = white;
+    train.random_background = random_background;
+    train.densify.from_iter = 1000;
+    train.densify.until_iter = 0;
+    let device = Device::flex().autodiff();
+    let view = TrainView::new("empty", RenderCamera::from(&camera), &image, &device)
+        .with_alpha(AlphaImage::new(&image, &alpha, white).unwrap());
+    let settings = RenderSettings {
+        background: white,
+        sh_degree: 0,
+        near_plane: 0.2,
+    };
+    let coverage = |m: &GaussianModel| {
+        let r = render_model(m, &RenderCamera::from(&camera), &settings);
+        r.alpha.data.iter().map(|&a| a as f64).sum::<f64>()
+    };
+    let before = coverage(&model);
+    let mut t = Trainer::new(train, model, vec![view], 1.0, device).unwrap();
+    t.run(|_| {}, |_, _| Ok(())).unwrap();
+    (before, coverage(&t.state.model))
+}
+
+#[test]
+fn random_background_removes_a_floater_that_a_fixed_background_hides() {
+    // Over the fixed white background the white Gaussian renders exactly as the target: no loss,
+    // no gradient, and it stays.
+    let (before, fixed) = train_white_floater(false);
+    assert!(before > 20.0, "the Gaussian covers the view: {before}");
+    assert!(
+        (fixed - before).abs() < 1e-3 * before,
+        "{fixed} vs {before}"
+    );
+    // Over random colours it shows wherever the target's alpha is 0, and fades away.
+    let (_, random) = train_white_floater(true);
+    assert!(random < 0.1 * before, "{random} vs {before}");
+}
+
+#[test]
+fn default_run_length_grows_with_the_number_of_training_views() {
+    use fewview_splat::pipeline::default_iterations;
+    let mut ds = small_demo();
+    // The demo's views have depth bounds: the forward-facing default.
+    assert_eq!(default_iterations(&ds), 1000);
+    for v in &mut ds.views {
+        v.depth_bounds = None;
+    }
+    assert_eq!(default_iterations(&ds), 3000);
+    ds.train = (0..100).map(|i| i % ds.views.len()).collect();
+    assert_eq!(default_iterations(&ds), 5000);
+}

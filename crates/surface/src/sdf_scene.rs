@@ -244,6 +244,7 @@ pub fn sdf_dataset(opts: &SdfSceneOptions) -> Dataset {
                 image,
                 mask: Some(mask),
                 depth_bounds: None,
+                mask_is_alpha: false,
             }
         })
         .collect();

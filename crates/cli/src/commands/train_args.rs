@@ -3,13 +3,20 @@
 use std::path::PathBuf;
 
 use anyhow::bail;
-use clap::Args;
+use clap::{Args, ValueEnum};
 use fewview_splat::pipeline::{InitStrategy, RunConfig};
 use fewview_splat::train::TrainConfig;
 
+/// What the Gaussians are composited over during training on images with alpha.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum TrainBackground {
+    Random,
+    Fixed,
+}
+
 #[derive(Debug, Clone, Args)]
 pub struct TrainArgs {
-    /// Training iterations (default for `train`: 1000 on forward-facing scenes with depth bounds, e.g. LLFF, 3000 otherwise; `demo`: 2000). The densification
+    /// Training iterations (default for `train`: 1000 on forward-facing scenes with depth bounds, e.g. LLFF, otherwise 3000 or 50 per training view, whichever is more; `demo`: 2000). The densification
     /// schedule is rescaled to the run length (see `TrainConfig::sparse_view` and the README).
     #[arg(long)]
     pub iterations: Option<usize>,
@@ -30,6 +37,13 @@ pub struct TrainArgs {
     /// Weight λ of the SSIM term in `(1 − λ) L1 + λ (1 − SSIM)`.
     #[arg(long, default_value_t = 0.2)]
     pub lambda_dssim: f32,
+    /// Background behind the Gaussians while training on images with alpha (NeRF-synthetic
+    /// RGBA): `random` (a random colour each iteration, the target re-composited over it, as
+    /// nerfstudio's splatfacto; a deviation from paper 000, it removes floaters that a fixed
+    /// background hides: lego 8-view 20.3 → 23.5 dB) or `fixed` (the dataset's background, as
+    /// paper 000 and Inria 3DGS). Opaque photos always train over the fixed background.
+    #[arg(long, value_enum, default_value_t = TrainBackground::Random)]
+    pub train_background: TrainBackground,
     /// Save a checkpoint every N iterations (0: never).
     #[arg(long, default_value_t = 500)]
     pub checkpoint_every: usize,
@@ -46,6 +60,7 @@ impl TrainArgs {
         train.sh_degree = self.sh_degree;
         train.lambda_dssim = self.lambda_dssim;
         train.background = background;
+        train.random_background = self.train_background == TrainBackground::Random;
         train.checkpoint_interval = self.checkpoint_every;
         if let Err(m) = train.validate() {
             bail!("invalid training options: {m}");

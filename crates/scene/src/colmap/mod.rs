@@ -298,6 +298,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
                 name: load::stem(Path::new(&img.name)),
                 camera: load::downscale_camera(&camera, k),
                 image: load::downscale_image(&photo.rgb, k, &file)?,
+                mask_is_alpha: mask.is_some(),
                 mask,
                 depth_bounds: None,
             })

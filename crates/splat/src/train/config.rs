@@ -79,6 +79,14 @@ pub struct TrainConfig {
     pub seed: u64,
     /// Background colour composited behind the Gaussians during training and rendering.
     pub background: [f32; 3],
+    /// Train each iteration over a random background colour, with the target image
+    /// re-composited over the same colour, on views whose images have alpha (NeRF-synthetic
+    /// RGBA). Gaussians must then match the alpha as well as the colour, so floaters that
+    /// blend into a fixed white background are pruned. nerfstudio's splatfacto default for
+    /// RGBA data; not in paper 000 or Inria's 3DGS (whose `--random_background` leaves the
+    /// targets composited over the fixed colour).
+    #[serde(default)]
+    pub random_background: bool,
     /// Gaussians closer than this to a camera (camera z) are culled.
     pub near_plane: f64,
     /// Save a checkpoint every this many iterations (0: only at the end).
@@ -109,6 +117,7 @@ impl TrainConfig {
             },
             seed: 0,
             background: [0.0; 3],
+            random_background: false,
             near_plane: 0.2,
             checkpoint_interval: 1000,
         }

@@ -7,4 +7,6 @@ pub mod densify;
 pub mod trainer;
 
 pub use config::{DensifyConfig, LearningRates, TrainConfig};
-pub use trainer::{LossContext, LossTerm, Progress, TrainError, TrainState, TrainView, Trainer};
+pub use trainer::{
+    AlphaImage, LossContext, LossTerm, Progress, TrainError, TrainState, TrainView, Trainer,
+};

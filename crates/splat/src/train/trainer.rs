@@ -3,9 +3,9 @@
 //! same result.
 
 use burn::tensor::{Device, Tensor, TensorData};
-use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand::seq::SliceRandom;
+use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
 use super::adam::AdamState;
@@ -23,6 +23,53 @@ pub struct TrainView {
     pub camera: RenderCamera,
     /// `[H, W, 3]` target.
     pub target: Tensor<3>,
+    /// The image's alpha, when it has one: lets the loop composite it over other backgrounds.
+    pub alpha: Option<AlphaImage>,
+}
+
+/// An RGBA photograph stored composited over a known background, so that it can be
+/// re-composited over any colour: `rgb·a + (1 − a)·new = image + (1 − a)·(new − old)`.
+#[derive(Clone, Debug)]
+pub struct AlphaImage {
+    /// The composited image, `[H, W, 3]` row-major.
+    composited: Vec<f32>,
+    /// Alpha, `[H, W]`.
+    alpha: Vec<f32>,
+    /// The colour `composited` was composited over.
+    background: [f32; 3],
+    height: usize,
+    width: usize,
+}
+
+impl AlphaImage {
+    /// `image` (3 channels) composited over `background` with alpha `alpha` (1 channel, same
+    /// size); `None` when the shapes disagree.
+    pub fn new(
+        image: &fewview_scene::Image,
+        alpha: &fewview_scene::Image,
+        background: [f32; 3],
+    ) -> Option<Self> {
+        let same = image.width == alpha.width && image.height == alpha.height;
+        (same && image.channels == 3 && alpha.channels == 1).then(|| Self {
+            composited: image.data.clone(),
+            alpha: alpha.data.clone(),
+            background,
+            height: image.height,
+            width: image.width,
+        })
+    }
+
+    /// The image composited over `background` instead, as a `[H, W, 3]` tensor.
+    pub fn over(&self, background: [f32; 3], device: &Device) -> Tensor<3> {
+        let shift = [0, 1, 2].map(|c| background[c] - self.background[c]);
+        let data: Vec<f32> = self
+            .composited
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| v + (1.0 - self.alpha[i / 3]) * shift[i % 3])
+            .collect();
+        Tensor::<3>::from_data(TensorData::new(data, [self.height, self.width, 3]), device)
+    }
 }
 
 impl TrainView {
@@ -43,7 +90,14 @@ impl TrainView {
             name: name.into(),
             camera,
             target,
+            alpha: None,
         }
+    }
+
+    /// Attaches the image's alpha (see [`AlphaImage`]).
+    pub fn with_alpha(mut self, alpha: AlphaImage) -> Self {
+        self.alpha = Some(alpha);
+        self
     }
 }
 
@@ -187,6 +241,19 @@ impl Trainer {
         }
     }
 
+    /// The background of an iteration on `view` and the target composited over it: a random
+    /// colour when `random_background` is on and the view has alpha, else the configured one.
+    fn background_and_target(&self, iteration: usize, view: &TrainView) -> ([f32; 3], Tensor<3>) {
+        match &view.alpha {
+            Some(alpha) if self.config.random_background => {
+                let mut rng = self.rng(iteration, 3);
+                let bg = [0; 3].map(|_| rng.random::<f32>());
+                (bg, alpha.over(bg, &self.device))
+            }
+            _ => (self.config.background, view.target.clone()),
+        }
+    }
+
     /// The random generator of one iteration: a pure function of the seed and the iteration, so
     /// a resumed run makes the same choices as an uninterrupted one.
     fn rng(&self, iteration: usize, stream: u64) -> StdRng {
@@ -211,7 +278,9 @@ impl Trainer {
         let it = self.state.iteration + 1;
         let cfg = self.config.clone();
         let view_index = self.view_of(it);
-        let settings = self.settings(it);
+        let mut settings = self.settings(it);
+        let (background, target) = self.background_and_target(it, &self.views[view_index]);
+        settings.background = background;
         let n = self.state.model.len();
 
         let gaussians = self.state.model.to_tensors(&self.device, true);
@@ -227,7 +296,7 @@ impl Trainer {
         );
         let [h, w, _] = out.image.dims();
         let rgb = out.image.clone().slice([0..h, 0..w, 0..3]);
-        let mut loss = photometric_loss(rgb, view.target.clone(), cfg.lambda_dssim);
+        let mut loss = photometric_loss(rgb, target, cfg.lambda_dssim);
         {
             let ctx = LossContext {
                 iteration: it,
@@ -385,4 +454,35 @@ fn step_sh(
         |col| if col < 3 { lr_dc } else { lr_rest },
         &cfg.adam,
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn alpha_image_recomposites_over_a_new_background() {
+        // rgb, alpha and the old background per pixel; composite by the definition.
+        let rgb = [[0.2f32, 0.4, 0.6], [0.9, 0.1, 0.5], [0.3, 0.3, 0.3]];
+        let a = [1.0f32, 0.25, 0.0];
+        let (old, new) = ([1.0f32, 1.0, 1.0], [0.1f32, 0.7, 0.3]);
+        let over = |bg: [f32; 3]| -> Vec<f32> {
+            (0..3)
+                .flat_map(|p| (0..3).map(move |c| rgb[p][c] * a[p] + (1.0 - a[p]) * bg[c]))
+                .collect()
+        };
+        let image = fewview_scene::Image::from_vec(3, 1, 3, over(old));
+        let alpha = fewview_scene::Image::from_vec(3, 1, 1, a.to_vec());
+        let device = Device::flex();
+        let got: Vec<f32> = AlphaImage::new(&image, &alpha, old)
+            .unwrap()
+            .over(new, &device)
+            .into_data()
+            .to_vec()
+            .unwrap();
+        for (g, e) in got.iter().zip(over(new)) {
+            assert!((g - e).abs() < 1e-6, "{got:?}");
+        }
+        assert!(AlphaImage::new(&image, &image, old).is_none());
+    }
 }
