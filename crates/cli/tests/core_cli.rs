@@ -312,3 +312,41 @@ fn bad_inputs_give_one_line_errors() {
         &["--init sphere"],
     );
 }
+
+#[test]
+fn surface_runs_on_the_built_in_analytic_scene_without_a_dataset() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("sdf");
+    let out = fewview(&[
+        "surface",
+        "--synthetic",
+        "--iterations",
+        "2",
+        "--mesh-resolution",
+        "32",
+        "--eval-views",
+        "1",
+        "--eval-scale",
+        "4",
+        "--out",
+        s(&run),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let metrics: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("metrics.json")).unwrap()).unwrap();
+    // Scored against the scene's exact surface.
+    let relative = metrics["chamfer"]["relative"].as_f64().unwrap();
+    assert!(relative.is_finite() && relative > 0.0, "{relative}");
+    assert!(run.join("mesh.ply").exists());
+
+    // Neither a dataset nor the analytic scene; both.
+    assert_clean_error(&fewview(&["surface", "--iterations", "1"]), &["--data"]);
+    assert_clean_error(
+        &fewview(&["surface", "--synthetic", "--data", s(dir.path())]),
+        &["--synthetic", "--data"],
+    );
+}

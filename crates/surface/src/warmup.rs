@@ -152,26 +152,25 @@ pub fn epipolar_warmup(
             Some("bad input (pose/intrinsics counts, match views or Cauchy scale)".into());
         return (poses.to_vec(), report);
     }
+    let matches = match usable_matches(matches, n, options.min_matches_per_pair) {
+        Ok(m) if m.len() >= unknowns => m,
+        Ok(m) => {
+            report.skipped = Some(format!(
+                "too few matches: {} for {unknowns} unknowns",
+                m.len()
+            ));
+            return (poses.to_vec(), report);
+        }
+        Err(why) => {
+            report.skipped = Some(why);
+            return (poses.to_vec(), report);
+        }
+    };
+    let matches = &matches[..];
     let d0 = distances(poses, intrinsics, matches);
     report.in_front = in_front_fraction(poses, intrinsics, matches);
     report.initial_median_px = median_abs(&d0);
     report.final_median_px = report.initial_median_px;
-    let mut per_pair = vec![0usize; n * n];
-    for m in matches {
-        per_pair[m.view_a.min(m.view_b) * n + m.view_a.max(m.view_b)] += 1;
-    }
-    let fewest = (0..n)
-        .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
-        .map(|(a, b)| per_pair[a * n + b])
-        .min()
-        .unwrap_or(0);
-    if matches.len() < unknowns || fewest < options.min_matches_per_pair {
-        report.skipped = Some(format!(
-            "too few matches: {fewest} for the weakest pair of views (need {})",
-            options.min_matches_per_pair
-        ));
-        return (poses.to_vec(), report);
-    }
     // Two annealing runs, from a wide and from a narrow starting scale. The epipolar
     // constraint cannot tell a relative translation `t` from `−t`, and a wide start can carry a
     // camera over to that mirrored solution (same cost, points behind the cameras); a narrow
@@ -222,6 +221,89 @@ pub fn epipolar_warmup(
     report.in_front = best.in_front;
     report.final_median_px = median_abs(&best.distances);
     (best.poses, report)
+}
+
+/// The matches of the pairs of views that have at least `min_per_pair` of them, or why they
+/// cannot fix the poses. Pairs below the threshold are dropped rather than vetoing the
+/// warm-up: on a ring of views, opposite views share no matches while neighbours share
+/// hundreds. The epipolar constraint fixes the direction of each pair's baseline, not its
+/// length, so what remains must tie every baseline length to the others: the usable pairs must
+/// form triangles (a triangle of known directions has known length ratios) that chain through
+/// shared edges over all views. A plain cycle of four or more views would leave lengths free.
+fn usable_matches(matches: &[Match], n: usize, min_per_pair: usize) -> Result<Vec<Match>, String> {
+    let key = |a: usize, b: usize| a.min(b) * n + a.max(b);
+    let mut per_pair = vec![0usize; n * n];
+    for m in matches {
+        per_pair[key(m.view_a, m.view_b)] += 1;
+    }
+    let usable = |a: usize, b: usize| per_pair[key(a, b)] >= min_per_pair.max(1);
+    let fewest = (0..n)
+        .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
+        .map(|(a, b)| per_pair[key(a, b)])
+        .min()
+        .unwrap_or(0);
+    let rigid = if n == 2 {
+        usable(0, 1)
+    } else {
+        rigid_triangle_chain(n, &usable)
+    };
+    if !rigid {
+        return Err(format!(
+            "too few matches: {fewest} for the weakest pair of views; the pairs with {min_per_pair} or more do not form triangles chained over all views"
+        ));
+    }
+    Ok(matches
+        .iter()
+        .filter(|m| usable(m.view_a, m.view_b))
+        .copied()
+        .collect())
+}
+
+/// Whether the triangles of `edge`-connected views, merged when they share an edge, cover all
+/// `n` views in one group.
+fn rigid_triangle_chain(n: usize, edge: &dyn Fn(usize, usize) -> bool) -> bool {
+    let mut triangles = Vec::new();
+    for a in 0..n {
+        for b in a + 1..n {
+            for c in b + 1..n {
+                if edge(a, b) && edge(b, c) && edge(a, c) {
+                    triangles.push([a, b, c]);
+                }
+            }
+        }
+    }
+    // Grow one group from the first triangle: add any triangle sharing two views with it.
+    let Some(first) = triangles.first() else {
+        return false;
+    };
+    let mut in_group = vec![false; n];
+    for &v in first {
+        in_group[v] = true;
+    }
+    let mut edges = vec![false; n * n];
+    let mark = |t: &[usize; 3], edges: &mut Vec<bool>| {
+        for (x, y) in [(t[0], t[1]), (t[1], t[2]), (t[0], t[2])] {
+            edges[x * n + y] = true;
+        }
+    };
+    mark(first, &mut edges);
+    let mut used = vec![false; triangles.len()];
+    used[0] = true;
+    loop {
+        let next = triangles.iter().enumerate().find(|(k, t)| {
+            !used[*k]
+                && [(t[0], t[1]), (t[1], t[2]), (t[0], t[2])]
+                    .iter()
+                    .any(|&(x, y)| edges[x * n + y])
+        });
+        let Some((k, t)) = next else { break };
+        used[k] = true;
+        for &v in t {
+            in_group[v] = true;
+        }
+        mark(t, &mut edges);
+    }
+    in_group.iter().all(|&g| g)
 }
 
 /// One annealing run's result, as [`epipolar_warmup`] compares them.
@@ -485,5 +567,71 @@ mod tests {
         let (out, report) = epipolar_warmup(&truth, &k, &thin, &WarmupOptions::default());
         assert_eq!(out, truth);
         assert!(report.skipped.unwrap().contains("30"));
+    }
+
+    #[test]
+    fn pairs_without_matches_are_dropped_when_the_rest_hold_the_views_together() {
+        // A ring of six cameras around the cloud; each view is matched with its neighbours and
+        // second neighbours (opposite views see different sides and share nothing).
+        let k = Intrinsics::centered(500.0, 400, 300);
+        let cams: Vec<Camera> = (0..6)
+            .map(|i| {
+                let a = i as f64 * std::f64::consts::TAU / 6.0;
+                let eye = Vector3::new(3.0 * a.cos(), 3.0 * a.sin(), 0.4 + 0.2 * (i % 2) as f64);
+                Camera::look_at(k, eye, Vector3::zeros(), Vector3::z())
+            })
+            .collect();
+        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        let points: Vec<Vector3<f64>> = (0..80)
+            .map(|_| Vector3::from_fn(|_, _| 2.0 * rng.random::<f64>() - 1.0))
+            .collect();
+        let mut matches = Vec::new();
+        for (a, b) in (0..6).flat_map(|a| [(a, (a + 1) % 6), (a, (a + 2) % 6)]) {
+            for p in &points {
+                let (ua, va, _) = cams[a].project(p).unwrap();
+                let (ub, vb, _) = cams[b].project(p).unwrap();
+                matches.push(Match {
+                    view_a: a.min(b),
+                    view_b: a.max(b),
+                    a: if a < b {
+                        [ua as f32, va as f32]
+                    } else {
+                        [ub as f32, vb as f32]
+                    },
+                    b: if a < b {
+                        [ub as f32, vb as f32]
+                    } else {
+                        [ua as f32, va as f32]
+                    },
+                    confidence: 1.0,
+                });
+            }
+        }
+        // A few stray matches between opposite views, below the threshold.
+        matches.extend(matches.clone().iter().take(5).map(|m| Match {
+            view_a: 0,
+            view_b: 3,
+            ..*m
+        }));
+        let truth: Vec<Se3> = cams.iter().map(|c| c.world_to_camera).collect();
+        let noisy = perturb_poses(&truth, 0.05, 5);
+        let (r0, t0) = errors(&noisy, &truth);
+        let (refined, report) =
+            epipolar_warmup(&noisy, &vec![k; 6], &matches, &WarmupOptions::default());
+        let (r1, t1) = errors(&refined, &truth);
+        assert!(report.skipped.is_none(), "{report:?}");
+        assert!(
+            r1 < 1e-3 * r0.max(1.0) && t1 < 1e-2 * t0,
+            "{r0}° → {r1}°, t×100 {t0} → {t1}; {report:?}"
+        );
+        // Neighbours only: a cycle of six baselines whose lengths the directions do not fix.
+        let open: Vec<Match> = matches
+            .iter()
+            .filter(|m| m.view_b - m.view_a == 1 || m.view_b - m.view_a == 5)
+            .copied()
+            .collect();
+        let (out, report) = epipolar_warmup(&noisy, &vec![k; 6], &open, &WarmupOptions::default());
+        assert_eq!(out, noisy);
+        assert!(report.skipped.is_some());
     }
 }

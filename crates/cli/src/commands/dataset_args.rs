@@ -1,6 +1,6 @@
 //! Flags shared by the commands that read a dataset.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
@@ -22,8 +22,9 @@ pub struct DatasetArgs {
     /// Dataset folder: LLFF (`poses_bounds.npy` + `images_N/`), NeRF-synthetic
     /// (`transforms_train.json`), nerfstudio (`transforms.json`), IDR/NeuS DTU
     /// (`cameras_sphere.npz` + `image/` + `mask/`) or COLMAP (`sparse/0` + `images/`).
-    #[arg(long, value_name = "DIR")]
-    pub data: PathBuf,
+    /// Required (an `Option` only so that `surface --synthetic` can go without it).
+    #[arg(long, value_name = "DIR", required = true)]
+    pub data: Option<PathBuf>,
     /// Force the format instead of detecting it: llff, blender, nerfstudio, dtu, colmap.
     #[arg(long, value_name = "NAME")]
     pub format: Option<DatasetFormat>,
@@ -58,9 +59,17 @@ impl DatasetArgs {
         }
     }
 
+    /// The `--data` folder.
+    pub fn folder(&self) -> anyhow::Result<&Path> {
+        self.data
+            .as_deref()
+            .ok_or_else(|| anyhow::anyhow!("give --data DIR"))
+    }
+
     pub fn load(&self) -> anyhow::Result<Dataset> {
-        let ds = load_dataset(&self.data, &self.load_options())
-            .with_context(|| format!("cannot load dataset {}", self.data.display()))?;
+        let folder = self.folder()?;
+        let ds = load_dataset(folder, &self.load_options())
+            .with_context(|| format!("cannot load dataset {}", folder.display()))?;
         Ok(ds)
     }
 }

@@ -27,9 +27,10 @@ use super::progress;
 /// Without `--data`, `--synthetic` runs on the built-in analytic SDF scene and scores the mesh
 /// against its exact surface.
 #[derive(Debug, ClapArgs)]
+#[command(mut_arg("data", |a| a.required(false)))]
 pub struct Args {
     #[command(flatten)]
-    pub dataset: Option<DatasetArgs>,
+    pub dataset: DatasetArgs,
     /// Use the built-in sphere-traced analytic scene instead of `--data`.
     #[arg(long)]
     pub synthetic: bool,
@@ -244,6 +245,9 @@ impl Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.synthetic && args.dataset.data.is_some() {
+        bail!("give either --data DIR or --synthetic, not both");
+    }
     let (ds, truth, name, idr, reference) = if args.synthetic {
         let opts = SdfSceneOptions {
             width: 320,
@@ -258,11 +262,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let reference = fewview_surface::sdf_scene::surface_mesh(256)?;
         (ds, None, "synthetic".to_string(), false, Some(reference))
     } else {
-        let Some(d) = &args.dataset else {
+        let d = &args.dataset;
+        let Some(folder) = d.data.as_deref() else {
             bail!("give --data DIR (or --synthetic)");
         };
         let ds = d.load()?;
-        let is_dtu = fewview_scene::detect_format(&d.data).ok() == Some(DatasetFormat::DtuIdr)
+        let is_dtu = fewview_scene::detect_format(folder).ok() == Some(DatasetFormat::DtuIdr)
             || d.format == Some(DatasetFormat::DtuIdr);
         // With other starting poses, the ground truth is the same folder's default cameras.
         let truth = if args.initial_poses == "loaded" && d.cameras_file.is_some() {
@@ -279,8 +284,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ),
             None => None,
         };
-        let name = d
-            .data
+        let name = folder
             .file_name()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "run".into());

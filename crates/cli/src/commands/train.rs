@@ -38,7 +38,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let name = args
             .dataset
             .data
-            .file_name()
+            .as_deref()
+            .and_then(|d| d.file_name())
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "run".into());
         PathBuf::from("runs").join(name)

@@ -478,7 +478,7 @@ mod tests {
             .unwrap()
             .over(new, &device)
             .into_data()
-            .to_vec()
+            .try_to_vec::<f32>()
             .unwrap();
         for (g, e) in got.iter().zip(over(new)) {
             assert!((g - e).abs() < 1e-6, "{got:?}");
