@@ -12,6 +12,22 @@ fn fewview(args: &[&str]) -> Output {
         .expect("run fewview")
 }
 
+/// Runs `fewview` and asserts it succeeded (stderr in the message otherwise).
+fn fewview_ok(args: &[&str]) -> Output {
+    let out = fewview(args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// A run directory's `metrics.json`.
+fn metrics(run: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(run.join("metrics.json")).unwrap()).unwrap()
+}
+
 /// Writes a `.npy` file of f64 values (NumPy format 1.0, C order).
 fn write_npy(path: &Path, rows: usize, cols: usize, values: &[f64]) {
     let mut header =
@@ -103,7 +119,7 @@ fn train_then_eval_and_render_agree_with_the_run() {
     let dir = tempfile::tempdir().unwrap();
     let data = write_llff(&dir.path().join("scene"), |_, _| {});
     let run = dir.path().join("run");
-    let out = fewview(&[
+    let out = fewview_ok(&[
         "train",
         "--data",
         s(&data),
@@ -114,22 +130,16 @@ fn train_then_eval_and_render_agree_with_the_run() {
         "--out",
         s(&run),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("held-out PSNR"), "{stdout}");
-    let metrics: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(run.join("metrics.json")).unwrap()).unwrap();
+    let metrics = metrics(&run);
     let psnr = metrics["test"]["mean_psnr"].as_f64().unwrap();
     assert!(psnr.is_finite());
 
     // `eval` of the written PLY reproduces the run's held-out scores exactly.
     let json = dir.path().join("eval.json");
     let ply = run.join("point_cloud.ply");
-    let out = fewview(&[
+    fewview_ok(&[
         "eval",
         "--ply",
         s(&ply),
@@ -138,18 +148,13 @@ fn train_then_eval_and_render_agree_with_the_run() {
         "--json",
         s(&json),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let eval: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     assert_eq!(eval["mean_psnr"].as_f64().unwrap(), psnr);
 
     // `render` of the PLY gives the same images the run saved.
     let renders = dir.path().join("renders");
     let video = dir.path().join("path.gif");
-    let out = fewview(&[
+    fewview_ok(&[
         "render",
         "--ply",
         s(&ply),
@@ -163,11 +168,6 @@ fn train_then_eval_and_render_agree_with_the_run() {
         "--frames-per-segment",
         "3",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     for entry in std::fs::read_dir(run.join("renders/test")).unwrap() {
         let p = entry.unwrap().path();
         let a = fewview_scene::Image::load(&p).unwrap();
@@ -317,7 +317,7 @@ fn bad_inputs_give_one_line_errors() {
 fn surface_runs_on_the_built_in_analytic_scene_without_a_dataset() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("sdf");
-    let out = fewview(&[
+    fewview_ok(&[
         "surface",
         "--synthetic",
         "--iterations",
@@ -331,13 +331,7 @@ fn surface_runs_on_the_built_in_analytic_scene_without_a_dataset() {
         "--out",
         s(&run),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let metrics: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(run.join("metrics.json")).unwrap()).unwrap();
+    let metrics = metrics(&run);
     // Scored against the scene's exact surface.
     let relative = metrics["chamfer"]["relative"].as_f64().unwrap();
     assert!(relative.is_finite() && relative > 0.0, "{relative}");
