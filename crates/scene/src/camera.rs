@@ -261,6 +261,27 @@ impl Camera {
     }
 }
 
+/// The point closest, in least squares, to the optical axes of world-to-camera `poses`: where
+/// the cameras look. Falls back to the mean camera centre when the axes are all parallel.
+pub fn axes_meeting_point(poses: &[Se3]) -> Vector3<f64> {
+    let mut a = Matrix3::zeros();
+    let mut b = Vector3::zeros();
+    for p in poses {
+        let d: Vector3<f64> = p.rotation.row(2).transpose();
+        let c = -(p.rotation.transpose() * p.translation);
+        let proj = Matrix3::identity() - d * d.transpose();
+        a += proj;
+        b += proj * c;
+    }
+    a.try_inverse().map(|inv| inv * b).unwrap_or_else(|| {
+        poses
+            .iter()
+            .map(|p| -(p.rotation.transpose() * p.translation))
+            .sum::<Vector3<f64>>()
+            / poses.len().max(1) as f64
+    })
+}
+
 /// A smooth path visiting `keys` in order, `frames_per_segment` frames from each key to the next
 /// (SLERP rotations, linear centres). The last key is included once at the end.
 pub fn camera_path(keys: &[Camera], frames_per_segment: usize) -> Vec<Camera> {

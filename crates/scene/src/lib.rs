@@ -30,7 +30,7 @@ pub mod synthetic;
 pub mod transforms;
 pub mod video;
 
-pub use camera::{Camera, Intrinsics, Se3, camera_path};
+pub use camera::{Camera, Intrinsics, Se3, axes_meeting_point, camera_path};
 pub use dataset::{Dataset, PointCloud, View};
 pub use error::SceneError;
 pub use image::Image;

@@ -15,7 +15,7 @@ use std::time::Instant;
 
 use burn::tensor::Device;
 use fewview_scene::{Camera, Dataset, Image, SceneError};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::eval::{EvalReport, evaluate, render_model};
@@ -164,17 +164,8 @@ pub fn load_checkpoint(path: &Path) -> Result<(TrainConfig, TrainState), Pipelin
 
 /// The point closest (least squares) to every camera's optical axis: where the cameras look.
 pub fn look_at_point(cameras: &[&Camera]) -> Vector3<f64> {
-    let mut a = Matrix3::zeros();
-    let mut b = Vector3::zeros();
-    for c in cameras {
-        let d = c.forward();
-        let p = Matrix3::identity() - d * d.transpose();
-        a += p;
-        b += p * c.center();
-    }
-    a.try_inverse().map(|inv| inv * b).unwrap_or_else(|| {
-        cameras.iter().map(|c| c.center()).sum::<Vector3<f64>>() / cameras.len().max(1) as f64
-    })
+    let poses: Vec<fewview_scene::Se3> = cameras.iter().map(|c| c.world_to_camera).collect();
+    fewview_scene::axes_meeting_point(&poses)
 }
 
 /// The default run length of `fewview train` on `ds`: 1000 iterations on forward-facing scenes
