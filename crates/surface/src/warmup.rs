@@ -308,36 +308,27 @@ fn rigid_triangle_chain(n: usize, edge: &dyn Fn(usize, usize) -> bool) -> bool {
             }
         }
     }
-    // Grow one group from the first triangle: add any triangle sharing two views with it.
-    let Some(first) = triangles.first() else {
-        return false;
-    };
+    (0..triangles.len()).any(|start| edge_chained_group_covers_all(n, &triangles, start))
+}
+
+/// Whether the triangles reachable from `triangles[start]` through shared edges cover all `n`
+/// views.
+fn edge_chained_group_covers_all(n: usize, triangles: &[[usize; 3]], start: usize) -> bool {
+    let sides = |t: &[usize; 3]| [(t[0], t[1]), (t[1], t[2]), (t[0], t[2])];
     let mut in_group = vec![false; n];
-    for &v in first {
-        in_group[v] = true;
-    }
     let mut edges = vec![false; n * n];
-    let mark = |t: &[usize; 3], edges: &mut Vec<bool>| {
-        for (x, y) in [(t[0], t[1]), (t[1], t[2]), (t[0], t[2])] {
-            edges[x * n + y] = true;
-        }
-    };
-    mark(first, &mut edges);
     let mut used = vec![false; triangles.len()];
-    used[0] = true;
-    loop {
-        let next = triangles.iter().enumerate().find(|(k, t)| {
-            !used[*k]
-                && [(t[0], t[1]), (t[1], t[2]), (t[0], t[2])]
-                    .iter()
-                    .any(|&(x, y)| edges[x * n + y])
-        });
-        let Some((k, t)) = next else { break };
+    let mut next = Some(start);
+    while let Some(k) = next {
         used[k] = true;
-        for &v in t {
+        for &v in &triangles[k] {
             in_group[v] = true;
         }
-        mark(t, &mut edges);
+        for (x, y) in sides(&triangles[k]) {
+            edges[x * n + y] = true;
+        }
+        next = (0..triangles.len())
+            .find(|&k| !used[k] && sides(&triangles[k]).iter().any(|&(x, y)| edges[x * n + y]));
     }
     in_group.iter().all(|&g| g)
 }
@@ -607,6 +598,31 @@ mod tests {
         );
         assert_eq!(in_front_fraction(&truth, &k, &matches), 1.0);
         assert_eq!(in_front_fraction(&mirrored, &k, &matches), 0.0);
+    }
+
+    #[test]
+    fn triangles_must_share_edges_not_just_views() {
+        let graph = |pairs: &'static [(usize, usize)]| {
+            move |a: usize, b: usize| pairs.contains(&(a.min(b), a.max(b)))
+        };
+        // Triangles 034, 134, 234 chained through edge 34, plus 012: rigid.
+        let chained: &[(usize, usize)] = &[
+            (0, 1),
+            (1, 2),
+            (0, 2),
+            (0, 3),
+            (0, 4),
+            (1, 3),
+            (1, 4),
+            (2, 3),
+            (2, 4),
+            (3, 4),
+        ];
+        assert!(rigid_triangle_chain(5, &graph(chained)));
+        // A bow tie: triangles 012 and 234 meet at view 2 only, so the scale of one against
+        // the other is free.
+        let bow_tie: &[(usize, usize)] = &[(0, 1), (1, 2), (0, 2), (2, 3), (2, 4), (3, 4)];
+        assert!(!rigid_triangle_chain(5, &graph(bow_tie)));
     }
 
     #[test]
