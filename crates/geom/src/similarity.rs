@@ -42,6 +42,14 @@ impl Similarity {
     }
 
     /// Applies to `f32` points.
+    /// A world-to-camera pose of the source world as a pose of the mapped world: the camera
+    /// centre is mapped, its axes rotated (pinhole projection is unchanged by the scale).
+    pub fn apply_to_pose(&self, world_to_camera: &fewview_scene::Se3) -> fewview_scene::Se3 {
+        let c2w = world_to_camera.inverse();
+        fewview_scene::Se3::new(self.rotation * c2w.rotation, self.apply(&c2w.translation))
+            .inverse()
+    }
+
     pub fn apply_points(&self, pts: &[[f32; 3]]) -> Vec<[f32; 3]> {
         pts.iter()
             .map(|p| crate::mesh::f3(&self.apply(&crate::mesh::v3(p))))

@@ -323,11 +323,10 @@ pub fn write_idr_cameras(
 /// The cameras of `gt` mapped into the reconstruction's world by the inverse of the Alg. 1
 /// alignment `x_gt = s R x_est + t`.
 pub fn camera_in_estimate_frame(gt: &Camera, alignment: &Similarity) -> Camera {
-    let inv = alignment.inverse();
-    let c2w = gt.world_to_camera.inverse();
-    let r = inv.rotation * c2w.rotation;
-    let c = inv.apply(&c2w.translation);
-    Camera::new(gt.intrinsics, Se3::new(r, c).inverse())
+    Camera::new(
+        gt.intrinsics,
+        alignment.inverse().apply_to_pose(&gt.world_to_camera),
+    )
 }
 
 /// Runs everything and writes the run directory. `resume` continues from `checkpoint.bin`

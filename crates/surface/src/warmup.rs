@@ -21,13 +21,10 @@
 //! all cameras) are left where they are. Jacobians by central differences (18 unknowns for
 //! three views; a few hundred residuals).
 
-use fewview_scene::{Intrinsics, Se3};
-use nalgebra::{DMatrix, DVector};
-use serde::{Deserialize, Serialize};
-
 use fewview_geom::similarity::umeyama;
-use fewview_scene::axes_meeting_point;
-use nalgebra::Vector3;
+use fewview_scene::{Intrinsics, Se3, axes_meeting_point};
+use nalgebra::{DMatrix, DVector, Vector3};
+use serde::{Deserialize, Serialize};
 
 use crate::matching::fundamental::sampson_signed;
 use crate::matching::{Match, fundamental_from_cameras};
@@ -250,13 +247,7 @@ fn into_frame_of(refined: &[Se3], reference: &[Se3]) -> Vec<Se3> {
     let Ok(sim) = umeyama(&landmarks(refined), &landmarks(reference), true) else {
         return refined.to_vec();
     };
-    refined
-        .iter()
-        .map(|p| {
-            let c2w = p.inverse();
-            Se3::new(sim.rotation * c2w.rotation, sim.apply(&c2w.translation)).inverse()
-        })
-        .collect()
+    refined.iter().map(|p| sim.apply_to_pose(p)).collect()
 }
 
 /// The matches of the pairs of views that have at least `min_per_pair` of them, or why they
