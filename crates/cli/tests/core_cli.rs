@@ -343,4 +343,17 @@ fn surface_runs_on_the_built_in_analytic_scene_without_a_dataset() {
         &fewview(&["surface", "--synthetic", "--data", s(dir.path())]),
         &["--synthetic", "--data"],
     );
+    // The matcher's images must be the training images at an integer multiple of their size.
+    assert_clean_error(
+        &fewview(&[
+            "surface",
+            "--data",
+            s(dir.path()),
+            "--downscale",
+            "2",
+            "--match-downscale",
+            "3",
+        ]),
+        &["--match-downscale 3", "--downscale 2"],
+    );
 }

@@ -4,7 +4,9 @@
 
 use fewview_scene::Dataset;
 use fewview_surface::checkpoint;
-use fewview_surface::pipeline::{InitialPoses, RunConfig, RunReport, prepare, run};
+use fewview_surface::pipeline::{
+    InitialPoses, RunConfig, RunInputs, RunReport, prepare, prepare_with_matching, run,
+};
 use fewview_surface::sdf_scene::{SdfSceneOptions, sdf_dataset, surface_mesh};
 use fewview_surface::train::Trainer;
 
@@ -35,6 +37,56 @@ fn tiny_config(iterations: usize) -> RunConfig {
 }
 
 fn silent(_: fewview_surface::pipeline::Event) {}
+
+fn inputs<'a>(ds: &'a Dataset, reference: Option<&'a fewview_geom::Mesh>) -> RunInputs<'a> {
+    RunInputs {
+        dataset: ds,
+        truth: None,
+        matching: None,
+        reference,
+    }
+}
+
+/// Matching on the same views at twice the size: the matches the losses get are the fine
+/// matches with their coordinates halved (pixel centres at half-integers map exactly), the
+/// warm-up and precision are computed in the fine pixels, and images that are not an integer
+/// multiple of the training size are refused.
+#[test]
+fn matching_on_finer_images_scales_the_matches_down() {
+    let scene = |w, h| {
+        sdf_dataset(&SdfSceneOptions {
+            width: w,
+            height: h,
+            views: 16,
+            train: vec![0, 1, 2],
+            supersample: 1,
+            ..Default::default()
+        })
+    };
+    let (coarse, fine) = (scene(160, 120), scene(320, 240));
+    let mut config = tiny_config(1);
+    config.pose_warmup = Some(fewview_surface::warmup::WarmupOptions::default());
+    let direct = prepare(&fine, None, &config).unwrap();
+    let via = prepare_with_matching(&coarse, None, Some(&fine), &config).unwrap();
+    assert!(!direct.matches.is_empty());
+    assert_eq!(via.matches.len(), direct.matches.len());
+    for (v, d) in via.matches.iter().zip(&direct.matches) {
+        assert_eq!(v.a, [d.a[0] / 2.0, d.a[1] / 2.0]);
+        assert_eq!(v.b, [d.b[0] / 2.0, d.b[1] / 2.0]);
+        assert_eq!(v.confidence, d.confidence);
+    }
+    assert_eq!(via.match_precision, direct.match_precision);
+    let warmup = via.warmup.as_ref().expect("warm-up report");
+    assert!(warmup.skipped.is_none(), "{:?}", warmup.skipped);
+    assert_eq!(via.start, direct.start);
+    assert_eq!(via.views[0].image.width, 160);
+    let odd = scene(240, 180);
+    let err = prepare_with_matching(&coarse, None, Some(&odd), &config)
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(err.contains("integer multiple"), "{err}");
+}
 
 /// A run interrupted after 4 of 8 iterations and resumed from its checkpoint ends with the
 /// same parameters and poses, bit for bit, as the uninterrupted run; and the pipeline's
@@ -89,12 +141,10 @@ fn resume_reproduces_the_uninterrupted_run() {
 
     // The pipeline's resume path: it continues from the checkpoint of iteration 4.
     let uninterrupted: RunReport = run(
-        &ds,
-        None,
+        inputs(&ds, None),
         &config,
         &dir.path().join("a"),
         false,
-        None,
         &mut silent,
     )
     .unwrap();
@@ -102,7 +152,7 @@ fn resume_reproduces_the_uninterrupted_run() {
     std::fs::create_dir_all(&b).unwrap();
     std::fs::copy(&ckpt, b.join("checkpoint.bin")).unwrap();
     let mut trained_from = None;
-    let resumed_run = run(&ds, None, &config, &b, true, None, &mut |e| {
+    let resumed_run = run(inputs(&ds, None), &config, &b, true, &mut |e| {
         if let fewview_surface::pipeline::Event::Stage("training") = e {
             trained_from = Some(());
         }
@@ -178,12 +228,10 @@ fn analytic_scene_with_noisy_poses_reduced_run() {
     let truth = surface_mesh(192).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let report = run(
-        &ds,
-        None,
+        inputs(&ds, Some(&truth)),
         &config,
         dir.path(),
         false,
-        Some(&truth),
         &mut silent,
     )
     .unwrap();
