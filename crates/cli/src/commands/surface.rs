@@ -71,6 +71,11 @@ pub struct Args {
     /// ones; on DTU scan65 this halves the warm-up's pose error against matching at 400×300.
     #[arg(long, default_value_t = 1, value_name = "K")]
     pub match_downscale: u32,
+    /// Match only pairs of views whose optical axes, under the initial poses, are at most this
+    /// many degrees apart (opposite views share no surface; their "matches" are look-alikes).
+    /// 180 matches every pair, as paper 001 does for its three views.
+    #[arg(long, default_value_t = 80.0, value_name = "DEG")]
+    pub max_pair_angle: f64,
     /// Deviation from paper 001: before the joint optimisation, refine the initial poses on the
     /// correspondences' epipolar constraints alone (robust Sampson distance, Levenberg–
     /// Marquardt). Helps when the classical matcher finds too few matches to pull the poses
@@ -242,6 +247,13 @@ impl Args {
             seed: self.seed,
             ..Default::default()
         });
+        if !(self.max_pair_angle > 0.0 && self.max_pair_angle <= 180.0) {
+            bail!(
+                "--max-pair-angle {}: expected degrees in (0, 180]",
+                self.max_pair_angle
+            );
+        }
+        c.max_pair_angle_deg = self.max_pair_angle;
         c.mesh_resolution = self.mesh_resolution;
         c.eval_views = self.eval_views;
         c.eval_scale = self.eval_scale.max(1);
