@@ -455,6 +455,13 @@ mod tests {
     use nalgebra::Vector3;
     use rand::{RngExt, SeedableRng};
 
+    /// `n` points uniform in the cube `[−1, 1]³`.
+    fn cube_points(rng: &mut rand::rngs::StdRng, n: usize) -> Vec<Vector3<f64>> {
+        (0..n)
+            .map(|_| Vector3::from_fn(|_, _| 2.0 * rng.random::<f64>() - 1.0))
+            .collect()
+    }
+
     /// Three cameras around a cloud of points filling most of their images (as a DTU object
     /// does), the matches its projections.
     fn scene(outliers: f64, noise_px: f64) -> (Vec<Se3>, Vec<Intrinsics>, Vec<Match>) {
@@ -468,9 +475,7 @@ mod tests {
         .map(|c| Camera::look_at(k, *c, Vector3::zeros(), Vector3::z()))
         .collect();
         let mut rng = rand::rngs::StdRng::seed_from_u64(7);
-        let points: Vec<Vector3<f64>> = (0..120)
-            .map(|_| Vector3::from_fn(|_, _| 2.0 * rng.random::<f64>() - 1.0))
-            .collect();
+        let points = cube_points(&mut rng, 120);
         let mut matches = Vec::new();
         for a in 0..3 {
             for b in a + 1..3 {
@@ -652,9 +657,7 @@ mod tests {
             })
             .collect();
         let mut rng = rand::rngs::StdRng::seed_from_u64(11);
-        let points: Vec<Vector3<f64>> = (0..80)
-            .map(|_| Vector3::from_fn(|_, _| 2.0 * rng.random::<f64>() - 1.0))
-            .collect();
+        let points = cube_points(&mut rng, 80);
         let mut matches = Vec::new();
         for (a, b) in (0..6).flat_map(|a| [(a, (a + 1) % 6), (a, (a + 2) % 6)]) {
             for p in &points {

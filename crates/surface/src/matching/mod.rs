@@ -43,10 +43,13 @@ pub trait Matcher: Send + Sync {
 
 /// Matches every unordered pair of views (`view_a < view_b`, indices into `views`).
 pub fn match_all_pairs(matcher: &dyn Matcher, views: &[MatchInput]) -> Vec<Match> {
-    let pairs: Vec<(usize, usize)> = (0..views.len())
-        .flat_map(|i| (i + 1..views.len()).map(move |j| (i, j)))
-        .collect();
+    let pairs: Vec<(usize, usize)> = unordered_pairs(views.len()).collect();
     match_pairs(matcher, views, &pairs)
+}
+
+/// Every pair `(i, j)` with `i < j < n`.
+fn unordered_pairs(n: usize) -> impl Iterator<Item = (usize, usize)> {
+    (0..n).flat_map(move |i| (i + 1..n).map(move |j| (i, j)))
 }
 
 /// Matches the given pairs of views (`(a, b)` with `a < b`, indices into `views`).
@@ -76,15 +79,9 @@ pub fn match_pairs(
 pub fn covisible_pairs(poses: &[Se3], max_angle_deg: f64) -> Vec<(usize, usize)> {
     let axis = |p: &Se3| p.rotation.transpose() * Vector3::z();
     let cos_max = max_angle_deg.to_radians().cos();
-    let mut pairs = Vec::new();
-    for i in 0..poses.len() {
-        for j in i + 1..poses.len() {
-            if axis(&poses[i]).dot(&axis(&poses[j])) >= cos_max {
-                pairs.push((i, j));
-            }
-        }
-    }
-    pairs
+    unordered_pairs(poses.len())
+        .filter(|&(i, j)| axis(&poses[i]).dot(&axis(&poses[j])) >= cos_max)
+        .collect()
 }
 
 /// The fundamental matrix mapping points of `a` to epipolar lines in `b`: `x_bᵀ F x_a = 0`.
