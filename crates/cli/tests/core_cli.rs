@@ -356,4 +356,12 @@ fn surface_runs_on_the_built_in_analytic_scene_without_a_dataset() {
         ]),
         &["--match-downscale 3", "--downscale 2"],
     );
+    assert_clean_error(
+        &fewview(&["surface", "--synthetic", "--match-refine", "lk"]),
+        &["--match-refine", "affine or none"],
+    );
+    // The default run refined its matches, and says so in its configuration.
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["match_refinement"]["half_window"], 10, "{config}");
 }

@@ -27,6 +27,7 @@ use serde::{Deserialize, Serialize};
 use crate::checkpoint;
 use crate::error::{Result, SurfaceError};
 use crate::extract::{MeshOptions, final_mesh, render_view};
+use crate::matching::refine::{AffineRefineOptions, refine_matches};
 use crate::matching::sift::{SiftMatcher, SiftOptions};
 use crate::matching::{
     Match, MatchInput, MatchPrecision, covisible_pairs, epipolar_precision, match_pairs,
@@ -73,6 +74,11 @@ pub struct RunConfig {
     /// every pair, on rings of views it drops the opposite ones.
     #[serde(default = "default_max_pair_angle")]
     pub max_pair_angle_deg: f64,
+    /// Deviation, on by default: refine each match's second end to sub-pixel precision by
+    /// affine Lucas–Kanade ([`refine_matches`]). `None` keeps the matcher's output (the
+    /// behaviour of configurations written before the option existed).
+    #[serde(default)]
+    pub match_refinement: Option<AffineRefineOptions>,
 }
 
 fn default_max_pair_angle() -> f64 {
@@ -92,6 +98,7 @@ impl Default for RunConfig {
             idr_output: false,
             pose_warmup: None,
             max_pair_angle_deg: default_max_pair_angle(),
+            match_refinement: Some(AffineRefineOptions::default()),
         }
     }
 }
@@ -187,6 +194,7 @@ pub fn prepare_with_matching(
                 &ground_truth,
                 config.train.use_masks,
                 opts,
+                config.match_refinement.as_ref(),
             );
             (m, Some(p))
         }
@@ -247,7 +255,8 @@ fn matching_scale(dataset: &Dataset, matching: &Dataset) -> Result<usize> {
 }
 
 /// SIFT correspondences between the given pairs of training views of `dataset` (in its
-/// pixels) and their precision against the ground-truth poses.
+/// pixels), refined when `refinement` is given, and their precision against the ground-truth
+/// poses.
 fn correspondences(
     dataset: &Dataset,
     pairs: &[(usize, usize)],
@@ -255,6 +264,7 @@ fn correspondences(
     ground_truth: &[Se3],
     use_masks: bool,
     options: &SiftOptions,
+    refinement: Option<&AffineRefineOptions>,
 ) -> (Vec<Match>, MatchPrecision) {
     let inputs: Vec<MatchInput> = dataset
         .train_views()
@@ -270,6 +280,13 @@ fn correspondences(
         &inputs,
         pairs,
     );
+    let matches = match refinement {
+        Some(o) => {
+            let images: Vec<&Image> = inputs.iter().map(|i| i.image).collect();
+            refine_matches(&images, &matches, o)
+        }
+        None => matches,
+    };
     let cams: Vec<Camera> = intrinsics
         .iter()
         .zip(ground_truth)

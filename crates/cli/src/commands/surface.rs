@@ -7,6 +7,7 @@ use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
 use fewview_scene::DatasetFormat;
 use fewview_surface::field::{EncoderKind, FdScheme};
+use fewview_surface::matching::refine::AffineRefineOptions;
 use fewview_surface::matching::sift::SiftOptions;
 use fewview_surface::pipeline::{
     Event, InitialPoses, RunConfig, RunInputs, RunReport, run as run_pipeline,
@@ -76,6 +77,11 @@ pub struct Args {
     /// 180 matches every pair, as paper 001 does for its three views.
     #[arg(long, default_value_t = 80.0, value_name = "DEG")]
     pub max_pair_angle: f64,
+    /// Sub-pixel refinement of the matches: `affine` (default; a deviation from paper 001:
+    /// affine Lucas–Kanade moves each match's second end to where the two windows agree,
+    /// dropping matches whose windows do not correlate) or `none` (the matcher's output).
+    #[arg(long, default_value = "affine", value_name = "affine|none")]
+    pub match_refine: String,
     /// Deviation from paper 001: before the joint optimisation, refine the initial poses on the
     /// correspondences' epipolar constraints alone (robust Sampson distance, Levenberg–
     /// Marquardt). Helps when the classical matcher finds too few matches to pull the poses
@@ -254,6 +260,11 @@ impl Args {
             );
         }
         c.max_pair_angle_deg = self.max_pair_angle;
+        c.match_refinement = match self.match_refine.as_str() {
+            "affine" => Some(AffineRefineOptions::default()),
+            "none" => None,
+            other => bail!("--match-refine {other:?}: expected affine or none"),
+        };
         c.mesh_resolution = self.mesh_resolution;
         c.eval_views = self.eval_views;
         c.eval_scale = self.eval_scale.max(1);

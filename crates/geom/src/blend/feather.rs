@@ -6,7 +6,7 @@ use super::{Weights, check_images, check_mask};
 use crate::error::{GeomError, Result};
 
 /// Separable Gaussian blur of a `w × h` plane (mirror boundary), kernel radius `⌈3σ⌉`.
-pub(crate) fn gaussian_blur(plane: &[f32], w: usize, h: usize, sigma: f32) -> Vec<f32> {
+pub fn gaussian_blur(plane: &[f32], w: usize, h: usize, sigma: f32) -> Vec<f32> {
     if sigma <= 0.0 {
         return plane.to_vec();
     }

@@ -11,7 +11,7 @@ mod poisson;
 mod pyramid;
 pub mod solver;
 
-pub use feather::gaussian_feather_blend;
+pub use feather::{gaussian_blur, gaussian_feather_blend};
 pub use poisson::{
     PoissonOptions, PoissonStats, occlusion_aware_poisson, occlusion_aware_poisson_with,
     overlap_size, poisson_blend,

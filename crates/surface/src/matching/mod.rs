@@ -7,6 +7,7 @@
 //! [`epipolar_precision`] scores matches against ground-truth cameras.
 
 pub mod fundamental;
+pub mod refine;
 pub mod sift;
 
 use fewview_scene::{Camera, Image, Se3};
