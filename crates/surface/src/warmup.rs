@@ -48,6 +48,25 @@ pub struct WarmupOptions {
     /// quarter of them wrong, the poses overfit the outliers (measured on the wide DTU triplet,
     /// 17 SIFT matches per pair: 12° → 24° of rotation error).
     pub min_matches_per_pair: usize,
+    /// Which graphs of matched pairs the warm-up runs on ([`Connectivity`]).
+    #[serde(default)]
+    pub connectivity: Connectivity,
+}
+
+/// What the pairs of views with enough matches must form for the warm-up to run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Connectivity {
+    /// Triangles chained through shared edges over all views: every baseline's length is tied
+    /// to the others, so the whole camera set is fixed up to a similarity.
+    #[default]
+    RigidTriangles,
+    /// Any connected graph (a chain of three views, a ring). The relative rotations and the
+    /// baseline directions are still fixed, but the lengths of baselines outside triangles are
+    /// not: they keep the initial poses' values (the damped solver does not move along
+    /// directions the cost cannot see) for the joint optimisation to correct. On the wide DTU
+    /// triplet, whose outer pair shares almost no matches, this is the only way to run.
+    Connected,
 }
 
 impl Default for WarmupOptions {
@@ -58,6 +77,7 @@ impl Default for WarmupOptions {
             max_iterations: 50,
             tolerance: 1e-10,
             min_matches_per_pair: 40,
+            connectivity: Connectivity::RigidTriangles,
         }
     }
 }
@@ -153,7 +173,12 @@ pub fn epipolar_warmup(
             Some("bad input (pose/intrinsics counts, match views or Cauchy scale)".into());
         return (poses.to_vec(), report);
     }
-    let matches = match usable_matches(matches, n, options.min_matches_per_pair) {
+    let matches = match usable_matches(
+        matches,
+        n,
+        options.min_matches_per_pair,
+        options.connectivity,
+    ) {
         Ok(m) if m.len() >= unknowns => m,
         Ok(m) => {
             report.skipped = Some(format!(
@@ -257,7 +282,13 @@ fn into_frame_of(refined: &[Se3], reference: &[Se3]) -> Vec<Se3> {
 /// length, so what remains must tie every baseline length to the others: the usable pairs must
 /// form triangles (a triangle of known directions has known length ratios) that chain through
 /// shared edges over all views. A plain cycle of four or more views would leave lengths free.
-fn usable_matches(matches: &[Match], n: usize, min_per_pair: usize) -> Result<Vec<Match>, String> {
+/// With [`Connectivity::Connected`] it is enough that they connect all views.
+fn usable_matches(
+    matches: &[Match],
+    n: usize,
+    min_per_pair: usize,
+    connectivity: Connectivity,
+) -> Result<Vec<Match>, String> {
     let key = |a: usize, b: usize| a.min(b) * n + a.max(b);
     let mut per_pair = vec![0usize; n * n];
     for m in matches {
@@ -269,14 +300,17 @@ fn usable_matches(matches: &[Match], n: usize, min_per_pair: usize) -> Result<Ve
         .map(|(a, b)| per_pair[key(a, b)])
         .min()
         .unwrap_or(0);
-    let rigid = if n == 2 {
-        usable(0, 1)
-    } else {
-        rigid_triangle_chain(n, &usable)
+    let (held, what) = match connectivity {
+        _ if n == 2 => (usable(0, 1), "join the two views"),
+        Connectivity::RigidTriangles => (
+            rigid_triangle_chain(n, &usable),
+            "form triangles chained over all views",
+        ),
+        Connectivity::Connected => (connects_all(n, &usable), "connect all views"),
     };
-    if !rigid {
+    if !held {
         return Err(format!(
-            "too few matches: {fewest} for the weakest pair of views; the pairs with {min_per_pair} or more do not form triangles chained over all views"
+            "too few matches: {fewest} for the weakest pair of views; the pairs with {min_per_pair} or more do not {what}"
         ));
     }
     Ok(matches
@@ -284,6 +318,22 @@ fn usable_matches(matches: &[Match], n: usize, min_per_pair: usize) -> Result<Ve
         .filter(|m| usable(m.view_a, m.view_b))
         .copied()
         .collect())
+}
+
+/// Whether the graph of `edge`s reaches every one of the `n` views from view 0.
+fn connects_all(n: usize, edge: &dyn Fn(usize, usize) -> bool) -> bool {
+    let mut reached = vec![false; n];
+    let mut stack = vec![0];
+    reached[0] = true;
+    while let Some(a) = stack.pop() {
+        for b in 0..n {
+            if !reached[b] && edge(a.min(b), a.max(b)) && a != b {
+                reached[b] = true;
+                stack.push(b);
+            }
+        }
+    }
+    reached.iter().all(|&r| r)
 }
 
 /// Whether the triangles of `edge`-connected views, merged when they share an edge, cover all
@@ -450,6 +500,7 @@ fn anneal(
 mod tests {
     use super::*;
     use crate::pose::perturb_poses;
+    use fewview_geom::similarity::rotation_angle_deg;
     use fewview_metrics::pose_error::{PoseErrorOptions, pose_error_pairwise};
     use fewview_scene::Camera;
     use nalgebra::Vector3;
@@ -706,5 +757,36 @@ mod tests {
         let (out, report) = epipolar_warmup(&noisy, &vec![k; 6], &open, &WarmupOptions::default());
         assert_eq!(out, noisy);
         assert!(report.skipped.is_some());
+        // Asked to run on any connected graph it does, and the relative rotations, which the
+        // epipolar constraints fix on every edge, come out right even so.
+        let connected = WarmupOptions {
+            connectivity: Connectivity::Connected,
+            ..Default::default()
+        };
+        let (out, report) = epipolar_warmup(&noisy, &vec![k; 6], &open, &connected);
+        assert!(report.skipped.is_none(), "{report:?}");
+        let relative = |p: &[Se3], a: usize, b: usize| p[b].rotation * p[a].rotation.transpose();
+        for a in 0..6 {
+            let b = (a + 1) % 6;
+            let before =
+                rotation_angle_deg(&(relative(&noisy, a, b) * relative(&truth, a, b).transpose()));
+            let after =
+                rotation_angle_deg(&(relative(&out, a, b) * relative(&truth, a, b).transpose()));
+            assert!(
+                after < 1e-3 * before.max(1.0),
+                "views {a}, {b}: {before}° → {after}°"
+            );
+        }
+    }
+
+    #[test]
+    fn a_chain_connects_but_is_not_rigid() {
+        let graph =
+            |edges: &'static [(usize, usize)]| move |a: usize, b: usize| edges.contains(&(a, b));
+        let chain: &[(usize, usize)] = &[(0, 1), (1, 2)];
+        assert!(connects_all(3, &graph(chain)));
+        assert!(!rigid_triangle_chain(3, &graph(chain)));
+        let split: &[(usize, usize)] = &[(0, 1), (2, 3)];
+        assert!(!connects_all(4, &graph(split)));
     }
 }

@@ -13,6 +13,7 @@ use fewview_surface::pipeline::{
     Event, InitialPoses, RunConfig, RunInputs, RunReport, run as run_pipeline,
 };
 use fewview_surface::sdf_scene::{SdfSceneOptions, sdf_dataset};
+use fewview_surface::warmup::{Connectivity, WarmupOptions};
 
 use super::dataset_args::DatasetArgs;
 use super::progress;
@@ -88,6 +89,15 @@ pub struct Args {
     /// back during training.
     #[arg(long)]
     pub pose_warmup: bool,
+    /// The warm-up runs only on the pairs of views with at least this many matches.
+    #[arg(long, default_value_t = 40, value_name = "N")]
+    pub warmup_min_matches: usize,
+    /// What those pairs must form for the warm-up to run: `triangles` (chained triangles, which
+    /// fix every baseline's length; default) or `connected` (any connected graph, e.g. the wide
+    /// DTU triplet's chain 22–25–28: rotations and baseline directions are refined, lengths
+    /// outside triangles keep their initial values).
+    #[arg(long, default_value = "triangles", value_name = "triangles|connected")]
+    pub warmup_connectivity: String,
     /// Deviation from paper 001 (which starts at 0): hold the poses fixed for this fraction of
     /// the iterations while the field forms, then refine them.
     #[arg(long, default_value_t = 0.0, value_name = "FRACTION")]
@@ -245,9 +255,16 @@ impl Args {
             "loaded" => InitialPoses::AsLoaded,
             other => bail!("--initial-poses {other:?}: expected noisy or loaded"),
         };
-        c.pose_warmup = self
-            .pose_warmup
-            .then(fewview_surface::warmup::WarmupOptions::default);
+        let connectivity = match self.warmup_connectivity.as_str() {
+            "triangles" => Connectivity::RigidTriangles,
+            "connected" => Connectivity::Connected,
+            other => bail!("--warmup-connectivity {other:?}: expected triangles or connected"),
+        };
+        c.pose_warmup = self.pose_warmup.then(|| WarmupOptions {
+            min_matches_per_pair: self.warmup_min_matches,
+            connectivity,
+            ..Default::default()
+        });
         let needs_matches = self.pose_warmup || !(self.no_matching && self.no_ncc && self.no_gc);
         c.matcher = needs_matches.then(|| SiftOptions {
             seed: self.seed,
