@@ -37,7 +37,8 @@ pub enum Command {
     Register(register::Args),
     Chamfer(chamfer::Args),
     PoseError(pose_error::Args),
-    Surface(surface::Args),
+    // Boxed: the surface command has many flags, and clippy bounds the size difference of variants.
+    Surface(Box<surface::Args>),
     /// Temporal-coherence metrics of a rendered frame sequence against ground truth.
     EvalVideo(eval_video::Args),
     /// Pairwise 2AFC user study: serve the page, analyse the answers.
@@ -58,7 +59,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Register(a) => register::run(a),
         Command::Chamfer(a) => chamfer::run(a),
         Command::PoseError(a) => pose_error::run(a),
-        Command::Surface(a) => surface::run(a),
+        Command::Surface(a) => surface::run(*a),
         Command::EvalVideo(args) => eval_video::run(args),
         Command::Study(args) => study::run(args),
     }
