@@ -162,4 +162,26 @@ fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
     let prep = prepare_with_matching(&wide, None, Some(&wide_fine), &config).unwrap();
     assert!(prep.warmup.unwrap().skipped.is_some());
     assert_eq!(prep.start, prep.initial);
+    // On the chain 22–25–28 (29 and 38 refined matches; `--warmup-connectivity connected
+    // --warmup-min-matches 25`) it runs. Seed 0 measured 12.39° → 0.30°; seeds 1 and 2 reach
+    // only 3.4° and 1.6° (see the crate README), so only seed 0 is asserted.
+    let chain = RunConfig {
+        pose_warmup: Some(WarmupOptions {
+            min_matches_per_pair: 25,
+            connectivity: fewview_surface::warmup::Connectivity::Connected,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let prep = prepare_with_matching(&wide, None, Some(&wide_fine), &chain).unwrap();
+    assert!(prep.warmup.as_ref().unwrap().skipped.is_none());
+    let (before, after) = (
+        error(&prep.initial, &prep.ground_truth),
+        error(&prep.start, &prep.ground_truth),
+    );
+    eprintln!(
+        "wide chain, seed 0: R {:.3}° → {:.3}°",
+        before.rotation_deg, after.rotation_deg
+    );
+    assert!(after.rotation_deg < 1.0, "{before:?} → {after:?}");
 }
