@@ -41,7 +41,6 @@ impl Similarity {
         self.rotation * x * self.scale + self.translation
     }
 
-    /// Applies to `f32` points.
     /// A world-to-camera pose of the source world as a pose of the mapped world: the camera
     /// centre is mapped, its axes rotated (pinhole projection is unchanged by the scale).
     pub fn apply_to_pose(&self, world_to_camera: &fewview_scene::Se3) -> fewview_scene::Se3 {
@@ -50,6 +49,7 @@ impl Similarity {
             .inverse()
     }
 
+    /// Applies to `f32` points.
     pub fn apply_points(&self, pts: &[[f32; 3]]) -> Vec<[f32; 3]> {
         pts.iter()
             .map(|p| crate::mesh::f3(&self.apply(&crate::mesh::v3(p))))

@@ -647,11 +647,13 @@ mod tests {
         assert_eq!(in_front_fraction(&mirrored, &k, &matches), 0.0);
     }
 
+    /// The edge predicate of the graph whose edges are `pairs` (either order).
+    fn graph(pairs: &'static [(usize, usize)]) -> impl Fn(usize, usize) -> bool {
+        move |a, b| pairs.contains(&(a.min(b), a.max(b)))
+    }
+
     #[test]
     fn triangles_must_share_edges_not_just_views() {
-        let graph = |pairs: &'static [(usize, usize)]| {
-            move |a: usize, b: usize| pairs.contains(&(a.min(b), a.max(b)))
-        };
         // Triangles 034, 134, 234 chained through edge 34, plus 012: rigid.
         let chained: &[(usize, usize)] = &[
             (0, 1),
@@ -781,8 +783,6 @@ mod tests {
 
     #[test]
     fn a_chain_connects_but_is_not_rigid() {
-        let graph =
-            |edges: &'static [(usize, usize)]| move |a: usize, b: usize| edges.contains(&(a, b));
         let chain: &[(usize, usize)] = &[(0, 1), (1, 2)];
         assert!(connects_all(3, &graph(chain)));
         assert!(!rigid_triangle_chain(3, &graph(chain)));

@@ -33,6 +33,16 @@ pub struct MatchInput<'a> {
     pub mask: Option<&'a Image>,
 }
 
+/// Grey value of a pixel as the matchers see it: Rec. 601 luminance of RGB(A), or the single
+/// channel.
+fn luminance(pixel: &[f32]) -> f32 {
+    if pixel.len() >= 3 {
+        0.299 * pixel[0] + 0.587 * pixel[1] + 0.114 * pixel[2]
+    } else {
+        pixel[0]
+    }
+}
+
 /// A two-view matcher.
 pub trait Matcher: Send + Sync {
     /// Correspondences between `a` and `b` (`view_a`/`view_b` of the results are 0 and 1).

@@ -29,7 +29,7 @@ use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::Match;
+use super::{Match, luminance};
 
 /// Options of [`refine_matches`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -78,14 +78,7 @@ impl Plane {
     fn new(image: &Image, sigma: f32) -> Self {
         let (w, h) = (image.width, image.height);
         let grey: Vec<f32> = (0..w * h)
-            .map(|i| {
-                let p = image.pixel(i % w, i / w);
-                if p.len() >= 3 {
-                    0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]
-                } else {
-                    p[0]
-                }
-            })
+            .map(|i| luminance(image.pixel(i % w, i / w)))
             .collect();
         let value = gaussian_blur(&grey, w, h, sigma);
         let diff = |lo: usize, hi: usize, step: f32| (value[hi] - value[lo]) / step;

@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::fundamental::ransac_inliers;
-use super::{Match, MatchInput, Matcher};
+use super::{Match, MatchInput, Matcher, luminance};
 
 /// Options of [`SiftMatcher`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -57,12 +57,7 @@ struct Features {
 fn to_gray(image: &Image) -> GrayImage {
     let (w, h) = (image.width, image.height);
     GrayImage::from_fn(w as u32, h as u32, |x, y| {
-        let p = image.pixel(x as usize, y as usize);
-        let g = if p.len() >= 3 {
-            0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]
-        } else {
-            p[0]
-        };
+        let g = luminance(image.pixel(x as usize, y as usize));
         Luma([(g.clamp(0.0, 1.0) * 255.0).round() as u8])
     })
 }
