@@ -405,6 +405,29 @@ fn register_the_bunny_fixture() {
         read_mesh(&out).unwrap().vertices.len() as u64,
         fixture["source_points"].as_u64().unwrap()
     );
+    // The report names ICP's start; `--icp-start ransac` is Alg. 3 as written.
+    let best_start = r["icp"]["start"].as_str().unwrap().to_string();
+    assert!(["ransac", "prealignment"].contains(&best_start.as_str()), "{r}");
+    let (ok, _, err) = fewview(&[
+        "register",
+        "--source",
+        s(&fx.join("source.ply")),
+        "--target",
+        s(&fx.join("target.ply")),
+        "--voxel",
+        "0.008",
+        "--prealign",
+        s(&pre),
+        "--icp-start",
+        "ransac",
+        "--report",
+        s(&report),
+    ]);
+    assert!(ok, "{err}");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(r["icp"]["start"], "ransac", "{r}");
+    assert!(r["ransac"]["fitness"].as_f64().unwrap() > 0.0, "{r}");
 
     // With the local-plane denoising the rotation lands within the 0.5°.
     let args = |radius: &'static str| {

@@ -72,7 +72,12 @@ fn run_fixture(dir: &std::path::Path, denoise: bool, seed: u64) -> ((f64, f64), 
     let (o3d_rot, o3d_disp) = errors(&o3d, &truth, &reference);
     let (pre_rot, pre_disp) = errors(&pre, &truth, &reference);
     let (g_rot, _) = errors(
-        &result.global.transformation.compose(&pre),
+        &result
+            .global
+            .as_ref()
+            .expect("RANSAC result")
+            .transformation
+            .compose(&pre),
         &truth,
         &reference,
     );

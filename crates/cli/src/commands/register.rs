@@ -5,11 +5,22 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::{Args as ClapArgs, ValueEnum};
 use fewview_geom::io::{cameras::read_poses, read_points, write_points};
-use fewview_geom::registration::{DenoiseOptions, IcpMethod, RegistrationOptions, register};
+use fewview_geom::registration::{
+    DenoiseOptions, IcpMethod, IcpStarts, RegistrationOptions, register,
+};
 use fewview_geom::similarity::Similarity;
 use fewview_metrics::pose_error::{PoseErrorOptions, pose_error_pairwise};
 
 use super::geom_common::write_json;
+
+/// Where ICP starts (`--icp-start`).
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum IcpStartArg {
+    /// Alg. 3 as written: from RANSAC's result.
+    Ransac,
+    /// From RANSAC's result and from the pre-alignment; the better fit wins.
+    Best,
+}
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum IcpArg {
@@ -54,6 +65,12 @@ pub struct Args {
     /// Off by default (the paper's Open3D pipeline).
     #[arg(long)]
     pub denoise_radius: Option<f64>,
+    /// `best` (default; a deviation from Alg. 3): run ICP from RANSAC's result and from the
+    /// pre-alignment and keep the better fit (higher fitness, then lower RMSE), so that RANSAC
+    /// failing on a near-symmetric or rough reconstruction cannot undo a good pre-alignment.
+    /// `ransac`: from RANSAC's result only, as the paper.
+    #[arg(long, value_enum, default_value = "best")]
+    pub icp_start: IcpStartArg,
     /// Estimate a scale in point-to-point ICP too.
     #[arg(long)]
     pub with_scaling: bool,
@@ -131,6 +148,10 @@ pub fn run(args: Args) -> Result<()> {
             max_nn: DenoiseOptions::DEFAULT_MAX_NN,
         });
     }
+    options.icp_starts = match args.icp_start {
+        IcpStartArg::Ransac => IcpStarts::Ransac,
+        IcpStartArg::Best => IcpStarts::RansacOrPrealignment,
+    };
     options.ransac.seed = args.seed;
     let result = register(&source, &target, pre.as_ref(), &options).with_context(|| {
         format!(
@@ -149,10 +170,12 @@ pub fn run(args: Args) -> Result<()> {
         "transformation": result.transformation.matrix_rows(),
         "scale": result.transformation.scale,
         "prealignment": result.prealignment.matrix_rows(),
-        "ransac": { "fitness": result.global.evaluation.fitness, "inlier_rmse": result.global.evaluation.inlier_rmse,
-                    "iterations": result.global.iterations, "matches": result.global.matches },
+        "ransac": result.global.as_ref().map(|g| serde_json::json!({
+            "fitness": g.evaluation.fitness, "inlier_rmse": g.evaluation.inlier_rmse,
+            "iterations": g.iterations, "matches": g.matches })),
         "icp": { "fitness": result.refined.evaluation.fitness, "inlier_rmse": result.refined.evaluation.inlier_rmse,
-                 "iterations": result.refined.iterations },
+                 "iterations": result.refined.iterations,
+                 "start": if result.refined_from_ransac { "ransac" } else { "prealignment" } },
         "downsampled": [result.downsampled.0, result.downsampled.1],
     });
     if let Some(p) = &args.report {
