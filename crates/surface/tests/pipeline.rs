@@ -207,8 +207,8 @@ fn checkpoint_of_another_configuration_is_refused() {
 
 /// The analytic scene from noisy poses, a reduced run that fits the CI budget: 6 views at
 /// 160 × 120, σ = 0.05 se(3) noise, 300 iterations. It bounds the Chamfer-L1 of the extracted
-/// mesh to the true surface (after the Alg. 3 registration) at 8 % of the bounding-box
-/// diagonal (measured: 6.6 %) and checks that the translation error drops (measured
+/// mesh to the true surface (after the Alg. 3 registration) at 5 % of the bounding-box
+/// diagonal (measured: 3.8 %, 6.4 % before ICP also started from the pre-alignment) and checks that the translation error drops (measured
 /// 0.277 → 0.212). This is a regression bound, **not** the acceptance figure (≤ 1 %),
 /// which this schedule does not reach (see the crate README).
 #[test]
@@ -253,7 +253,7 @@ fn analytic_scene_with_noisy_poses_reduced_run() {
         report.train_seconds_wall
     );
     assert!(
-        chamfer.relative <= 0.08,
+        chamfer.relative <= 0.05,
         "chamfer {:.4} of the diagonal",
         chamfer.relative
     );
