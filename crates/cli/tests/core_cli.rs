@@ -335,6 +335,9 @@ fn surface_runs_on_the_built_in_analytic_scene_without_a_dataset() {
     // Scored against the scene's exact surface.
     let relative = metrics["chamfer"]["relative"].as_f64().unwrap();
     assert!(relative.is_finite() && relative > 0.0, "{relative}");
+    // And on the part the training views see (all look down at 30°; the underside is hidden).
+    let seen = metrics["chamfer_observed"]["relative"].as_f64().unwrap();
+    assert!(seen.is_finite() && seen > 0.0, "{seen}");
     assert!(run.join("mesh.ply").exists());
 
     // Neither a dataset nor the analytic scene; both.

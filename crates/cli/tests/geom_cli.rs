@@ -407,7 +407,10 @@ fn register_the_bunny_fixture() {
     );
     // The report names ICP's start; `--icp-start ransac` is Alg. 3 as written.
     let best_start = r["icp"]["start"].as_str().unwrap().to_string();
-    assert!(["ransac", "prealignment"].contains(&best_start.as_str()), "{r}");
+    assert!(
+        ["ransac", "prealignment"].contains(&best_start.as_str()),
+        "{r}"
+    );
     let (ok, _, err) = fewview(&[
         "register",
         "--source",

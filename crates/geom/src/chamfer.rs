@@ -236,6 +236,43 @@ pub fn surface_metrics(
     taus: &[f64],
     seed: u64,
 ) -> Result<SurfaceMetrics> {
+    metrics_on(pred, gt, None, samples, taus, seed)
+}
+
+/// [`surface_metrics`] on the observed part of a synthetic ground truth, the way the DTU
+/// protocol scores only what its scanner saw: `gt_face_observed[f]` says whether some input
+/// view sees face `f`. Completeness runs from the samples on observed faces; accuracy from the
+/// predicted samples whose nearest ground-truth sample lies on an observed face (a prediction
+/// of an unseen part is neither rewarded nor punished).
+pub fn surface_metrics_observed(
+    pred: &Mesh,
+    gt: &Mesh,
+    gt_face_observed: &[bool],
+    samples: usize,
+    taus: &[f64],
+    seed: u64,
+) -> Result<SurfaceMetrics> {
+    if gt_face_observed.len() != gt.faces.len() {
+        return Err(GeomError::invalid(
+            "observed faces",
+            format!(
+                "{} flags for {} ground-truth faces",
+                gt_face_observed.len(),
+                gt.faces.len()
+            ),
+        ));
+    }
+    metrics_on(pred, gt, Some(gt_face_observed), samples, taus, seed)
+}
+
+fn metrics_on(
+    pred: &Mesh,
+    gt: &Mesh,
+    observed: Option<&[bool]>,
+    samples: usize,
+    taus: &[f64],
+    seed: u64,
+) -> Result<SurfaceMetrics> {
     if samples == 0 {
         return Err(GeomError::invalid("samples", "must be at least 1"));
     }
@@ -243,9 +280,36 @@ pub fn surface_metrics(
         .map_err(|e| GeomError::invalid("prediction", e.to_string()))?;
     let (gp, gf) = sample_surface_with_faces(gt, samples, seed.wrapping_add(1))
         .map_err(|e| GeomError::invalid("ground truth", e.to_string()))?;
+    let seen = |face: u32| observed.is_none_or(|o| o[face as usize]);
+    // Completeness: from the (observed) ground-truth samples.
+    let (go, gof): (Vec<[f32; 3]>, Vec<u32>) = gp
+        .iter()
+        .zip(&gf)
+        .filter(|(_, f)| seen(**f))
+        .map(|(p, f)| (*p, *f))
+        .unzip();
+    if go.is_empty() {
+        return Err(GeomError::invalid(
+            "ground truth",
+            "no sample lies on an observed face",
+        ));
+    }
+    let g_to_p = PointTree::new(&pp).nearest_many(&go);
+    // Accuracy: from the predicted samples that face an observed part.
+    let (p_to_g, pkept): (Vec<(usize, f64)>, Vec<u32>) = PointTree::new(&gp)
+        .nearest_many(&pp)
+        .into_iter()
+        .zip(&pf)
+        .filter(|((j, _), _)| seen(gf[*j]))
+        .map(|(nn, f)| (nn, *f))
+        .unzip();
+    if p_to_g.is_empty() {
+        return Err(GeomError::invalid(
+            "prediction",
+            "no sample lies near an observed part of the ground truth",
+        ));
+    }
     let normal = |m: &Mesh, f: u32| m.face_cross(f as usize).normalize();
-    let p_to_g = PointTree::new(&gp).nearest_many(&pp);
-    let g_to_p = PointTree::new(&pp).nearest_many(&gp);
     let mean = |d: &[(usize, f64)], pow: i32| {
         d.iter().map(|x| x.1.powi(pow)).sum::<f64>() / d.len() as f64
     };
@@ -260,7 +324,7 @@ pub fn surface_metrics(
             / nn.len() as f64
     };
     let normal_consistency =
-        0.5 * (nc(pred, &pf, gt, &gf, &p_to_g) + nc(gt, &gf, pred, &pf, &g_to_p));
+        0.5 * (nc(pred, &pkept, gt, &gf, &p_to_g) + nc(gt, &gof, pred, &pf, &g_to_p));
     let fscore = taus
         .iter()
         .map(|&tau| {
@@ -412,5 +476,44 @@ mod tests {
         // A cube against a plane: normals agree on the bottom only.
         let c = surface_metrics(&test_cube(), &plane(4, 1.0, 0.0), 20_000, &[0.01], 1).unwrap();
         assert!(c.normal_consistency < 0.8);
+    }
+
+    /// Two meshes as one; the faces of `b` follow those of `a`.
+    fn stacked(a: &Mesh, b: &Mesh) -> Mesh {
+        let offset = a.vertices.len() as u32;
+        let mut m = a.clone();
+        m.vertices.extend(b.vertices.iter().copied());
+        m.faces.extend(
+            b.faces
+                .iter()
+                .map(|f| [f[0] + offset, f[1] + offset, f[2] + offset]),
+        );
+        m
+    }
+
+    /// Ground truth: an observed plane at z = 0 and an unobserved one at z = 1. The prediction
+    /// is the first shifted by 0.1 plus a guess at z = 1.3 of the unseen part: on the observed
+    /// part both directions are 0.1 away; the guess and the unseen plane are not scored.
+    #[test]
+    fn observed_metrics_score_only_the_observed_part() {
+        let gt = stacked(&plane(8, 1.0, 0.0), &plane(8, 1.0, 1.0));
+        let half = gt.faces.len() / 2;
+        let observed: Vec<bool> = (0..gt.faces.len()).map(|f| f < half).collect();
+        let pred = stacked(&plane(8, 1.0, 0.1), &plane(8, 1.0, 1.3));
+        let o = surface_metrics_observed(&pred, &gt, &observed, 20_000, &[0.2], 3).unwrap();
+        assert!((o.accuracy / 0.1 - 1.0).abs() < 0.01, "{o:?}");
+        assert!((o.completeness / 0.1 - 1.0).abs() < 0.01, "{o:?}");
+        assert_eq!(o.fscore[0].fscore, 1.0);
+        // Everything scored: the guess is 0.3 off the unseen plane.
+        let all = surface_metrics(&pred, &gt, 20_000, &[0.2], 3).unwrap();
+        assert!((all.accuracy / 0.2 - 1.0).abs() < 0.02, "{all:?}");
+        // Every face observed gives the plain metrics.
+        let every = vec![true; gt.faces.len()];
+        let same = surface_metrics_observed(&pred, &gt, &every, 20_000, &[0.2], 3).unwrap();
+        assert_eq!(same, all);
+        let err = surface_metrics_observed(&pred, &gt, &observed[1..], 100, &[0.2], 3)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("flags for"), "{err}");
     }
 }

@@ -317,6 +317,8 @@ pub struct RunReport {
     pub mean_psnr_masked: Option<f64>,
     pub mean_ssim_masked: Option<f64>,
     pub chamfer: Option<ChamferReport>,
+    /// Chamfer on the part of the reference the training views see, when known.
+    pub chamfer_observed: Option<ChamferReport>,
     pub mesh_vertices: usize,
     pub mesh_faces: usize,
 }
@@ -444,6 +446,9 @@ pub struct RunInputs<'a> {
     pub matching: Option<&'a Dataset>,
     /// A surface in the dataset's (normalised) frame for Chamfer.
     pub reference: Option<&'a Mesh>,
+    /// For each face of `reference`, whether a training view sees it: Chamfer is then also
+    /// scored on the observed part (`RunReport::chamfer_observed`), as DTU's protocol does.
+    pub reference_observed: Option<&'a [bool]>,
 }
 
 /// Runs everything and writes the run directory. `resume` continues from `checkpoint.bin`
@@ -460,6 +465,7 @@ pub fn run(
         truth,
         matching,
         reference,
+        reference_observed,
     } = inputs;
     std::fs::create_dir_all(out).map_err(|e| SurfaceError::io(out, e))?;
     write_json(&out.join("config.json"), config)?;
@@ -638,11 +644,16 @@ pub fn run(
         (!test_metrics.is_empty())
             .then(|| test_metrics.iter().map(f).sum::<f64>() / test_metrics.len() as f64)
     };
-    let chamfer = match reference {
+    let (chamfer, chamfer_observed) = match reference {
         Some(gt) if !mesh.faces.is_empty() => {
-            Some(chamfer_after_alignment(&mesh, gt, &final_err.alignment)?)
+            let aligned = register_to_reference(&mesh, gt, &final_err.alignment)?;
+            let observed = match reference_observed {
+                Some(flags) => Some(chamfer_of(&aligned, gt, Some(flags))?),
+                None => None,
+            };
+            (Some(chamfer_of(&aligned, gt, None)?), observed)
         }
-        _ => None,
+        _ => (None, None),
     };
     let report = RunReport {
         iterations: trainer.state.iteration,
@@ -665,6 +676,7 @@ pub fn run(
         mean_ssim_masked: mean(&|m| m.ssim_masked),
         test_views: test_metrics,
         chamfer,
+        chamfer_observed,
         mesh_vertices: mesh.vertices.len(),
         mesh_faces: mesh.faces.len(),
     };
@@ -672,17 +684,16 @@ pub fn run(
     Ok(report)
 }
 
-/// Paper 001 Alg. 3 then Chamfer-L1: the mesh is pre-aligned with the pose-evaluation
-/// similarity, registered to the reference by FPFH + RANSAC and point-to-point ICP, and scored
-/// with uniform surface samples.
-pub fn chamfer_after_alignment(
+/// Paper 001 Alg. 3: the mesh pre-aligned with the pose-evaluation similarity, then
+/// registered to the reference by FPFH + RANSAC and point-to-point ICP (ICP also from the
+/// pre-alignment, see `fewview_geom::registration::IcpStarts`).
+pub fn register_to_reference(
     mesh: &Mesh,
     reference: &Mesh,
     alignment: &Similarity,
-) -> Result<ChamferReport> {
+) -> Result<Mesh> {
     use fewview_geom::registration::{RegistrationOptions, register};
-    let diag = fewview_geom::mesh::bbox_diagonal(&reference.vertices);
-    let voxel = diag / 100.0;
+    let voxel = fewview_geom::mesh::bbox_diagonal(&reference.vertices) / 100.0;
     let src = fewview_geom::Points::from_positions(mesh.vertices.clone());
     let dst = fewview_geom::Points::from_positions(reference.vertices.clone());
     let reg = register(
@@ -691,12 +702,26 @@ pub fn chamfer_after_alignment(
         Some(alignment),
         &RegistrationOptions::for_voxel(voxel),
     )?;
-    let aligned = Mesh {
+    Ok(Mesh {
         vertices: reg.transformation.apply_points(&mesh.vertices),
         ..mesh.clone()
+    })
+}
+
+/// Chamfer-L1 of a registered mesh to the reference from uniform surface samples, on the whole
+/// reference or, given per-face flags, on its observed part.
+pub fn chamfer_of(
+    aligned: &Mesh,
+    reference: &Mesh,
+    observed: Option<&[bool]>,
+) -> Result<ChamferReport> {
+    use fewview_geom::chamfer::{surface_metrics, surface_metrics_observed};
+    let diag = fewview_geom::mesh::bbox_diagonal(&reference.vertices);
+    let (n, taus) = (200_000, [0.01 * diag]);
+    let m = match observed {
+        Some(flags) => surface_metrics_observed(aligned, reference, flags, n, &taus, 0)?,
+        None => surface_metrics(aligned, reference, n, &taus, 0)?,
     };
-    let m =
-        fewview_geom::chamfer::surface_metrics(&aligned, reference, 200_000, &[0.01 * diag], 0)?;
     Ok(ChamferReport {
         chamfer_l1: m.chamfer_l1,
         accuracy: m.accuracy,

@@ -312,6 +312,44 @@ pub fn surface_mesh(resolution: usize) -> fewview_geom::Result<fewview_geom::Mes
     )
 }
 
+/// Whether `camera` sees the surface point `p`: it projects inside the image and a ray from
+/// the camera centre towards it first meets the surface at `p` (within `1e-3`, much less than
+/// the scene's features).
+pub fn sees(camera: &Camera, p: &Vector3<f64>) -> bool {
+    let Some((u, v, _)) = camera.project(p) else {
+        return false;
+    };
+    if !(0.0..camera.width() as f64).contains(&u) || !(0.0..camera.height() as f64).contains(&v) {
+        return false;
+    }
+    let o = camera.center();
+    let to_p = p - o;
+    let dist = to_p.norm();
+    trace(&o, &(to_p / dist)).is_some_and(|t| t > dist - 1e-3)
+}
+
+/// For each face of `mesh` (a mesh of the true surface, e.g. [`surface_mesh`]): whether one of
+/// `cameras` sees its centroid. Feeds [`fewview_geom::chamfer::surface_metrics_observed`], so
+/// that the analytic scene is scored, like DTU, on the part of the surface the views show.
+pub fn observed_faces(mesh: &fewview_geom::Mesh, cameras: &[Camera]) -> Vec<bool> {
+    mesh.faces
+        .par_iter()
+        .map(|f| {
+            let c = f
+                .iter()
+                .map(|&i| {
+                    let v = mesh.vertices[i as usize];
+                    Vector3::new(v[0] as f64, v[1] as f64, v[2] as f64)
+                })
+                .sum::<Vector3<f64>>()
+                / 3.0;
+            // Nudge the centroid (inside a convex patch) onto the zero set before testing.
+            let on = c - sdf(&c) * sdf_normal(&c);
+            cameras.iter().any(|cam| sees(cam, &on))
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -375,5 +413,59 @@ mod tests {
         let max_z = pts.positions.iter().map(|p| p[2]).fold(f32::MIN, f32::max);
         assert!((max_x - 0.61).abs() < 0.02, "{max_x}");
         assert!((max_z - 0.42).abs() < 0.03, "{max_z}");
+    }
+
+    /// Seen from straight above, the top of the ball is visible and the bottom of the torus is
+    /// not; a point behind the camera or outside the image is not; and the face flags of the
+    /// true mesh follow: the top cap observed, the bottom cap not.
+    #[test]
+    fn visibility_from_above() {
+        let k = Intrinsics::centered(200.0, 160, 120);
+        let above = Camera::look_at(
+            k,
+            Vector3::new(0.0, 0.0, 3.0),
+            Vector3::zeros(),
+            Vector3::new(0.0, 1.0, 0.0),
+        );
+        let top = Vector3::new(0.0, 0.0, BALL_CENTER_Z + BALL_RADIUS);
+        assert!(sdf(&top).abs() < 1e-9);
+        assert!(sees(&above, &top));
+        let underside = Vector3::new(TORUS_MAJOR, 0.0, -TORUS_MINOR);
+        assert!(sdf(&underside).abs() < 1e-9);
+        assert!(!sees(&above, &underside));
+        let below = Camera::look_at(
+            k,
+            Vector3::new(0.0, 0.0, -3.0),
+            Vector3::zeros(),
+            Vector3::new(0.0, 1.0, 0.0),
+        );
+        assert!(sees(&below, &underside));
+        assert!(!sees(&below, &top));
+        let aside = Camera::look_at(
+            k,
+            Vector3::new(3.0, 0.0, 0.0),
+            Vector3::new(3.0, 5.0, 0.0),
+            Vector3::new(0.0, 0.0, 1.0),
+        );
+        assert!(!sees(&aside, &top));
+        let mesh = surface_mesh(48).unwrap();
+        let flags = observed_faces(&mesh, std::slice::from_ref(&above));
+        let z_of =
+            |f: &[u32; 3]| f.iter().map(|&i| mesh.vertices[i as usize][2]).sum::<f32>() / 3.0;
+        let (mut top_seen, mut top_all, mut bottom_seen) = (0, 0, 0);
+        for (f, &seen) in mesh.faces.iter().zip(&flags) {
+            if z_of(f) > 0.35 {
+                top_all += 1;
+                top_seen += seen as usize;
+            }
+            if z_of(f) < -0.1 {
+                bottom_seen += seen as usize;
+            }
+        }
+        assert!(
+            top_all > 0 && top_seen == top_all,
+            "{top_seen} of {top_all}"
+        );
+        assert_eq!(bottom_seen, 0);
     }
 }

@@ -44,6 +44,7 @@ fn dtu_scan65_short_run_end_to_end() {
         truth: None,
         matching: None,
         reference: None,
+        reference_observed: None,
     };
     let report = run(inputs, &config, out.path(), false, &mut |_| {}).unwrap();
     let (a, b) = (&report.initial_pose_error, &report.final_pose_error);

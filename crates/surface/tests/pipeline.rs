@@ -7,7 +7,7 @@ use fewview_surface::checkpoint;
 use fewview_surface::pipeline::{
     InitialPoses, RunConfig, RunInputs, RunReport, prepare, prepare_with_matching, run,
 };
-use fewview_surface::sdf_scene::{SdfSceneOptions, sdf_dataset, surface_mesh};
+use fewview_surface::sdf_scene::{SdfSceneOptions, observed_faces, sdf_dataset, surface_mesh};
 use fewview_surface::train::Trainer;
 
 fn tiny_scene() -> Dataset {
@@ -44,6 +44,7 @@ fn inputs<'a>(ds: &'a Dataset, reference: Option<&'a fewview_geom::Mesh>) -> Run
         truth: None,
         matching: None,
         reference,
+        reference_observed: None,
     }
 }
 
@@ -208,7 +209,8 @@ fn checkpoint_of_another_configuration_is_refused() {
 /// The analytic scene from noisy poses, a reduced run that fits the CI budget: 6 views at
 /// 160 × 120, σ = 0.05 se(3) noise, 300 iterations. It bounds the Chamfer-L1 of the extracted
 /// mesh to the true surface (after the Alg. 3 registration) at 5 % of the bounding-box
-/// diagonal (measured: 3.8 %, 6.4 % before ICP also started from the pre-alignment) and checks that the translation error drops (measured
+/// diagonal (measured: 3.8 %, 6.4 % before ICP also started from the pre-alignment), on the
+/// observed part of the surface at 3.5 % (measured 2.64 %), and checks that the translation error drops (measured
 /// 0.277 → 0.212). This is a regression bound, **not** the acceptance figure (≤ 1 %),
 /// which this schedule does not reach (see the crate README).
 #[test]
@@ -231,9 +233,18 @@ fn analytic_scene_with_noisy_poses_reduced_run() {
     config.eval_views = 2;
     config.eval_scale = 2;
     let truth = surface_mesh(192).unwrap();
+    let cameras: Vec<_> = ds
+        .train
+        .iter()
+        .map(|&i| ds.views[i].camera.clone())
+        .collect();
+    let observed = observed_faces(&truth, &cameras);
     let dir = tempfile::tempdir().unwrap();
     let report = run(
-        inputs(&ds, Some(&truth)),
+        RunInputs {
+            reference_observed: Some(&observed),
+            ..inputs(&ds, Some(&truth))
+        },
         &config,
         dir.path(),
         false,
@@ -241,6 +252,12 @@ fn analytic_scene_with_noisy_poses_reduced_run() {
     )
     .unwrap();
     let chamfer = report.chamfer.clone().expect("chamfer");
+    let seen = report.chamfer_observed.clone().expect("observed chamfer");
+    eprintln!(
+        "analytic: observed part {:.3} % of diag ({:.3} % of the faces seen)",
+        100.0 * seen.relative,
+        100.0 * observed.iter().filter(|&&o| o).count() as f64 / observed.len() as f64
+    );
     eprintln!(
         "analytic: chamfer {:.5} ({:.3} % of diag), R {:.3}° → {:.3}°, t {:.4} → {:.4}, psnr {:?}, {:.0} s",
         chamfer.chamfer_l1,
@@ -251,6 +268,12 @@ fn analytic_scene_with_noisy_poses_reduced_run() {
         report.final_pose_error.translation,
         report.mean_psnr_masked,
         report.train_seconds_wall
+    );
+    // Scored like DTU on the faces a training view sees (67 % of them): measured 2.64 %.
+    assert!(
+        seen.relative <= 0.035 && seen.relative < chamfer.relative,
+        "observed part {:.4} of the diagonal",
+        seen.relative
     );
     assert!(
         chamfer.relative <= 0.05,

@@ -382,11 +382,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         out.display()
     );
     let bar = progress::iterations(cfg.train.iterations as u64, "surface");
+    // The analytic scene knows which faces of its true surface the training views see.
+    let observed = match (&reference, args.synthetic) {
+        (Some(mesh), true) => {
+            let cameras: Vec<_> = ds
+                .train
+                .iter()
+                .map(|&i| ds.views[i].camera.clone())
+                .collect();
+            Some(fewview_surface::sdf_scene::observed_faces(mesh, &cameras))
+        }
+        _ => None,
+    };
     let inputs = RunInputs {
         dataset: &ds,
         truth: truth.as_ref(),
         matching: matching.as_ref(),
         reference: reference.as_ref(),
+        reference_observed: observed.as_deref(),
     };
     let report = run_pipeline(inputs, &cfg, &out, args.resume, &mut |e| match e {
         Event::Matched { matches, precision } => {
@@ -464,6 +477,13 @@ fn print_report(r: &RunReport, out: &std::path::Path) {
     if let Some(c) = &r.chamfer {
         println!(
             "chamfer-L1       {:.5} ({:.2} % of the bounding-box diagonal)",
+            c.chamfer_l1,
+            100.0 * c.relative
+        );
+    }
+    if let Some(c) = &r.chamfer_observed {
+        println!(
+            "  observed part  {:.5} ({:.2} % of the diagonal; the faces a training view sees)",
             c.chamfer_l1,
             100.0 * c.relative
         );
