@@ -374,29 +374,32 @@ fn register_the_bunny_fixture() {
     std::fs::write(&pre, fixture["prealignment"].to_string()).unwrap();
     let out = dir.path().join("moved.ply");
     let report = dir.path().join("r.json");
-    let (ok, _, err) = fewview(&[
-        "register",
-        "--source",
-        s(&fx.join("source.ply")),
-        "--target",
-        s(&fx.join("target.ply")),
-        "--voxel",
-        "0.008",
-        "--prealign",
-        s(&pre),
-        "--icp-threshold",
-        "0.02",
-        "--icp-threshold",
-        "0.01",
-        "--icp-threshold",
-        "0.005",
-        "--icp-threshold",
-        "0.003",
-        "-o",
-        s(&out),
-        "--report",
-        s(&report),
-    ]);
+    let (source, target) = (fx.join("source.ply"), fx.join("target.ply"));
+    // `fewview register` on the fixture with its pre-alignment and report, plus `extra`.
+    let register = |extra: &[&str]| {
+        let mut a = vec![
+            "register",
+            "--source",
+            s(&source),
+            "--target",
+            s(&target),
+            "--voxel",
+            "0.008",
+            "--prealign",
+            s(&pre),
+            "--report",
+            s(&report),
+        ];
+        a.extend_from_slice(extra);
+        fewview(&a)
+    };
+    let fine_icp = [
+        "--icp-threshold=0.02",
+        "--icp-threshold=0.01",
+        "--icp-threshold=0.005",
+        "--icp-threshold=0.003",
+    ];
+    let (ok, _, err) = register(&[fine_icp.as_slice(), &["-o", s(&out)]].concat());
     assert!(ok, "{err}");
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
@@ -411,21 +414,7 @@ fn register_the_bunny_fixture() {
         ["ransac", "prealignment"].contains(&best_start.as_str()),
         "{r}"
     );
-    let (ok, _, err) = fewview(&[
-        "register",
-        "--source",
-        s(&fx.join("source.ply")),
-        "--target",
-        s(&fx.join("target.ply")),
-        "--voxel",
-        "0.008",
-        "--prealign",
-        s(&pre),
-        "--icp-start",
-        "ransac",
-        "--report",
-        s(&report),
-    ]);
+    let (ok, _, err) = register(&["--icp-start", "ransac"]);
     assert!(ok, "{err}");
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
@@ -433,31 +422,7 @@ fn register_the_bunny_fixture() {
     assert!(r["ransac"]["fitness"].as_f64().unwrap() > 0.0, "{r}");
 
     // With the local-plane denoising the rotation lands within the 0.5°.
-    let args = |radius: &'static str| {
-        vec![
-            "register".to_string(),
-            "--source".into(),
-            s(&fx.join("source.ply")).into(),
-            "--target".into(),
-            s(&fx.join("target.ply")).into(),
-            "--voxel".into(),
-            "0.008".into(),
-            "--prealign".into(),
-            s(&pre).into(),
-            "--icp-threshold=0.02".into(),
-            "--icp-threshold=0.01".into(),
-            "--icp-threshold=0.005".into(),
-            "--icp-threshold=0.003".into(),
-            "--denoise-radius".into(),
-            radius.into(),
-            "--report".into(),
-            s(&report).into(),
-        ]
-    };
-    let run = |radius| {
-        let a = args(radius);
-        fewview(&a.iter().map(String::as_str).collect::<Vec<_>>())
-    };
+    let run = |radius| register(&[fine_icp.as_slice(), &["--denoise-radius", radius]].concat());
     let (ok, _, err) = run("0.016");
     assert!(ok, "{err}");
     let r: serde_json::Value =
