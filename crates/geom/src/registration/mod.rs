@@ -259,20 +259,15 @@ mod tests {
     use super::*;
 
     /// `n` points drawn uniformly over a unit sphere with a bump around +x (radius up to
-    /// 1.2), from the LCG stream `seed`: two seeds give two samplings of one surface.
+    /// 1.2), from the random stream `seed`: two seeds give two samplings of one surface.
     fn bumpy_sphere(n: usize, seed: u64) -> Points {
-        let mut state = seed.wrapping_mul(0x2545_F491_4F6C_DD1D) | 1;
-        let mut uniform = || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
         Points::from_positions(
             (0..n)
                 .map(|_| {
-                    let z = 2.0 * uniform() - 1.0;
-                    let a = std::f64::consts::TAU * uniform();
+                    let z = 2.0 * rng.random::<f64>() - 1.0;
+                    let a = std::f64::consts::TAU * rng.random::<f64>();
                     let r = (1.0 - z * z).sqrt();
                     let (x, y) = (r * a.cos(), r * a.sin());
                     let radius = 1.0 + (x - 0.8).max(0.0);
