@@ -27,6 +27,7 @@ use serde::{Deserialize, Serialize};
 use crate::checkpoint;
 use crate::error::{Result, SurfaceError};
 use crate::extract::{MeshOptions, final_mesh, render_view};
+use crate::matching::densify::{DensifyOptions, densify_matches};
 use crate::matching::refine::{AffineRefineOptions, refine_matches};
 use crate::matching::sift::{SiftMatcher, SiftOptions};
 use crate::matching::{
@@ -79,6 +80,11 @@ pub struct RunConfig {
     /// behaviour of configurations written before the option existed).
     #[serde(default)]
     pub match_refinement: Option<AffineRefineOptions>,
+    /// Deviation, off by default: grow dense matches from the (refined) sparse ones by affine
+    /// Lucas–Kanade with forward–backward checks ([`densify_matches`]), standing in for the
+    /// density of paper 001's PDC-Net matches.
+    #[serde(default)]
+    pub densify: Option<DensifyOptions>,
 }
 
 fn default_max_pair_angle() -> f64 {
@@ -99,6 +105,7 @@ impl Default for RunConfig {
             pose_warmup: None,
             max_pair_angle_deg: default_max_pair_angle(),
             match_refinement: Some(AffineRefineOptions::default()),
+            densify: None,
         }
     }
 }
@@ -192,9 +199,8 @@ pub fn prepare_with_matching(
                 &pairs,
                 &match_intrinsics,
                 &ground_truth,
-                config.train.use_masks,
                 opts,
-                config.match_refinement.as_ref(),
+                config,
             );
             (m, Some(p))
         }
@@ -255,17 +261,17 @@ fn matching_scale(dataset: &Dataset, matching: &Dataset) -> Result<usize> {
 }
 
 /// SIFT correspondences between the given pairs of training views of `dataset` (in its
-/// pixels), refined when `refinement` is given, and their precision against the ground-truth
-/// poses.
+/// pixels), refined and densified as `config` asks, and their precision against the
+/// ground-truth poses.
 fn correspondences(
     dataset: &Dataset,
     pairs: &[(usize, usize)],
     intrinsics: &[Intrinsics],
     ground_truth: &[Se3],
-    use_masks: bool,
     options: &SiftOptions,
-    refinement: Option<&AffineRefineOptions>,
+    config: &RunConfig,
 ) -> (Vec<Match>, MatchPrecision) {
+    let (use_masks, refinement) = (config.train.use_masks, config.match_refinement.as_ref());
     let inputs: Vec<MatchInput> = dataset
         .train_views()
         .map(|v| MatchInput {
@@ -280,13 +286,17 @@ fn correspondences(
         &inputs,
         pairs,
     );
-    let matches = match refinement {
-        Some(o) => {
-            let images: Vec<&Image> = inputs.iter().map(|i| i.image).collect();
-            refine_matches(&images, &matches, o)
-        }
+    let images: Vec<&Image> = inputs.iter().map(|i| i.image).collect();
+    let mut matches = match refinement {
+        Some(o) => refine_matches(&images, &matches, o),
         None => matches,
     };
+    if let Some(o) = &config.densify {
+        let masks: Vec<Option<&Image>> = inputs.iter().map(|i| i.mask).collect();
+        let window = refinement.cloned().unwrap_or_default();
+        let dense = densify_matches(&images, &masks, &matches, pairs, &window, o);
+        matches.extend(dense);
+    }
     let cams: Vec<Camera> = intrinsics
         .iter()
         .zip(ground_truth)

@@ -44,6 +44,22 @@ impl Default for SdfSceneOptions {
     }
 }
 
+impl SdfSceneOptions {
+    /// The scene of `fewview surface --synthetic`: 16 views at 320 × 240 (field of view 30°),
+    /// the eight at 30° elevation, 45° apart, for training.
+    pub fn ring_of_eight() -> Self {
+        Self {
+            width: 320,
+            height: 240,
+            views: 16,
+            train: vec![0, 2, 4, 6, 8, 10, 12, 14],
+            supersample: 2,
+            fov_deg: 30.0,
+            ..Default::default()
+        }
+    }
+}
+
 const TORUS_MAJOR: f64 = 0.45;
 const TORUS_MINOR: f64 = 0.16;
 const BALL_RADIUS: f64 = 0.3;

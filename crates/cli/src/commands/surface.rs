@@ -7,6 +7,7 @@ use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
 use fewview_scene::DatasetFormat;
 use fewview_surface::field::{EncoderKind, FdScheme};
+use fewview_surface::matching::densify::DensifyOptions;
 use fewview_surface::matching::refine::AffineRefineOptions;
 use fewview_surface::matching::sift::SiftOptions;
 use fewview_surface::pipeline::{
@@ -83,6 +84,11 @@ pub struct Args {
     /// dropping matches whose windows do not correlate) or `none` (the matcher's output).
     #[arg(long, default_value = "affine", value_name = "affine|none")]
     pub match_refine: String,
+    /// Deviation from paper 001 (which has PDC-Net's dense matches): grow dense matches from
+    /// the sparse ones, on a grid of this spacing (pixels of the matching images), by affine
+    /// Lucas–Kanade with forward–backward checks. 0 (default) keeps the sparse matches only.
+    #[arg(long, default_value_t = 0, value_name = "PX")]
+    pub densify: usize,
     /// Deviation from paper 001: before the joint optimisation, refine the initial poses on the
     /// correspondences' epipolar constraints alone (robust Sampson distance, Levenberg–
     /// Marquardt). Helps when the classical matcher finds too few matches to pull the poses
@@ -282,6 +288,10 @@ impl Args {
             "none" => None,
             other => bail!("--match-refine {other:?}: expected affine or none"),
         };
+        c.densify = (self.densify > 0).then(|| DensifyOptions {
+            spacing_px: self.densify,
+            ..Default::default()
+        });
         c.mesh_resolution = self.mesh_resolution;
         c.eval_views = self.eval_views;
         c.eval_scale = self.eval_scale.max(1);
@@ -318,16 +328,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("give either --data DIR or --synthetic, not both");
     }
     let (ds, truth, matching, name, idr, reference) = if args.synthetic {
-        let opts = SdfSceneOptions {
-            width: 320,
-            height: 240,
-            views: 16,
-            train: vec![0, 2, 4, 6, 8, 10, 12, 14],
-            supersample: 2,
-            fov_deg: 30.0,
-            ..Default::default()
-        };
-        let ds = sdf_dataset(&opts);
+        let ds = sdf_dataset(&SdfSceneOptions::ring_of_eight());
         let reference = fewview_surface::sdf_scene::surface_mesh(256)?;
         (
             ds,

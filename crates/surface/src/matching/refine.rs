@@ -64,9 +64,9 @@ impl Default for AffineRefineOptions {
 }
 
 /// A grey plane with its gradients, sampled bilinearly with pixel centres at half-integers.
-struct Plane {
-    width: usize,
-    height: usize,
+pub(super) struct Plane {
+    pub(super) width: usize,
+    pub(super) height: usize,
     value: Vec<f32>,
     grad_x: Vec<f32>,
     grad_y: Vec<f32>,
@@ -75,7 +75,7 @@ struct Plane {
 impl Plane {
     /// Luminance (Rec. 601 weights, as the SIFT matcher's grey image) blurred by `sigma`, with
     /// central-difference gradients (one-sided at the borders).
-    fn new(image: &Image, sigma: f32) -> Self {
+    pub(super) fn new(image: &Image, sigma: f32) -> Self {
         let (w, h) = (image.width, image.height);
         let grey: Vec<f32> = (0..w * h)
             .map(|i| luminance(image.pixel(i % w, i / w)))
@@ -146,13 +146,13 @@ impl Plane {
 }
 
 /// Offsets of the window and their Gaussian weights.
-struct Window {
+pub(super) struct Window {
     offsets: Vec<Vector2<f64>>,
     weights: Vec<f64>,
 }
 
 impl Window {
-    fn new(half: usize) -> Self {
+    pub(super) fn new(half: usize) -> Self {
         let h = half as isize;
         let sigma = (half as f64 / 2.0).max(0.5);
         let mut offsets = Vec::new();
@@ -202,56 +202,72 @@ pub fn refine_matches(
 
 /// For each match, the affine map of offsets around `a` to offsets around `b` fitted (least
 /// squares) to the displacements of its `k` nearest matches of the same pair of views; the
-/// identity where they are too few or too degenerate to fix one, or where the fit folds or
-/// stretches the window by more than 4×.
+/// identity where [`local_affine`] finds none.
 fn affine_seeds(matches: &[Match], k: usize) -> Vec<Matrix2<f64>> {
-    let at = |m: &Match| Vector2::new(m.a[0] as f64, m.a[1] as f64);
-    let bt = |m: &Match| Vector2::new(m.b[0] as f64, m.b[1] as f64);
     matches
         .par_iter()
         .map(|m| {
             let mut near: Vec<(f64, &Match)> = matches
                 .iter()
                 .filter(|o| o.view_a == m.view_a && o.view_b == m.view_b && !std::ptr::eq(*o, m))
-                .map(|o| ((at(o) - at(m)).norm_squared(), o))
+                .map(|o| ((end_a(o) - end_a(m)).norm_squared(), o))
                 .collect();
-            if near.len() < 3 {
-                return Matrix2::identity();
-            }
             near.sort_by(|x, y| x.0.total_cmp(&y.0));
             near.truncate(k.max(3));
-            // Rows [dx, dy, 1] → displacement of b; one 3×3 normal system per output axis.
-            let mut ata = Matrix3::<f64>::zeros();
-            let mut atb = [Vector3::<f64>::zeros(); 2];
-            for (_, o) in &near {
-                let da = at(o) - at(m);
-                let db = bt(o) - bt(m);
-                let row = Vector3::new(da.x, da.y, 1.0);
-                ata += row * row.transpose();
-                atb[0] += row * db.x;
-                atb[1] += row * db.y;
-            }
-            let Some(inv) = ata.try_inverse() else {
-                return Matrix2::identity();
-            };
-            let (cx, cy) = (inv * atb[0], inv * atb[1]);
-            let a = Matrix2::new(cx.x, cx.y, cy.x, cy.y);
-            let sv = a.singular_values();
-            let plausible = a.determinant() > 0.0 && sv.max() < 4.0 && sv.min() > 0.25;
-            if plausible { a } else { Matrix2::identity() }
+            let ends: Vec<_> = near.iter().map(|(_, o)| (end_a(o), end_b(o))).collect();
+            local_affine(end_a(m), &ends).map_or(Matrix2::identity(), |(_, a)| a)
         })
         .collect()
 }
 
+pub(super) fn end_a(m: &Match) -> Vector2<f64> {
+    Vector2::new(m.a[0] as f64, m.a[1] as f64)
+}
+
+pub(super) fn end_b(m: &Match) -> Vector2<f64> {
+    Vector2::new(m.b[0] as f64, m.b[1] as f64)
+}
+
+/// The affine map `b ≈ c + A (a − at)` fitted by least squares to the correspondences `ends`
+/// (pairs of `a` and `b` ends) around `at`: `(c, A)`, the predicted image of `at` and the map of
+/// offsets. `None` when they are fewer than three, too degenerate to fix it, or when `A` folds
+/// or stretches a window by more than 4×.
+pub(super) fn local_affine(
+    at: Vector2<f64>,
+    ends: &[(Vector2<f64>, Vector2<f64>)],
+) -> Option<(Vector2<f64>, Matrix2<f64>)> {
+    if ends.len() < 3 {
+        return None;
+    }
+    // Rows [dx, dy, 1] → b; one 3×3 normal system per output axis.
+    let mut ata = Matrix3::<f64>::zeros();
+    let mut atb = [Vector3::<f64>::zeros(); 2];
+    for (a, b) in ends {
+        let d = a - at;
+        let row = Vector3::new(d.x, d.y, 1.0);
+        ata += row * row.transpose();
+        atb[0] += row * b.x;
+        atb[1] += row * b.y;
+    }
+    let inv = ata.try_inverse()?;
+    let (cx, cy) = (inv * atb[0], inv * atb[1]);
+    let a = Matrix2::new(cx.x, cx.y, cy.x, cy.y);
+    let sv = a.singular_values();
+    let plausible = a.determinant() > 0.0 && sv.max() < 4.0 && sv.min() > 0.25;
+    plausible.then_some((Vector2::new(cx.z, cy.z), a))
+}
+
 /// The outcome of one refinement.
-struct Fit {
-    b: Vector2<f64>,
-    ncc: f64,
+pub(super) struct Fit {
+    pub(super) b: Vector2<f64>,
+    /// The fitted affine map of offsets around `a` to offsets around `b`.
+    pub(super) warp: Matrix2<f64>,
+    pub(super) ncc: f64,
 }
 
 /// Gauss–Newton over `p = (b_x, b_y, A₀₀, A₀₁, A₁₀, A₁₁, gain, bias)`; `None` when the template
 /// is flat, the system singular, or the window leaves image `b`.
-fn refine_one(
+pub(super) fn refine_one(
     a: &Plane,
     b: &Plane,
     at: Vector2<f64>,
@@ -312,6 +328,7 @@ fn refine_one(
     }
     Some(Fit {
         b: centre,
+        warp,
         ncc: normalised_cross_correlation(&template, &samples),
     })
 }
@@ -340,11 +357,11 @@ fn normalised_cross_correlation(x: &[f64], y: &[f64]) -> f64 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
     /// A smooth texture defined everywhere: a sum of sinusoids of 9–30 px periods.
-    fn texture(x: f64, y: f64) -> f64 {
+    pub(crate) fn texture(x: f64, y: f64) -> f64 {
         let waves = [
             (0.21, 0.05, 0.3),
             (-0.11, 0.23, 1.1),
@@ -360,7 +377,7 @@ mod tests {
 
     /// Image `b` shows the texture of image `a` through the affine map `x_b = M x_a + o`
     /// (so `I_b(x) = texture(M⁻¹(x − o))`), with a photometric gain of 0.8 and bias of 0.1.
-    fn affine_pair(m: Matrix2<f64>, o: Vector2<f64>) -> (Image, Image) {
+    pub(crate) fn affine_pair(m: Matrix2<f64>, o: Vector2<f64>) -> (Image, Image) {
         let (w, h) = (160, 120);
         let inv = m.try_inverse().unwrap();
         let mut a = Image::new(w, h, 1);
