@@ -367,6 +367,18 @@ mod tests {
         (end_b(m) - (warp * end_a(m) + o)).norm()
     }
 
+    /// Dense matches between two views, grown from the four exact seeds, default options.
+    fn densify_two(a: &Image, b: &Image, warp: &Matrix2<f64>, o: &Vector2<f64>) -> Vec<Match> {
+        densify_matches(
+            &[a, b],
+            &[None, None],
+            &seeds(warp, o, (0, 1)),
+            &[(0, 1)],
+            &AffineRefineOptions::default(),
+            &DensifyOptions::default(),
+        )
+    }
+
     #[test]
     fn grows_from_four_seeds_over_the_image_along_the_true_warp() {
         let (warp, o) = (
@@ -374,14 +386,7 @@ mod tests {
             Vector2::new(3.0, -2.5),
         );
         let (a, b) = affine_pair(warp, o);
-        let dense = densify_matches(
-            &[&a, &b],
-            &[None, None],
-            &seeds(&warp, &o, (0, 1)),
-            &[(0, 1)],
-            &AffineRefineOptions::default(),
-            &DensifyOptions::default(),
-        );
+        let dense = densify_two(&a, &b, &warp, &o);
         // The grid (spacing 8, 11 px margins) has 17 × 12 points; a few map outside image b.
         assert!(dense.len() >= 150, "{} matches", dense.len());
         let worst = dense
@@ -403,14 +408,7 @@ mod tests {
                 b.set(x, y, 0, other.get(x, y, 0));
             }
         }
-        let dense = densify_matches(
-            &[&a, &b],
-            &[None, None],
-            &seeds(&warp, &o, (0, 1)),
-            &[(0, 1)],
-            &AffineRefineOptions::default(),
-            &DensifyOptions::default(),
-        );
+        let dense = densify_two(&a, &b, &warp, &o);
         assert!(dense.len() >= 80, "{} matches", dense.len());
         // A window (half-size 10) wholly inside the foreign part could only match by chance;
         // none is accepted, and every accepted match is right.
