@@ -15,7 +15,14 @@
 //! where the windows agree. It is accepted when the windows correlate (`min_ncc`), it stayed
 //! near the prediction (`max_shift_px`), and the backward fit from `b` returns to the grid point
 //! within `max_forward_backward_px`. Accepted points seed the next round, so matches spread
-//! from the sparse seeds over the textured surface both views see. Nothing here uses poses.
+//! from the sparse seeds over the textured surface both views see. A pair with too few seeds
+//! of its own (views 90° apart on a ring, DTU's outer pair 22–28) is seeded by composing two
+//! pairs' dense matches through a third view ([`compose_through`]). Nothing here uses poses.
+//!
+//! **Measured** (crate README): on the analytic ring and DTU's wide triplet the warm-up can
+//! then run on chained triangles (13.3° → 0.47°; 12° → 0.16–0.19°). On the narrow triplet it
+//! does not lower the error (0.134° against 0.106° from the sparse matches): there the dense
+//! matches' errors are correlated and do not average away.
 
 use fewview_scene::Image;
 use nalgebra::Vector2;
