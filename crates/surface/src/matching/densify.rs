@@ -11,7 +11,7 @@
 //! **How.** Points of view `a` on a regular grid (`spacing_px`, inside `a`'s mask when masks
 //! are used) are matched by region growing: a point next to accepted matches (within
 //! `reach_px` of one) gets the affine map fitted to its nearest accepted matches as its start
-//! ([`local_affine`]); affine Lucas–Kanade with gain and bias ([`super::refine`]) moves it to
+//! (`refine::local_affine`); affine Lucas–Kanade with gain and bias ([`super::refine`]) moves it to
 //! where the windows agree. It is accepted when the windows correlate (`min_ncc`), it stayed
 //! near the prediction (`max_shift_px`), and the backward fit from `b` returns to the grid point
 //! within `max_forward_backward_px`. Accepted points seed the next round, so matches spread
@@ -187,7 +187,7 @@ fn oriented(matches: &[Match], from: usize, to: usize) -> Vec<(Vector2<f64>, Vec
 
 /// Composes correspondences `x → y` (`first`) with `y → z` (`second`): each `y` of `first` that
 /// has at least `neighbours` points of `second` within `reach_px` is carried to `z` by the
-/// affine map fitted to them ([`local_affine`]). Returns `(x, z)` pairs.
+/// affine map fitted to them (`refine::local_affine`). Returns `(x, z)` pairs.
 pub fn compose_through(
     first: &[(Vector2<f64>, Vector2<f64>)],
     second: &[(Vector2<f64>, Vector2<f64>)],
