@@ -105,13 +105,7 @@ pub fn densify_matches(
         let margin = window.half_window as f64 + 1.0;
         ctx.grow(pair_seeds, margin)
             .into_iter()
-            .map(|(a, b, ncc)| Match {
-                view_a: va,
-                view_b: vb,
-                a: [a.x as f32, a.y as f32],
-                b: [b.x as f32, b.y as f32],
-                confidence: ncc.clamp(0.0, 1.0) as f32,
-            })
+            .map(|(a, b, ncc)| pair_match((va, vb), a, b, ncc.clamp(0.0, 1.0) as f32))
             .collect()
     };
     let of_pair = |ms: &[Match], va: usize, vb: usize| -> Vec<Match> {
@@ -148,13 +142,7 @@ pub fn densify_matches(
         }
         let composed: Vec<Match> = composed
             .into_iter()
-            .map(|(a, b)| Match {
-                view_a: va,
-                view_b: vb,
-                a: [a.x as f32, a.y as f32],
-                b: [b.x as f32, b.y as f32],
-                confidence: options.composed_confidence,
-            })
+            .map(|(a, b)| pair_match((va, vb), a, b, options.composed_confidence))
             .collect();
         if composed.len() < options.min_seeds {
             continue;
@@ -166,6 +154,39 @@ pub fn densify_matches(
         dense.extend(grown);
     }
     dense
+}
+
+/// A match of the pair `views` from its two ends.
+fn pair_match(views: (usize, usize), a: Vector2<f64>, b: Vector2<f64>, confidence: f32) -> Match {
+    Match {
+        view_a: views.0,
+        view_b: views.1,
+        a: [a.x as f32, a.y as f32],
+        b: [b.x as f32, b.y as f32],
+        confidence,
+    }
+}
+
+/// The (at most) `k` correspondences of `ends` whose first end lies nearest `at`, among those
+/// within squared distance `max_d2`; ties go to the earlier index, so the choice is
+/// deterministic.
+fn nearest_ends(
+    ends: &[(Vector2<f64>, Vector2<f64>)],
+    at: Vector2<f64>,
+    k: usize,
+    max_d2: f64,
+) -> Vec<(Vector2<f64>, Vector2<f64>)> {
+    let mut near: Vec<(f64, usize)> = ends
+        .iter()
+        .enumerate()
+        .map(|(i, (a, _))| ((a - at).norm_squared(), i))
+        .filter(|(d, _)| *d <= max_d2)
+        .collect();
+    if near.len() > k {
+        near.select_nth_unstable_by(k - 1, |x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+        near.truncate(k);
+    }
+    near.iter().map(|&(_, i)| ends[i]).collect()
 }
 
 /// The matches between views `from` and `to` as `(point in from, point in to)`, whichever way
@@ -198,17 +219,10 @@ pub fn compose_through(
     first
         .par_iter()
         .filter_map(|(x, y)| {
-            let mut near: Vec<(f64, usize)> = second
-                .iter()
-                .enumerate()
-                .map(|(i, (a, _))| ((a - y).norm_squared(), i))
-                .filter(|(d, _)| *d <= reach2)
-                .collect();
-            if near.len() < k {
+            let ends = nearest_ends(second, *y, k, reach2);
+            if ends.len() < k {
                 return None;
             }
-            near.select_nth_unstable_by(k - 1, |p, q| p.0.total_cmp(&q.0).then(p.1.cmp(&q.1)));
-            let ends: Vec<_> = near[..k].iter().map(|&(_, i)| second[i]).collect();
             let (z, _) = local_affine(*y, &ends)?;
             Some((*x, z))
         })
@@ -241,8 +255,8 @@ impl PairContext<'_> {
             .filter(|p| known.iter().all(|(a, _)| (a - p).norm() >= half))
             .collect();
         let mut accepted = Vec::new();
+        let reach2 = o.reach_px * o.reach_px;
         for _ in 0..o.rounds {
-            let reach2 = o.reach_px * o.reach_px;
             let (ready, waiting): (Vec<Vector2<f64>>, Vec<Vector2<f64>>) = open
                 .iter()
                 .partition(|p| known.iter().any(|(a, _)| (a - *p).norm_squared() <= reach2));
@@ -287,17 +301,7 @@ impl PairContext<'_> {
     /// Forward and backward affine Lucas–Kanade from the local affine prediction at `p`.
     fn try_point(&self, p: Vector2<f64>, known: &[(Vector2<f64>, Vector2<f64>)]) -> Option<Grown> {
         let o = self.options;
-        let k = o.neighbours.max(3);
-        let mut near: Vec<(f64, usize)> = known
-            .iter()
-            .enumerate()
-            .map(|(i, (a, _))| ((a - p).norm_squared(), i))
-            .collect();
-        if near.len() > k {
-            near.select_nth_unstable_by(k - 1, |x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
-            near.truncate(k);
-        }
-        let ends: Vec<_> = near.iter().map(|&(_, i)| known[i]).collect();
+        let ends = nearest_ends(known, p, o.neighbours.max(3), f64::INFINITY);
         let (predicted, affine) = local_affine(p, &ends)?;
         let fwd = refine_one(
             self.a,
@@ -352,14 +356,7 @@ mod tests {
         o: &Vector2<f64>,
         views: (usize, usize),
     ) -> Match {
-        let b = m * a + o;
-        Match {
-            view_a: views.0,
-            view_b: views.1,
-            a: [a.x as f32, a.y as f32],
-            b: [b.x as f32, b.y as f32],
-            confidence: 1.0,
-        }
+        pair_match(views, a, m * a + o, 1.0)
     }
 
     /// Four seeds around the centre of a 160 × 120 image.
