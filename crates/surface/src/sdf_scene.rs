@@ -4,7 +4,8 @@
 //!
 //! The solid is a torus (major radius 0.45, minor 0.16) smoothly joined (polynomial smooth
 //! minimum, k = 0.12) with a sphere of radius 0.3 raised above its hole; it lies well inside the
-//! unit sphere. Its albedo is coloured 3D fractal value noise (a random texture for matching); shading is Lambertian under one directional light plus ambient light, so colours
+//! unit sphere. Its albedo is coloured 3D fractal value noise (a random texture for matching); shading is Lambertian under a directional key light from above, a weaker fill light from
+//! the opposite direction and ambient light, so colours
 //! do not depend on the viewing direction. The background is black. Cameras sit on a ring
 //! around the object at distance 3, alternating elevation, looking at the origin (world z up).
 
@@ -18,8 +19,11 @@ use rayon::prelude::*;
 pub struct SdfSceneOptions {
     pub width: usize,
     pub height: usize,
-    /// Cameras on the ring.
+    /// Cameras on the ring (elevation alternating 30° and 15°).
     pub views: usize,
+    /// Further rings of cameras (numbered after the first ring's, in order); the first ring
+    /// sees nothing of the underside.
+    pub extra_rings: Vec<Ring>,
     /// Training views (the rest are test views).
     pub train: Vec<usize>,
     /// Supersampling per pixel axis.
@@ -36,6 +40,7 @@ impl Default for SdfSceneOptions {
             width: 160,
             height: 120,
             views: 12,
+            extra_rings: Vec::new(),
             train: vec![0, 2, 4, 6, 8, 10],
             supersample: 2,
             distance: 3.0,
@@ -58,6 +63,49 @@ impl SdfSceneOptions {
             ..Default::default()
         }
     }
+
+    /// [`Self::ring_of_eight`] plus two rings of eight training views, at 0° elevation
+    /// (staggered by 22.5°, views 16–23) and at −30° (under the first ring's training views,
+    /// views 24–31), so that every part of the surface is seen by some training view and every
+    /// view has neighbours at most 45° away (`fewview surface --synthetic --synthetic-all-around`).
+    /// Neighbouring views are 37–45° apart, as on the first ring, where the matcher works.
+    pub fn ring_of_eight_all_around() -> Self {
+        let ring = Self::ring_of_eight();
+        let extra_rings = vec![
+            Ring {
+                views: 8,
+                elevation_deg: 0.0,
+                offset: 0.5,
+            },
+            Ring {
+                views: 8,
+                elevation_deg: -30.0,
+                offset: 0.0,
+            },
+        ];
+        let mut train = ring.train.clone();
+        train.extend(ring.views..ring.views + 16);
+        Self {
+            extra_rings,
+            train,
+            ..ring
+        }
+    }
+
+    /// Cameras in all rings.
+    pub fn total_views(&self) -> usize {
+        self.views + self.extra_rings.iter().map(|r| r.views).sum::<usize>()
+    }
+}
+
+/// A ring of training cameras at one elevation, evenly spaced in azimuth.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Ring {
+    pub views: usize,
+    /// Degrees above (negative: below) the object's equator.
+    pub elevation_deg: f64,
+    /// Azimuth of the first camera (from the x axis) as a fraction of this ring's spacing.
+    pub offset: f64,
 }
 
 const TORUS_MAJOR: f64 = 0.45;
@@ -91,15 +139,23 @@ pub fn sdf_normal(p: &Vector3<f64>) -> Vector3<f64> {
     Vector3::new(d(0), d(1), d(2)).normalize()
 }
 
-/// A lattice hash in `[0, 1)`.
+/// A lattice hash in `[0, 1)`: the coordinates and salt folded in one at a time, each fold
+/// followed by a full 64-bit avalanche (SplitMix64's finaliser). Folding them all in with one
+/// XOR made `(x, −y, −z)` hash almost as `(x, y, z)` (two's complement: `−a = !a + 1`), so the
+/// texture nearly repeated under a half turn about the x axis, and views from below matched
+/// half-turned views from above with correlation 0.9–1.0.
 fn hash3(x: i64, y: i64, z: i64, salt: u64) -> f64 {
-    let mut h = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
-        ^ (y as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
-        ^ (z as u64).wrapping_mul(0x1656_67B1_9E37_79F9)
-        ^ salt.wrapping_mul(0x27D4_EB2F_1656_67C5);
-    h ^= h >> 33;
-    h = h.wrapping_mul(0xFF51_AFD7_ED55_8CCD);
-    h ^= h >> 33;
+    fn avalanche(mut h: u64) -> u64 {
+        h ^= h >> 30;
+        h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        h ^= h >> 27;
+        h = h.wrapping_mul(0x94D0_49BB_1331_11EB);
+        h ^ (h >> 31)
+    }
+    let mut h = avalanche(salt.wrapping_add(0x9E37_79B9_7F4A_7C15));
+    for c in [x, y, z] {
+        h = avalanche(h ^ (c as u64).wrapping_add(0x9E37_79B9_7F4A_7C15));
+    }
     (h >> 11) as f64 / (1u64 << 53) as f64
 }
 
@@ -181,9 +237,12 @@ fn shade(o: &Vector3<f64>, d: &Vector3<f64>) -> ([f64; 3], f64) {
         Some(t) => {
             let p = o + d * t;
             let n = sdf_normal(&p);
-            let lambert = n.dot(&light()).max(0.0);
+            // Key light from above and a weaker fill from the opposite side, below: no face is
+            // lit by ambient light alone, so the underside keeps its texture's contrast.
+            let key = n.dot(&light()).max(0.0);
+            let fill = (-n.dot(&light())).max(0.0);
             let a = albedo(&p);
-            let s = 0.35 + 0.65 * lambert;
+            let s = 0.3 + 0.6 * key + 0.4 * fill;
             ([a[0] * s, a[1] * s, a[2] * s], 1.0)
         }
     }
@@ -193,10 +252,18 @@ fn shade(o: &Vector3<f64>, d: &Vector3<f64>) -> ([f64; 3], f64) {
 pub fn cameras(opts: &SdfSceneOptions) -> Vec<Camera> {
     let focal = 0.5 * opts.width as f64 / (0.5 * opts.fov_deg.to_radians()).tan();
     let k = Intrinsics::centered(focal, opts.width as u32, opts.height as u32);
-    (0..opts.views)
-        .map(|i| {
-            let az = i as f64 / opts.views as f64 * std::f64::consts::TAU;
-            let el = if i % 2 == 0 { 30f64 } else { 15f64 }.to_radians();
+    let ring = (0..opts.views).map(|i| {
+        let az = i as f64 / opts.views as f64;
+        let el = if i % 2 == 0 { 30f64 } else { 15f64 };
+        (az, el)
+    });
+    let extra = opts.extra_rings.iter().flat_map(|r| {
+        (0..r.views).map(move |j| ((j as f64 + r.offset) / r.views as f64, r.elevation_deg))
+    });
+    ring.chain(extra)
+        .map(|(turns, el_deg)| {
+            let az = turns * std::f64::consts::TAU;
+            let el = el_deg.to_radians();
             let eye =
                 Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin()) * opts.distance;
             Camera::look_at(k, eye, Vector3::zeros(), Vector3::new(0.0, 0.0, 1.0))
@@ -264,7 +331,7 @@ pub fn sdf_dataset(opts: &SdfSceneOptions) -> Dataset {
             }
         })
         .collect();
-    let test = (0..opts.views)
+    let test = (0..opts.total_views())
         .filter(|i| !opts.train.contains(i))
         .collect();
     Dataset {
@@ -429,6 +496,60 @@ mod tests {
         let max_z = pts.positions.iter().map(|p| p[2]).fold(f32::MIN, f32::max);
         assert!((max_x - 0.61).abs() < 0.02, "{max_x}");
         assert!((max_z - 0.42).abs() < 0.03, "{max_z}");
+    }
+
+    /// The texture does not repeat under the half turn about the x axis, `(x, y, z) → (x, −y,
+    /// −z)`, which maps the views from above onto views from below (the old one-XOR lattice
+    /// hash nearly did: correlation 0.9–1.0 between such views), nor under the others.
+    #[test]
+    fn texture_has_no_half_turn_symmetry() {
+        let mut rng_state = 7u64;
+        let mut next = || {
+            rng_state = rng_state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            (rng_state >> 11) as f64 / (1u64 << 53) as f64 * 1.6 - 0.8
+        };
+        // Sign flips of the axes: the three half turns and the point reflection.
+        let flips = [
+            Vector3::new(1.0, -1.0, -1.0),
+            Vector3::new(-1.0, 1.0, -1.0),
+            Vector3::new(-1.0, -1.0, 1.0),
+            Vector3::new(-1.0, -1.0, -1.0),
+        ];
+        for flip in flips {
+            let (mut same, mut apart) = (0.0, 0.0);
+            for _ in 0..2000 {
+                let p = Vector3::new(next(), next(), next());
+                let q = Vector3::new(next(), next(), next());
+                same += (fbm(&p, 10.0, 1) - fbm(&p.component_mul(&flip), 10.0, 1)).abs();
+                apart += (fbm(&p, 10.0, 1) - fbm(&q, 10.0, 1)).abs();
+            }
+            assert!(
+                same > 0.8 * apart,
+                "mirrored {same:.1} against random {apart:.1}"
+            );
+        }
+    }
+
+    /// The all-around layout's training views see every part of the true surface (the ring of
+    /// eight alone misses the underside).
+    #[test]
+    fn all_around_views_see_the_whole_surface() {
+        let mesh = surface_mesh(48).unwrap();
+        let seen_fraction = |opts: &SdfSceneOptions| {
+            let cams = cameras(opts);
+            let train: Vec<Camera> = opts.train.iter().map(|&i| cams[i].clone()).collect();
+            let flags = observed_faces(&mesh, &train);
+            flags.iter().filter(|&&f| f).count() as f64 / flags.len() as f64
+        };
+        let around = SdfSceneOptions::ring_of_eight_all_around();
+        assert_eq!(around.total_views(), 32);
+        assert_eq!(around.train.len(), 24);
+        let ring = seen_fraction(&SdfSceneOptions::ring_of_eight());
+        let all = seen_fraction(&around);
+        assert!(ring < 0.8, "ring of eight sees {ring:.3}");
+        assert!(all > 0.99, "all around sees {all:.3}");
     }
 
     /// Seen from straight above, the top of the ball is visible and the bottom of the torus is

@@ -57,10 +57,14 @@ pub struct WarmupOptions {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Connectivity {
-    /// Triangles chained through shared edges over all views: every baseline's length is tied
-    /// to the others, so the whole camera set is fixed up to a similarity.
+    /// The baseline directions of the pairs fix every camera centre up to one translation and
+    /// one scale (parallel rigidity; e.g. triangles chained through shared edges): every
+    /// baseline's length is tied to the others, so the whole camera set is fixed up to a
+    /// similarity. (`rigid-triangles`, the name of the triangle-chain test this generalises,
+    /// still reads.)
     #[default]
-    RigidTriangles,
+    #[serde(alias = "rigid-triangles")]
+    Rigid,
     /// Any connected graph (a chain of three views, a ring). The relative rotations and the
     /// baseline directions are still fixed, but the lengths of baselines outside triangles are
     /// not: they keep the initial poses' values (the damped solver does not move along
@@ -77,7 +81,7 @@ impl Default for WarmupOptions {
             max_iterations: 50,
             tolerance: 1e-10,
             min_matches_per_pair: 40,
-            connectivity: Connectivity::RigidTriangles,
+            connectivity: Connectivity::Rigid,
         }
     }
 }
@@ -280,9 +284,10 @@ fn into_frame_of(refined: &[Se3], reference: &[Se3]) -> Vec<Se3> {
 /// warm-up: on a ring of views, opposite views share no matches while neighbours share
 /// hundreds. The epipolar constraint fixes the direction of each pair's baseline, not its
 /// length, so what remains must tie every baseline length to the others: the usable pairs must
-/// form triangles (a triangle of known directions has known length ratios) that chain through
-/// shared edges over all views. A plain cycle of four or more views would leave lengths free.
-/// With [`Connectivity::Connected`] it is enough that they connect all views.
+/// make the camera centres parallel rigid ([`parallel_rigid`]; e.g. triangles, which have known
+/// length ratios, chained through shared edges). A plain cycle of four or more views would
+/// leave lengths free. With [`Connectivity::Connected`] it is enough that they connect all
+/// views.
 fn usable_matches(
     matches: &[Match],
     n: usize,
@@ -302,9 +307,9 @@ fn usable_matches(
         .unwrap_or(0);
     let (held, what) = match connectivity {
         _ if n == 2 => (usable(0, 1), "join the two views"),
-        Connectivity::RigidTriangles => (
-            rigid_triangle_chain(n, &usable),
-            "form triangles chained over all views",
+        Connectivity::Rigid => (
+            parallel_rigid(n, &usable),
+            "fix all baseline lengths (triangles chained over all views, or the like)",
         ),
         Connectivity::Connected => (connects_all(n, &usable), "connect all views"),
     };
@@ -336,42 +341,51 @@ fn connects_all(n: usize, edge: &dyn Fn(usize, usize) -> bool) -> bool {
     reached.iter().all(|&r| r)
 }
 
-/// Whether the triangles of `edge`-connected views, merged when they share an edge, cover all
-/// `n` views in one group.
-fn rigid_triangle_chain(n: usize, edge: &dyn Fn(usize, usize) -> bool) -> bool {
-    let mut triangles = Vec::new();
-    for a in 0..n {
-        for b in a + 1..n {
-            for c in b + 1..n {
-                if edge(a, b) && edge(b, c) && edge(a, c) {
-                    triangles.push([a, b, c]);
-                }
-            }
-        }
+/// Whether the directions of the baselines `edge(a, b)` (`a < b`) fix the `n` camera centres up
+/// to a common translation and scale (parallel rigidity), even when the cameras lie in one plane
+/// (a ring). Each edge asks `c_a − c_b` to be parallel to a known direction. In the plane that
+/// is one linear constraint on the centres, and the graph is rigid when the constraints leave
+/// only the three-dimensional family of translations and scalings: rank `2n − 3` at generic
+/// directions (those of random planar centres, fixed seed; rigidity is a property of the graph
+/// for almost every placement). The planar test is the strict one: out of a plane a cycle of
+/// four views would already be rigid, but on a ring its directions are coplanar and its lengths
+/// free. Triangles chained through shared edges are rigid; two rigid groups that share one
+/// view are not (their relative scale is free) unless further baselines tie them, which is how
+/// rings of views at several elevations connect.
+fn parallel_rigid(n: usize, edge: &dyn Fn(usize, usize) -> bool) -> bool {
+    if n < 2 {
+        return true;
     }
-    (0..triangles.len()).any(|start| edge_chained_group_covers_all(n, &triangles, start))
-}
-
-/// Whether the triangles reachable from `triangles[start]` through shared edges cover all `n`
-/// views.
-fn edge_chained_group_covers_all(n: usize, triangles: &[[usize; 3]], start: usize) -> bool {
-    let sides = |t: &[usize; 3]| [(t[0], t[1]), (t[1], t[2]), (t[0], t[2])];
-    let mut in_group = vec![false; n];
-    let mut edges = vec![false; n * n];
-    let mut used = vec![false; triangles.len()];
-    let mut next = Some(start);
-    while let Some(k) = next {
-        used[k] = true;
-        for &v in &triangles[k] {
-            in_group[v] = true;
-        }
-        for (x, y) in sides(&triangles[k]) {
-            edges[x * n + y] = true;
-        }
-        next = (0..triangles.len())
-            .find(|&k| !used[k] && sides(&triangles[k]).iter().any(|&(x, y)| edges[x * n + y]));
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut uniform = || {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    let centres: Vec<(f64, f64)> = (0..n).map(|_| (uniform(), uniform())).collect();
+    let pairs: Vec<(usize, usize)> = (0..n)
+        .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
+        .filter(|&(a, b)| edge(a, b))
+        .collect();
+    let free = 2 * n - 3;
+    if pairs.len() < free {
+        return false;
     }
-    in_group.iter().all(|&g| g)
+    let mut m = DMatrix::<f64>::zeros(pairs.len(), 2 * n);
+    for (row, &(a, b)) in pairs.iter().enumerate() {
+        let (dx, dy) = (centres[a].0 - centres[b].0, centres[a].1 - centres[b].1);
+        let len = dx.hypot(dy);
+        // The unit normal of the baseline: its component of c_a − c_b must vanish.
+        let (nx, ny) = (-dy / len, dx / len);
+        m[(row, 2 * a)] = nx;
+        m[(row, 2 * a + 1)] = ny;
+        m[(row, 2 * b)] = -nx;
+        m[(row, 2 * b + 1)] = -ny;
+    }
+    let singular = m.singular_values();
+    let largest = singular.max();
+    singular.iter().filter(|&&s| s > 1e-9 * largest).count() == free
 }
 
 /// One annealing run's result, as [`epipolar_warmup`] compares them.
@@ -653,7 +667,7 @@ mod tests {
     }
 
     #[test]
-    fn triangles_must_share_edges_not_just_views() {
+    fn baseline_lengths_must_be_tied_not_just_views_shared() {
         // Triangles 034, 134, 234 chained through edge 34, plus 012: rigid.
         let chained: &[(usize, usize)] = &[
             (0, 1),
@@ -667,11 +681,24 @@ mod tests {
             (2, 4),
             (3, 4),
         ];
-        assert!(rigid_triangle_chain(5, &graph(chained)));
+        assert!(parallel_rigid(5, &graph(chained)));
         // A bow tie: triangles 012 and 234 meet at view 2 only, so the scale of one against
         // the other is free.
         let bow_tie: &[(usize, usize)] = &[(0, 1), (1, 2), (0, 2), (2, 3), (2, 4), (3, 4)];
-        assert!(!rigid_triangle_chain(5, &graph(bow_tie)));
+        assert!(!parallel_rigid(5, &graph(bow_tie)));
+        // The bow tie plus one baseline across it (0–3): triangle 0-2-3 now has all three
+        // directions and ties the two scales, though no new triangle shares an edge with 012.
+        let tied: &[(usize, usize)] = &[(0, 1), (1, 2), (0, 2), (2, 3), (2, 4), (3, 4), (0, 3)];
+        assert!(parallel_rigid(5, &graph(tied)));
+        // A ring of four views: lengths free. One diagonal makes two triangles sharing it.
+        let ring: &[(usize, usize)] = &[(0, 1), (1, 2), (2, 3), (0, 3)];
+        assert!(!parallel_rigid(4, &graph(ring)));
+        let braced: &[(usize, usize)] = &[(0, 1), (1, 2), (2, 3), (0, 3), (0, 2)];
+        assert!(parallel_rigid(4, &graph(braced)));
+        // Two views are always fixed up to scale; a triangle is; a chain of three is not.
+        assert!(parallel_rigid(2, &graph(&[(0, 1)])));
+        assert!(parallel_rigid(3, &graph(&[(0, 1), (1, 2), (0, 2)])));
+        assert!(!parallel_rigid(3, &graph(&[(0, 1), (1, 2)])));
     }
 
     #[test]
@@ -785,7 +812,7 @@ mod tests {
     fn a_chain_connects_but_is_not_rigid() {
         let chain: &[(usize, usize)] = &[(0, 1), (1, 2)];
         assert!(connects_all(3, &graph(chain)));
-        assert!(!rigid_triangle_chain(3, &graph(chain)));
+        assert!(!parallel_rigid(3, &graph(chain)));
         let split: &[(usize, usize)] = &[(0, 1), (2, 3)];
         assert!(!connects_all(4, &graph(split)));
     }

@@ -39,6 +39,10 @@ pub struct Args {
     /// Use the built-in sphere-traced analytic scene instead of `--data`.
     #[arg(long)]
     pub synthetic: bool,
+    /// With `--synthetic`: add 16 training views on rings at 0° and −30° elevation, so that
+    /// the underside, which the eight training views at 30° never see, is observed too.
+    #[arg(long, requires = "synthetic")]
+    pub synthetic_all_around: bool,
     /// Run directory. Default: `runs/surface-<dataset folder name>`.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
@@ -98,11 +102,12 @@ pub struct Args {
     /// The warm-up runs only on the pairs of views with at least this many matches.
     #[arg(long, default_value_t = 40, value_name = "N")]
     pub warmup_min_matches: usize,
-    /// What those pairs must form for the warm-up to run: `triangles` (chained triangles, which
-    /// fix every baseline's length; default) or `connected` (any connected graph, e.g. the wide
-    /// DTU triplet's chain 22–25–28: rotations and baseline directions are refined, lengths
-    /// outside triangles keep their initial values).
-    #[arg(long, default_value = "triangles", value_name = "triangles|connected")]
+    /// What those pairs must form for the warm-up to run: `rigid` (their baseline directions fix
+    /// every baseline's length up to one scale, e.g. chained triangles; default; `triangles` is
+    /// the old name) or `connected` (any connected graph, e.g. the wide DTU triplet's chain
+    /// 22–25–28: rotations and baseline directions are refined, lengths outside triangles keep
+    /// their initial values).
+    #[arg(long, default_value = "rigid", value_name = "rigid|connected")]
     pub warmup_connectivity: String,
     /// Deviation from paper 001 (which starts at 0): hold the poses fixed for this fraction of
     /// the iterations while the field forms, then refine them.
@@ -262,9 +267,9 @@ impl Args {
             other => bail!("--initial-poses {other:?}: expected noisy or loaded"),
         };
         let connectivity = match self.warmup_connectivity.as_str() {
-            "triangles" => Connectivity::RigidTriangles,
+            "rigid" | "triangles" => Connectivity::Rigid,
             "connected" => Connectivity::Connected,
-            other => bail!("--warmup-connectivity {other:?}: expected triangles or connected"),
+            other => bail!("--warmup-connectivity {other:?}: expected rigid or connected"),
         };
         c.pose_warmup = self.pose_warmup.then(|| WarmupOptions {
             min_matches_per_pair: self.warmup_min_matches,
@@ -328,7 +333,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("give either --data DIR or --synthetic, not both");
     }
     let (ds, truth, matching, name, idr, reference) = if args.synthetic {
-        let ds = sdf_dataset(&SdfSceneOptions::ring_of_eight());
+        let ds = sdf_dataset(&if args.synthetic_all_around {
+            SdfSceneOptions::ring_of_eight_all_around()
+        } else {
+            SdfSceneOptions::ring_of_eight()
+        });
         let reference = fewview_surface::sdf_scene::surface_mesh(256)?;
         (
             ds,
