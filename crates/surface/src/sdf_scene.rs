@@ -4,10 +4,13 @@
 //!
 //! The solid is a torus (major radius 0.45, minor 0.16) smoothly joined (polynomial smooth
 //! minimum, k = 0.12) with a sphere of radius 0.3 raised above its hole; it lies well inside the
-//! unit sphere. Its albedo is coloured 3D fractal value noise (a random texture for matching); shading is Lambertian under a directional key light from above, a weaker fill light from
-//! the opposite direction and ambient light, so colours
-//! do not depend on the viewing direction. The background is black. Cameras sit on a ring
-//! around the object at distance 3, alternating elevation, looking at the origin (world z up).
+//! unit sphere. Its albedo is coloured 3D fractal value noise (a random texture for matching);
+//! shading is Lambertian under a directional key light from above, a weaker fill light from the
+//! opposite direction below, and ambient light, so colours do not depend on the viewing
+//! direction. The background is black. Cameras sit on a ring around the object at distance 3,
+//! alternating elevation (30°, 15°), looking at the origin (world z up); further rings
+//! ([`Ring`], e.g. [`SdfSceneOptions::ring_of_eight_all_around`]) add views from the side and
+//! from below.
 
 use fewview_geom::Points;
 use fewview_scene::{Camera, Dataset, Image, Intrinsics, View};
@@ -248,7 +251,7 @@ fn shade(o: &Vector3<f64>, d: &Vector3<f64>) -> ([f64; 3], f64) {
     }
 }
 
-/// The cameras of the ring.
+/// The cameras: the first ring's, then each further ring's in order.
 pub fn cameras(opts: &SdfSceneOptions) -> Vec<Camera> {
     let focal = 0.5 * opts.width as f64 / (0.5 * opts.fov_deg.to_radians()).tan();
     let k = Intrinsics::centered(focal, opts.width as u32, opts.height as u32);
