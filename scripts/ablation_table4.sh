@@ -7,7 +7,7 @@ out="${1:?usage: $0 OUT_DIR}"
 bin="${FEWVIEW_BIN:-target/release/fewview}"
 data="${FEWVIEW_DATA:?set FEWVIEW_DATA to the shared data folder}"
 common=(surface --data "$data/dtu/scan65" --train-views 22,23,24 --downscale 2
-  --pose-noise 0.15 --seed 0 --pose-warmup --pose-start 0.5
+  --pose-noise 0.15 --seed 0 --schedule paper --pose-warmup --pose-start 0.5
   --iterations 240 --checkpoint-every 60 --mesh-resolution 64 --eval-views 1 --eval-scale 4)
 declare -A rows=(
   [A]="--no-uncertainty --no-ncc --no-gc"

@@ -339,6 +339,19 @@ fn surface_runs_on_the_built_in_analytic_scene_without_a_dataset() {
     let seen = metrics["chamfer_observed"]["relative"].as_f64().unwrap();
     assert!(seen.is_finite() && seen > 0.0, "{seen}");
     assert!(run.join("mesh.ply").exists());
+    // The default (CPU) schedule asks for the warm-up; the ring's sparse matches cannot tie
+    // its views together, so it declines and the poses fall back to the paper's timing.
+    assert!(
+        metrics["warmup"]["skipped"].is_string(),
+        "{}",
+        metrics["warmup"]
+    );
+    assert_eq!(metrics["pose_timing_fell_back"], true);
+    assert_eq!(metrics["pose_timing"]["start"], 0.0);
+    assert_eq!(
+        metrics["pose_timing"]["lr"]["start"].as_f64().unwrap() as f32,
+        1e-3
+    );
 
     // Neither a dataset nor the analytic scene; both.
     assert_clean_error(&fewview(&["surface", "--iterations", "1"]), &["--data"]);

@@ -22,6 +22,7 @@ pub mod pipeline;
 pub mod pose;
 pub mod rays;
 pub mod render;
+pub mod schedule;
 pub mod sdf_scene;
 pub mod train;
 pub mod warmup;

@@ -34,6 +34,7 @@ use crate::matching::{
     Match, MatchInput, MatchPrecision, covisible_pairs, epipolar_precision, match_pairs,
 };
 use crate::pose::perturb_poses;
+use crate::schedule::PoseTiming;
 use crate::train::{StepStats, TrainConfig, TrainView, Trainer};
 use crate::warmup::{WarmupOptions, WarmupReport, epipolar_warmup};
 
@@ -86,6 +87,12 @@ pub struct RunConfig {
     /// density of paper 001's PDC-Net matches.
     #[serde(default)]
     pub densify: Option<DensifyOptions>,
+    /// The pose timing the training uses instead of `train`'s when [`Self::pose_warmup`] is
+    /// asked for but declines (too few matches to tie the views together): a late release at
+    /// a low rate assumes warmed-up poses ([`crate::schedule::Schedule::Cpu`]). `None` keeps
+    /// `train`'s.
+    #[serde(default)]
+    pub pose_timing_without_warmup: Option<PoseTiming>,
 }
 
 fn default_max_pair_angle() -> f64 {
@@ -107,6 +114,24 @@ impl Default for RunConfig {
             max_pair_angle_deg: default_max_pair_angle(),
             match_refinement: Some(AffineRefineOptions::default()),
             densify: None,
+            pose_timing_without_warmup: None,
+        }
+    }
+}
+
+impl RunConfig {
+    /// The training configuration a run uses: `train`, with the pose timing replaced by
+    /// [`Self::pose_timing_without_warmup`] when the warm-up was asked for and declined
+    /// (`warmup` is its report). The flag says whether that happened.
+    pub fn effective_train(&self, warmup: Option<&WarmupReport>) -> (TrainConfig, bool) {
+        let mut train = self.train.clone();
+        let declined = warmup.is_some_and(|w| w.skipped.is_some());
+        match self.pose_timing_without_warmup {
+            Some(timing) if declined => {
+                timing.apply_to(&mut train);
+                (train, true)
+            }
+            _ => (train, false),
         }
     }
 }
@@ -320,6 +345,10 @@ pub struct RunReport {
     /// After the epipolar warm-up, when it ran.
     pub warmup: Option<WarmupReport>,
     pub warmup_pose_error: Option<PoseError>,
+    /// When the poses were released and their learning rate, as the training used them.
+    pub pose_timing: PoseTiming,
+    /// Whether that is [`RunConfig::pose_timing_without_warmup`] because the warm-up declined.
+    pub pose_timing_fell_back: bool,
     pub final_pose_error: PoseError,
     pub last_step: StepStats,
     /// Pose errors at the checkpoints of this invocation (a resumed run lists only its own).
@@ -380,6 +409,9 @@ pub enum Event<'a> {
         iteration: usize,
         pose_error: &'a PoseError,
     },
+    /// The warm-up declined, so the training refines the poses with
+    /// [`RunConfig::pose_timing_without_warmup`], this timing.
+    PoseTimingFallback(&'a PoseTiming),
     Stage(&'static str),
 }
 
@@ -517,15 +549,20 @@ pub fn run(
         }
         None => None,
     };
+    let (train_config, fell_back) = config.effective_train(prep.warmup.as_ref());
+    let pose_timing = PoseTiming::of(&train_config);
+    if fell_back {
+        on_event(Event::PoseTimingFallback(&pose_timing));
+    }
     let mut trainer = Trainer::new(
-        config.train.clone(),
+        train_config.clone(),
         prep.views.clone(),
         &prep.start,
         prep.matches.clone(),
     )?;
     let ckpt = out.join("checkpoint.bin");
     if resume && ckpt.exists() {
-        let state = checkpoint::load(&ckpt, &config.train)?;
+        let state = checkpoint::load(&ckpt, &train_config)?;
         trainer.restore(state)?;
         trainer.sync_progress();
     }
@@ -535,14 +572,14 @@ pub fn run(
     let start_it = trainer.state.iteration;
     let mut last = StepStats::default();
     let mut history = Vec::new();
-    while trainer.state.iteration < config.train.iterations {
+    while trainer.state.iteration < train_config.iterations {
         last = trainer.step()?;
         on_event(Event::Step(&last));
         let it = trainer.state.iteration;
         if config.checkpoint_every > 0
-            && (it % config.checkpoint_every == 0 || it == config.train.iterations)
+            && (it % config.checkpoint_every == 0 || it == train_config.iterations)
         {
-            checkpoint::save(&ckpt, &config.train, &trainer.state)?;
+            checkpoint::save(&ckpt, &train_config, &trainer.state)?;
             let err = pose_error(&trainer.poses(), &prep.ground_truth)?;
             history.push(PoseErrorAt {
                 iteration: it,
@@ -680,6 +717,8 @@ pub fn run(
         initial_pose_error: initial_err,
         warmup: prep.warmup.clone(),
         warmup_pose_error,
+        pose_timing,
+        pose_timing_fell_back: fell_back,
         final_pose_error: final_err,
         last_step: last,
         pose_error_history: history,
