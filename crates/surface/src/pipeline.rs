@@ -36,7 +36,7 @@ use crate::matching::{
 use crate::pose::perturb_poses;
 use crate::schedule::PoseTiming;
 use crate::train::{StepStats, TrainConfig, TrainView, Trainer};
-use crate::warmup::{WarmupOptions, WarmupReport, epipolar_warmup};
+use crate::warmup::{WarmupOptions, WarmupReport, epipolar_warmup, matches_tie_the_views};
 
 /// Where the initial poses come from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -87,6 +87,13 @@ pub struct RunConfig {
     /// density of paper 001's PDC-Net matches.
     #[serde(default)]
     pub densify: Option<DensifyOptions>,
+    /// Deviation, used by [`crate::schedule::Schedule::Cpu`]: when [`Self::densify`] is off,
+    /// the warm-up is on, and the refined sparse matches cannot tie the views together for it
+    /// ([`crate::warmup::matches_tie_the_views`]; e.g. DTU's wide triplet, whose outer pair
+    /// shares 2 of them), grow dense matches with these options all the same. The narrow
+    /// triplet's sparse matches suffice, and there the dense ones do not help (crate README).
+    #[serde(default)]
+    pub densify_if_needed: Option<DensifyOptions>,
     /// The pose timing the training uses instead of `train`'s when [`Self::pose_warmup`] is
     /// asked for but declines (too few matches to tie the views together): a late release at
     /// a low rate assumes warmed-up poses ([`crate::schedule::Schedule::Cpu`]). `None` keeps
@@ -114,6 +121,7 @@ impl Default for RunConfig {
             max_pair_angle_deg: default_max_pair_angle(),
             match_refinement: Some(AffineRefineOptions::default()),
             densify: None,
+            densify_if_needed: None,
             pose_timing_without_warmup: None,
         }
     }
@@ -150,6 +158,9 @@ pub struct Prepared {
     pub warmup: Option<WarmupReport>,
     pub matches: Vec<Match>,
     pub match_precision: Option<MatchPrecision>,
+    /// Why dense matches were grown under [`RunConfig::densify_if_needed`] (the warm-up's
+    /// verdict on the sparse ones), when they were.
+    pub densified_because: Option<String>,
 }
 
 /// Builds the training inputs: views, ground-truth and initial poses, correspondences.
@@ -216,11 +227,11 @@ pub fn prepare_with_matching(
         .train_views()
         .map(|v| v.camera.intrinsics)
         .collect();
-    let (fine_matches, match_precision) = match &config.matcher {
-        None => (Vec::new(), None),
+    let (fine_matches, match_precision, densified_because) = match &config.matcher {
+        None => (Vec::new(), None, None),
         Some(opts) => {
             let pairs = covisible_pairs(&initial, config.max_pair_angle_deg);
-            let (m, p) = correspondences(
+            let c = correspondences(
                 matching,
                 &pairs,
                 &match_intrinsics,
@@ -228,7 +239,7 @@ pub fn prepare_with_matching(
                 opts,
                 config,
             );
-            (m, Some(p))
+            (c.matches, Some(c.precision), c.densified_because)
         }
     };
     let (start, warmup) = match &config.pose_warmup {
@@ -255,6 +266,7 @@ pub fn prepare_with_matching(
         warmup,
         matches,
         match_precision,
+        densified_because,
     })
 }
 
@@ -286,8 +298,16 @@ fn matching_scale(dataset: &Dataset, matching: &Dataset) -> Result<usize> {
     Ok(scale.unwrap_or(1))
 }
 
+/// What [`correspondences`] found.
+struct Correspondences {
+    matches: Vec<Match>,
+    precision: MatchPrecision,
+    densified_because: Option<String>,
+}
+
 /// SIFT correspondences between the given pairs of training views of `dataset` (in its
-/// pixels), refined and densified as `config` asks, and their precision against the
+/// pixels), refined and densified as `config` asks (or, under
+/// [`RunConfig::densify_if_needed`], as the warm-up needs), and their precision against the
 /// ground-truth poses.
 fn correspondences(
     dataset: &Dataset,
@@ -296,7 +316,7 @@ fn correspondences(
     ground_truth: &[Se3],
     options: &SiftOptions,
     config: &RunConfig,
-) -> (Vec<Match>, MatchPrecision) {
+) -> Correspondences {
     let (use_masks, refinement) = (config.train.use_masks, config.match_refinement.as_ref());
     let inputs: Vec<MatchInput> = dataset
         .train_views()
@@ -317,7 +337,25 @@ fn correspondences(
         Some(o) => refine_matches(&images, &matches, o),
         None => matches,
     };
-    if let Some(o) = &config.densify {
+    let mut densified_because = None;
+    let densify = match (
+        &config.densify,
+        &config.densify_if_needed,
+        &config.pose_warmup,
+    ) {
+        (Some(o), _, _) => Some(o),
+        (None, Some(o), Some(warmup)) => {
+            match matches_tie_the_views(inputs.len(), &matches, warmup) {
+                Ok(()) => None,
+                Err(why) => {
+                    densified_because = Some(why);
+                    Some(o)
+                }
+            }
+        }
+        _ => None,
+    };
+    if let Some(o) = densify {
         let masks: Vec<Option<&Image>> = inputs.iter().map(|i| i.mask).collect();
         let window = refinement.cloned().unwrap_or_default();
         let dense = densify_matches(&images, &masks, &matches, pairs, &window, o);
@@ -329,7 +367,11 @@ fn correspondences(
         .map(|(k, p)| Camera::new(*k, *p))
         .collect();
     let precision = epipolar_precision(&matches, &cams);
-    (matches, precision)
+    Correspondences {
+        matches,
+        precision,
+        densified_because,
+    }
 }
 
 /// What a run reports.
@@ -341,6 +383,8 @@ pub struct RunReport {
     pub iterations_per_second_wall: f64,
     pub matches: usize,
     pub match_precision: Option<MatchPrecision>,
+    /// Why dense matches were grown under [`RunConfig::densify_if_needed`], when they were.
+    pub densified_because: Option<String>,
     pub initial_pose_error: PoseError,
     /// After the epipolar warm-up, when it ran.
     pub warmup: Option<WarmupReport>,
@@ -359,6 +403,10 @@ pub struct RunReport {
     pub chamfer: Option<ChamferReport>,
     /// Chamfer on the part of the reference the training views see, when known.
     pub chamfer_observed: Option<ChamferReport>,
+    /// Why a Chamfer score asked for (a reference given) is missing: an empty mesh, a failed
+    /// registration, or no part of the mesh near the observed reference (e.g. a run too short
+    /// to form a surface). The run's other outputs are kept.
+    pub chamfer_error: Option<String>,
     pub mesh_vertices: usize,
     pub mesh_faces: usize,
 }
@@ -397,6 +445,8 @@ pub enum Event<'a> {
     Matched {
         matches: usize,
         precision: Option<&'a MatchPrecision>,
+        /// Why dense matches were grown although not asked for ([`Prepared::densified_because`]).
+        densified_because: Option<&'a str>,
     },
     /// The epipolar warm-up finished; the pose error of its poses.
     WarmedUp {
@@ -517,6 +567,7 @@ pub fn run(
     on_event(Event::Matched {
         matches: prep.matches.len(),
         precision: prep.match_precision.as_ref(),
+        densified_because: prep.densified_because.as_deref(),
     });
     write_json(
         &out.join("matches.json"),
@@ -692,17 +743,9 @@ pub fn run(
         (!test_metrics.is_empty())
             .then(|| test_metrics.iter().map(f).sum::<f64>() / test_metrics.len() as f64)
     };
-    let (chamfer, chamfer_observed) = match reference {
-        Some(gt) if !mesh.faces.is_empty() => {
-            let aligned = register_to_reference(&mesh, gt, &final_err.alignment)?;
-            let observed = match reference_observed {
-                Some(flags) => Some(chamfer_of(&aligned, gt, Some(flags))?),
-                None => None,
-            };
-            (Some(chamfer_of(&aligned, gt, None)?), observed)
-        }
-        _ => (None, None),
-    };
+    let scores =
+        reference.map(|gt| reference_scores(&mesh, gt, reference_observed, &final_err.alignment));
+    let (chamfer, chamfer_observed, chamfer_error) = scores.unwrap_or_default();
     let report = RunReport {
         iterations: trainer.state.iteration,
         train_seconds_wall: train_wall,
@@ -714,6 +757,7 @@ pub fn run(
         },
         matches: prep.matches.len(),
         match_precision: prep.match_precision.clone(),
+        densified_because: prep.densified_because.clone(),
         initial_pose_error: initial_err,
         warmup: prep.warmup.clone(),
         warmup_pose_error,
@@ -727,11 +771,40 @@ pub fn run(
         test_views: test_metrics,
         chamfer,
         chamfer_observed,
+        chamfer_error,
         mesh_vertices: mesh.vertices.len(),
         mesh_faces: mesh.faces.len(),
     };
     write_json(&out.join("metrics.json"), &report)?;
     Ok(report)
+}
+
+/// Chamfer of `mesh` against `reference` on the whole reference and, given per-face flags, on
+/// its observed part, after registering it ([`register_to_reference`]); what cannot be scored
+/// is `None`, with the reasons.
+fn reference_scores(
+    mesh: &Mesh,
+    reference: &Mesh,
+    observed: Option<&[bool]>,
+    alignment: &Similarity,
+) -> (Option<ChamferReport>, Option<ChamferReport>, Option<String>) {
+    if mesh.faces.is_empty() {
+        return (None, None, Some("the extracted mesh is empty".into()));
+    }
+    let aligned = match register_to_reference(mesh, reference, alignment) {
+        Ok(m) => m,
+        Err(e) => return (None, None, Some(format!("registration: {e}"))),
+    };
+    let mut errors = Vec::new();
+    let mut score = |flags: Option<&[bool]>, what: &str| {
+        chamfer_of(&aligned, reference, flags)
+            .map_err(|e| errors.push(format!("{what}: {e}")))
+            .ok()
+    };
+    let whole = score(None, "whole surface");
+    let seen = observed.and_then(|flags| score(Some(flags), "observed part"));
+    let why = (!errors.is_empty()).then(|| errors.join("; "));
+    (whole, seen, why)
 }
 
 /// Paper 001 Alg. 3: the mesh pre-aligned with the pose-evaluation similarity, then

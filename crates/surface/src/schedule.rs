@@ -14,6 +14,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::adam::ExpSchedule;
+use crate::matching::densify::DensifyOptions;
 use crate::pipeline::RunConfig;
 use crate::train::TrainConfig;
 use crate::warmup::WarmupOptions;
@@ -73,26 +74,35 @@ pub enum Schedule {
     /// Paper 001: no warm-up, poses refined from the first iteration at 10⁻³ → 10⁻⁴.
     Paper,
     /// The CPU schedule that converges (the module docs): the epipolar warm-up, then
-    /// [`PoseTiming::LATE_RELEASE`]. When the warm-up declines (too few matches to tie the
-    /// views together, e.g. DTU's wide triplet without `--densify`), holding the unrefined
-    /// noisy poses for most of the run would waste it, so the run falls back to
-    /// [`PoseTiming::PAPER`] ([`RunConfig::pose_timing_without_warmup`]).
+    /// [`PoseTiming::LATE_RELEASE`]. When the sparse matches cannot tie the views together for
+    /// the warm-up, dense ones are grown on a 4-pixel grid first
+    /// ([`RunConfig::densify_if_needed`]; DTU's wide triplet: 12° → 0.16–0.19°). When the
+    /// warm-up still declines (e.g. a ring of views whose neighbours alone are matched),
+    /// holding the unrefined noisy poses for most of the run would waste it, so the run falls
+    /// back to [`PoseTiming::PAPER`] ([`RunConfig::pose_timing_without_warmup`]).
     #[default]
     Cpu,
 }
 
 impl Schedule {
-    /// Sets the warm-up, the pose timing and the fallback of `config` for this schedule.
+    /// Sets the warm-up, the pose timing, the densification if needed and the fallback of
+    /// `config` for this schedule.
     pub fn apply(self, config: &mut RunConfig) {
         match self {
             Schedule::Paper => {
                 config.pose_warmup = None;
                 PoseTiming::PAPER.apply_to(&mut config.train);
+                config.densify_if_needed = None;
                 config.pose_timing_without_warmup = None;
             }
             Schedule::Cpu => {
                 config.pose_warmup = Some(WarmupOptions::default());
                 PoseTiming::LATE_RELEASE.apply_to(&mut config.train);
+                config.densify_if_needed = Some(DensifyOptions {
+                    spacing_px: 4,
+                    compose_unmatched_pairs: true,
+                    ..Default::default()
+                });
                 config.pose_timing_without_warmup = Some(PoseTiming::PAPER);
             }
         }
@@ -119,6 +129,8 @@ mod tests {
         assert_eq!(c.train.pose_start, 0.75);
         assert_eq!((c.train.pose_lr.start, c.train.pose_lr.end), (1e-4, 1e-5));
         assert_eq!(c.pose_timing_without_warmup, Some(PoseTiming::PAPER));
+        assert_eq!(c.densify, None);
+        assert_eq!(c.densify_if_needed.as_ref().map(|d| d.spacing_px), Some(4));
         // Back to the paper's clears all of it.
         Schedule::Paper.apply(&mut c);
         assert_eq!(c, RunConfig::default());

@@ -156,7 +156,6 @@ pub fn epipolar_warmup(
     matches: &[Match],
     options: &WarmupOptions,
 ) -> (Vec<Se3>, WarmupReport) {
-    let unknowns = 6 * poses.len();
     let n = poses.len();
     let mut report = WarmupReport {
         skipped: None,
@@ -177,20 +176,8 @@ pub fn epipolar_warmup(
             Some("bad input (pose/intrinsics counts, match views or Cauchy scale)".into());
         return (poses.to_vec(), report);
     }
-    let matches = match usable_matches(
-        matches,
-        n,
-        options.min_matches_per_pair,
-        options.connectivity,
-    ) {
-        Ok(m) if m.len() >= unknowns => m,
-        Ok(m) => {
-            report.skipped = Some(format!(
-                "too few matches: {} for {unknowns} unknowns",
-                m.len()
-            ));
-            return (poses.to_vec(), report);
-        }
+    let matches = match tying_matches(matches, n, options) {
+        Ok(m) => m,
         Err(why) => {
             report.skipped = Some(why);
             return (poses.to_vec(), report);
@@ -323,6 +310,39 @@ fn usable_matches(
         .filter(|m| usable(m.view_a, m.view_b))
         .copied()
         .collect())
+}
+
+/// The matches the warm-up uses ([`usable_matches`]), or why there are too few of them to tie
+/// the `n` views together (also when they are fewer than the unknowns, six per view).
+fn tying_matches(
+    matches: &[Match],
+    n: usize,
+    options: &WarmupOptions,
+) -> Result<Vec<Match>, String> {
+    let unknowns = 6 * n;
+    let usable = usable_matches(
+        matches,
+        n,
+        options.min_matches_per_pair,
+        options.connectivity,
+    )?;
+    if usable.len() < unknowns {
+        return Err(format!(
+            "too few matches: {} for {unknowns} unknowns",
+            usable.len()
+        ));
+    }
+    Ok(usable)
+}
+
+/// `Ok` when [`epipolar_warmup`] would find enough `matches` between `n` views to run under
+/// `options`, else why not: a run can then decide to look for more matches first.
+pub fn matches_tie_the_views(
+    n: usize,
+    matches: &[Match],
+    options: &WarmupOptions,
+) -> Result<(), String> {
+    tying_matches(matches, n, options).map(|_| ())
 }
 
 /// Whether the graph of `edge`s reaches every one of the `n` views from view 0.

@@ -10,6 +10,7 @@
 use fewview_scene::load::{LoadOptions, load_dataset};
 use fewview_surface::adam::ExpSchedule;
 use fewview_surface::pipeline::{InitialPoses, RunConfig, RunInputs, run};
+use fewview_surface::schedule::Schedule;
 
 #[test]
 #[ignore = "needs FEWVIEW_DATA (dataset tests)"]
@@ -110,10 +111,11 @@ fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
     let narrow = load(vec![22, 23, 24], 2);
     let narrow_fine = load(vec![22, 23, 24], 1);
     for seed in 0..3 {
+        // The CLI's default schedule: it would densify if the sparse matches fell short.
         let mut config = RunConfig::default();
+        Schedule::Cpu.apply(&mut config);
         config.train.seed = seed;
         config.initial_poses = InitialPoses::NoisyGroundTruth { sigma: 0.15 };
-        config.pose_warmup = Some(WarmupOptions::default());
         // As the CLI: the matcher's RANSAC takes the run's seed too.
         config.matcher = Some(fewview_surface::matching::sift::SiftOptions {
             seed,
@@ -130,6 +132,7 @@ fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
             100.0 * after.translation
         );
         assert!(prep.warmup.as_ref().unwrap().skipped.is_none());
+        assert_eq!(prep.densified_because, None, "the sparse matches suffice");
         assert!(before.rotation_deg > 5.0, "{before:?}");
         // Measured 0.106° / 0.106° / 0.093° and t×100 0.36 / 0.36 / 0.34 (unrefined matches:
         // 0.293° / 0.310° / 0.278°, 1.25 / 1.19 / 0.95; matching at 400 × 300: 0.59–0.72°).
@@ -186,19 +189,15 @@ fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
         before.rotation_deg, after.rotation_deg
     );
     assert!(after.rotation_deg < 1.0, "{before:?} → {after:?}");
-    // Dense matches (`--densify 4 --max-pair-angle 180 --warmup-min-matches 30`): the outer
-    // pair, seeded through view 25, gets ~320 matches, triangles form, and every seed's warm-up
-    // runs. Measured 0.163° / 0.159° / 0.186°, t×100 0.64 / 0.63 / 0.86.
+    // Dense matches, grown because the sparse ones cannot tie the views together (the CLI's
+    // default `--schedule cpu --densify auto`, with `--max-pair-angle 180`; the same as
+    // `--densify 4 --max-pair-angle 180 --warmup-min-matches 30`): the outer pair, seeded through
+    // view 25, gets ~320 matches, triangles form, and every seed's warm-up runs. Measured
+    // 0.163° / 0.159° / 0.186°, t×100 0.64 / 0.63 / 0.86.
     for seed in 0..3 {
+        let mut cpu = RunConfig::default();
+        Schedule::Cpu.apply(&mut cpu);
         let dense = RunConfig {
-            pose_warmup: Some(WarmupOptions {
-                min_matches_per_pair: 30,
-                ..Default::default()
-            }),
-            densify: Some(fewview_surface::matching::densify::DensifyOptions {
-                spacing_px: 4,
-                ..Default::default()
-            }),
             max_pair_angle_deg: 180.0,
             matcher: Some(fewview_surface::matching::sift::SiftOptions {
                 seed,
@@ -206,11 +205,13 @@ fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
             }),
             train: fewview_surface::train::TrainConfig {
                 seed,
-                ..Default::default()
+                ..cpu.train.clone()
             },
-            ..Default::default()
+            ..cpu
         };
         let prep = prepare_with_matching(&wide, None, Some(&wide_fine), &dense).unwrap();
+        let why = prep.densified_because.as_deref().unwrap_or_default();
+        assert!(why.contains("too few matches"), "seed {seed}: {why:?}");
         assert!(prep.warmup.as_ref().unwrap().skipped.is_none());
         let after = error(&prep.start, &prep.ground_truth);
         eprintln!(

@@ -100,9 +100,11 @@ pub struct Args {
     pub match_refine: String,
     /// Deviation from paper 001 (which has PDC-Net's dense matches): grow dense matches from
     /// the sparse ones, on a grid of this spacing (pixels of the matching images), by affine
-    /// Lucas–Kanade with forward–backward checks. 0 (default) keeps the sparse matches only.
-    #[arg(long, default_value_t = 0, value_name = "PX")]
-    pub densify: usize,
+    /// Lucas–Kanade with forward–backward checks. `auto` (default): with `--schedule cpu`, on
+    /// a 4-pixel grid only when the sparse matches cannot tie the views together for the
+    /// warm-up (DTU's wide triplet), else not at all. `off` or 0: sparse matches only.
+    #[arg(long, default_value = "auto", value_name = "PX|auto|off")]
+    pub densify: String,
     /// Deviation from paper 001 (on with `--schedule cpu`): before the joint optimisation,
     /// refine the initial poses on the correspondences' epipolar constraints alone (robust
     /// Sampson distance, Levenberg–Marquardt). Helps when the classical matcher finds too few
@@ -326,10 +328,19 @@ impl Args {
             "none" => None,
             other => bail!("--match-refine {other:?}: expected affine or none"),
         };
-        c.densify = (self.densify > 0).then(|| DensifyOptions {
-            spacing_px: self.densify,
-            ..Default::default()
-        });
+        match self.densify.as_str() {
+            "auto" => {}
+            "off" | "0" => c.densify_if_needed = None,
+            px => {
+                let spacing_px: usize = px.parse().ok().filter(|&v| v > 0).with_context(|| {
+                    format!("--densify {px:?}: expected a grid spacing in pixels, auto or off")
+                })?;
+                c.densify = Some(DensifyOptions {
+                    spacing_px,
+                    ..Default::default()
+                });
+            }
+        }
         c.mesh_resolution = self.mesh_resolution;
         c.eval_views = self.eval_views;
         c.eval_scale = self.eval_scale.max(1);
@@ -445,7 +456,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         reference_observed: observed.as_deref(),
     };
     let report = run_pipeline(inputs, &cfg, &out, args.resume, &mut |e| match e {
-        Event::Matched { matches, precision } => {
+        Event::Matched {
+            matches,
+            precision,
+            densified_because,
+        } => {
             let p = precision
                 .map(|p| {
                     format!(
@@ -454,7 +469,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     )
                 })
                 .unwrap_or_default();
-            bar.suspend(|| eprintln!("{matches} correspondences{p}"));
+            bar.suspend(|| {
+                if let Some(why) = densified_because {
+                    eprintln!(
+                        "sparse matches cannot tie the views together ({why}): growing dense ones"
+                    );
+                }
+                eprintln!("{matches} correspondences{p}")
+            });
         }
         Event::Step(s) => {
             bar.set_position(s.iteration as u64 + 1);
@@ -492,7 +514,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             };
             eprintln!(
                 "so the poses are refined from {from} at {:e} → {:e} instead (views that share \
-                 few matches may need --densify 4 --max-pair-angle 180)",
+                 few matches may need a larger --max-pair-angle: 180 matches every pair)",
                 timing.lr.start, timing.lr.end
             )
         }),
@@ -543,6 +565,9 @@ fn print_report(r: &RunReport, out: &std::path::Path) {
             c.chamfer_l1,
             100.0 * c.relative
         );
+    }
+    if let Some(why) = &r.chamfer_error {
+        println!("chamfer-L1       not scored: {why}");
     }
     println!(
         "mesh             {} vertices, {} faces",
@@ -608,6 +633,33 @@ mod tests {
         assert_eq!(c.pose_timing_without_warmup, None);
         let c = config(&["--warmup-min-matches", "30"]);
         assert_eq!(c.pose_warmup.unwrap().min_matches_per_pair, 30);
+    }
+
+    #[test]
+    fn densify_is_automatic_explicit_or_off() {
+        let c = config(&[]);
+        assert_eq!(
+            (c.densify.is_some(), c.densify_if_needed.is_some()),
+            (false, true)
+        );
+        let c = config(&["--densify", "6"]);
+        assert_eq!(c.densify.map(|d| d.spacing_px), Some(6));
+        for off in ["off", "0"] {
+            let c = config(&["--densify", off]);
+            assert_eq!(
+                (c.densify.is_some(), c.densify_if_needed.is_some()),
+                (false, false)
+            );
+        }
+        let c = config(&["--schedule", "paper"]);
+        assert!(c.densify_if_needed.is_none());
+        let err = Cli::try_parse_from(["surface", "--densify", "dense"])
+            .unwrap()
+            .args
+            .config(false)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("--densify \"dense\""), "{err}");
     }
 
     #[test]

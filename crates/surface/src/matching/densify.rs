@@ -51,6 +51,16 @@ pub struct DensifyOptions {
     pub neighbours: usize,
     /// Pairs with fewer direct seeds are seeded by composition through a third view.
     pub min_seeds: usize,
+    /// Also seed by composition the pairs of views missing from the `pairs` given to
+    /// [`densify_matches`] (those the matcher was not asked to match, beyond the pipeline's
+    /// `max_pair_angle_deg`). The angle filter keeps look-alike SIFT matches between views that
+    /// share no surface out; a composed match instead rests on two grown pairs and is then
+    /// checked by its own windows, so it needs no such guard. It gives views two steps apart
+    /// on a ring their matches, and DTU's wide outer pair when σ = 0.15 noise has pushed it
+    /// past the angle (seed 1: 89.7°). Off by default; [`crate::schedule::Schedule::Cpu`]
+    /// turns it on for the dense matches it grows when the warm-up needs them.
+    #[serde(default)]
+    pub compose_unmatched_pairs: bool,
     /// Confidence given to composed matches.
     pub composed_confidence: f32,
 }
@@ -66,6 +76,7 @@ impl Default for DensifyOptions {
             max_forward_backward_px: 0.3,
             neighbours: 10,
             min_seeds: 20,
+            compose_unmatched_pairs: false,
             composed_confidence: 0.5,
         }
     }
@@ -122,12 +133,16 @@ pub fn densify_matches(
             dense.extend(grow_pair(va, vb, &direct));
         }
     }
+    let unmatched = (0..images.len())
+        .flat_map(|a| (a + 1..images.len()).map(move |b| (a, b)))
+        .filter(|p| options.compose_unmatched_pairs && !pairs.contains(p));
     let weak: Vec<(usize, usize)> = pairs
         .iter()
         .copied()
         .filter(|&(va, vb)| {
             of_pair(seeds, va, vb).len() + of_pair(&dense, va, vb).len() < options.min_seeds
         })
+        .chain(unmatched)
         .collect();
     // Pass 2: the others, seeded through a third view.
     let first_pass: Vec<Match> = seeds.iter().chain(&dense).copied().collect();
@@ -479,28 +494,43 @@ mod tests {
         let (_, c) = affine_pair(m02, o02);
         let mut seed_matches = seeds(&m1, &o1, (0, 1));
         seed_matches.extend(seeds(&m2, &o2, (1, 2)));
-        let dense = densify_matches(
-            &[&a, &b, &c],
-            &[None, None, None],
-            &seed_matches,
-            &[(0, 1), (0, 2), (1, 2)],
-            &AffineRefineOptions::default(),
-            &DensifyOptions::default(),
-        );
-        let through: Vec<&Match> = dense
-            .iter()
+        let of_0_2 = |pairs: &[(usize, usize)], options: &DensifyOptions| -> Vec<Match> {
+            densify_matches(
+                &[&a, &b, &c],
+                &[None, None, None],
+                &seed_matches,
+                pairs,
+                &AffineRefineOptions::default(),
+                options,
+            )
+            .into_iter()
             .filter(|m| (m.view_a, m.view_b) == (0, 2))
-            .collect();
-        assert!(through.len() >= 150, "{} matches of (0, 2)", through.len());
-        let worst = through
-            .iter()
-            .map(|m| error(m, &m02, &o02))
-            .fold(0.0, f64::max);
-        assert!(worst < 0.05, "worst error {worst} px");
-        assert!(
-            through
+            .collect()
+        };
+        let check = |through: &[Match]| {
+            assert!(through.len() >= 150, "{} matches of (0, 2)", through.len());
+            let worst = through
                 .iter()
-                .any(|m| m.confidence == DensifyOptions::default().composed_confidence)
-        );
+                .map(|m| error(m, &m02, &o02))
+                .fold(0.0, f64::max);
+            assert!(worst < 0.05, "worst error {worst} px");
+            assert!(
+                through
+                    .iter()
+                    .any(|m| m.confidence == DensifyOptions::default().composed_confidence)
+            );
+        };
+        check(&of_0_2(
+            &[(0, 1), (0, 2), (1, 2)],
+            &DensifyOptions::default(),
+        ));
+        // A pair the matcher was not asked for gets matches only when asked to compose them.
+        let asked = [(0, 1), (1, 2)];
+        assert!(of_0_2(&asked, &DensifyOptions::default()).is_empty());
+        let compose_all = DensifyOptions {
+            compose_unmatched_pairs: true,
+            ..Default::default()
+        };
+        check(&of_0_2(&asked, &compose_all));
     }
 }
