@@ -70,9 +70,10 @@ pub struct Args {
     /// Pose schedule: `cpu` (default; deviations from paper 001 that converge in the CPU
     /// budget, measured on DTU scan65's narrow triplet: 12° → 0.083–0.092°): the epipolar
     /// warm-up, then the poses held for the first 75 % of the iterations and refined at
-    /// 1e-4 → 1e-5; if the warm-up declines (too few matches to tie the views together), the
-    /// poses are refined from the first iteration at the paper's rate instead. `paper`: no
-    /// warm-up, refined from the first iteration at 1e-3 → 1e-4 (paper 001 §B.1).
+    /// 1e-4 → 1e-5; dense matches are grown first when the sparse ones cannot tie the views
+    /// together for the warm-up (`--densify auto`), and if it still declines, the poses are
+    /// refined from the first iteration at the paper's rate instead. `paper`: no warm-up,
+    /// refined from the first iteration at 1e-3 → 1e-4 (paper 001 §B.1).
     /// `--pose-warmup`/`--no-pose-warmup`, `--pose-start` and `--pose-lr` override it.
     #[arg(long, value_enum, default_value_t = ScheduleArg::Cpu)]
     pub schedule: ScheduleArg,
@@ -102,7 +103,9 @@ pub struct Args {
     /// the sparse ones, on a grid of this spacing (pixels of the matching images), by affine
     /// Lucas–Kanade with forward–backward checks. `auto` (default): with `--schedule cpu`, on
     /// a 4-pixel grid only when the sparse matches cannot tie the views together for the
-    /// warm-up (DTU's wide triplet), else not at all. `off` or 0: sparse matches only.
+    /// warm-up (DTU's wide triplet, the analytic ring), also composing matches through a third
+    /// view for the pairs `--max-pair-angle` left unmatched; else not at all. `off` or 0:
+    /// sparse matches only.
     #[arg(long, default_value = "auto", value_name = "PX|auto|off")]
     pub densify: String,
     /// Deviation from paper 001 (on with `--schedule cpu`): before the joint optimisation,
