@@ -73,8 +73,10 @@ pub struct RunConfig {
     /// Match only pairs of views whose optical axes, under the initial poses, are at most this
     /// many degrees apart ([`covisible_pairs`]). Paper 001 matches every pair of its three
     /// views; on rings of views the default drops the opposite ones. On DTU's wide triplet
-    /// σ = 0.15 noise can push the outer pair past it (seed 1: 89.7° under the noisy poses), so
-    /// pass 180 there to match every pair as the paper does.
+    /// σ = 0.15 noise can push the outer pair past it (seed 1: 89.7° under the noisy poses):
+    /// pass 180 there to match every pair as the paper does, or let dense matching compose
+    /// that pair through the middle view (`DensifyOptions::compose_unmatched_pairs`, as
+    /// [`crate::schedule::Schedule::Cpu`] does).
     #[serde(default = "default_max_pair_angle")]
     pub max_pair_angle_deg: f64,
     /// Deviation, on by default: refine each match's second end to sub-pixel precision by
