@@ -223,47 +223,49 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
 
     let background = opts.background.unwrap_or([0.0; 3]);
     let extra = (opts.llff_factor / folder_factor).saturating_mul(opts.downscale);
-    let views = files
-        .par_iter()
-        .enumerate()
-        .map(|(i, file)| {
-            let [h_full, w_full, f_full] = rows[i].hwf;
-            let photo = load::load_photo(file, background)?;
-            let (w, h) = (photo.rgb.width, photo.rgb.height);
-            // The stored images are the full resolution divided by the folder's factor (rounded
-            // either way by the resizer that made them).
-            let g = folder_factor as f64;
-            if (w as f64 * g - w_full).abs() >= g || (h as f64 * g - h_full).abs() >= g {
-                return Err(SceneError::invalid(
-                    file,
-                    format!(
-                        "image is {w}×{h} but poses_bounds.npy says {w_full}×{h_full} at full resolution, i.e. {:.1}×{:.1} at factor {folder_factor}",
-                        w_full / g,
-                        h_full / g
-                    ),
-                ));
-            }
-            // NeRF divides the full-resolution focal by the folder's factor; the principal point is
-            // the image centre.
-            let intrinsics = Intrinsics::centered(f_full / g, w as u32, h as u32);
-            let camera = Camera::from_camera_to_world(intrinsics, opengl_to_opencv(&gl[i]));
-            load::check_camera(&camera, &poses_path, &format!("row {i}"))?;
-            let camera = load::downscale_camera(&camera, extra);
-            let image = load::downscale_image(&photo.rgb, extra, file)?;
-            let mask = match photo.alpha {
-                Some(a) => Some(load::downscale_mask(&a, extra, false, file)?),
-                None => None,
-            };
-            Ok(View {
-                name: load::stem(file),
-                camera,
-                image,
-                mask_is_alpha: mask.is_some(),
-                mask,
-                depth_bounds: Some(bounds[i]),
+    let views = load::first_error_in_order(
+        files
+            .par_iter()
+            .enumerate()
+            .map(|(i, file)| {
+                let [h_full, w_full, f_full] = rows[i].hwf;
+                let photo = load::load_photo(file, background)?;
+                let (w, h) = (photo.rgb.width, photo.rgb.height);
+                // The stored images are the full resolution divided by the folder's factor (rounded
+                // either way by the resizer that made them).
+                let g = folder_factor as f64;
+                if (w as f64 * g - w_full).abs() >= g || (h as f64 * g - h_full).abs() >= g {
+                    return Err(SceneError::invalid(
+                        file,
+                        format!(
+                            "image is {w}×{h} but poses_bounds.npy says {w_full}×{h_full} at full resolution, i.e. {:.1}×{:.1} at factor {folder_factor}",
+                            w_full / g,
+                            h_full / g
+                        ),
+                    ));
+                }
+                // NeRF divides the full-resolution focal by the folder's factor; the principal point is
+                // the image centre.
+                let intrinsics = Intrinsics::centered(f_full / g, w as u32, h as u32);
+                let camera = Camera::from_camera_to_world(intrinsics, opengl_to_opencv(&gl[i]));
+                load::check_camera(&camera, &poses_path, &format!("row {i}"))?;
+                let camera = load::downscale_camera(&camera, extra);
+                let image = load::downscale_image(&photo.rgb, extra, file)?;
+                let mask = match photo.alpha {
+                    Some(a) => Some(load::downscale_mask(&a, extra, false, file)?),
+                    None => None,
+                };
+                Ok(View {
+                    name: load::stem(file),
+                    camera,
+                    image,
+                    mask_is_alpha: mask.is_some(),
+                    mask,
+                    depth_bounds: Some(bounds[i]),
+                })
             })
-        })
-        .collect::<Result<Vec<_>>>()?;
+            .collect(),
+    )?;
 
     let n_views = views.len();
     let (train, test) = load::choose_split(

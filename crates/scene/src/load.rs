@@ -247,6 +247,13 @@ pub(crate) fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
 }
 
 /// The file stem, for [`crate::View::name`].
+/// The views of a parallel load in order, or the error of the first view (in file order) that
+/// failed. Rayon's own `collect::<Result<_>>` returns whichever error a thread meets first, so
+/// a folder with several bad files would name a different one from run to run.
+pub(crate) fn first_error_in_order<T>(results: Vec<Result<T>>) -> Result<Vec<T>> {
+    results.into_iter().collect()
+}
+
 pub(crate) fn stem(path: &Path) -> String {
     path.file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -417,6 +424,29 @@ pub(crate) fn choose_split(
 mod tests {
     use super::*;
     use crate::camera::Se3;
+
+    #[test]
+    fn a_parallel_load_reports_the_first_bad_file_in_order() {
+        use rayon::prelude::*;
+        let names = ["a.png", "b.png", "c.png", "d.png"];
+        for _ in 0..20 {
+            let results: Vec<Result<usize>> = names
+                .par_iter()
+                .enumerate()
+                .map(|(i, n)| {
+                    if i == 0 {
+                        Ok(i)
+                    } else {
+                        Err(SceneError::invalid(*n, "bad"))
+                    }
+                })
+                .collect();
+            let e = first_error_in_order(results).unwrap_err().to_string();
+            assert!(e.starts_with("b.png"), "{e}");
+        }
+        let all_good: Vec<Result<usize>> = (0..3).map(Ok).collect();
+        assert_eq!(first_error_in_order(all_good).unwrap(), vec![0, 1, 2]);
+    }
 
     #[test]
     fn format_names_parse() {
