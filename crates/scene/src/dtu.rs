@@ -234,38 +234,29 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let background = opts.background.unwrap_or([0.0; 3]);
     let k = opts.downscale;
 
-    let views = load::first_error_in_order(
-        images
-            .par_iter()
-            .enumerate()
-            .map(|(i, file)| {
-                let photo = load::load_photo(file, background)?;
-                let camera = camera_from_projection(
-                    &cameras.projections[i],
-                    photo.rgb.width,
-                    photo.rgb.height,
-                )
+    let views = load::first_error_in_order(images.par_iter().enumerate().map(|(i, file)| {
+        let photo = load::load_photo(file, background)?;
+        let camera =
+            camera_from_projection(&cameras.projections[i], photo.rgb.width, photo.rgb.height)
                 .map_err(|m| SceneError::invalid(&cam_path, format!("view {i}: {m}")))?;
-                load::check_camera(&camera, &cam_path, &format!("view {i}"))?;
-                let mask = match &masks {
-                    Some(m) => {
-                        let mask = load::load_binary_mask(&m[i])?;
-                        load::check_size(&mask, &camera, &m[i], "mask")?;
-                        Some(load::downscale_mask(&mask, k, true, &m[i])?)
-                    }
-                    None => None,
-                };
-                Ok(View {
-                    name: load::stem(file),
-                    camera: load::downscale_camera(&camera, k),
-                    image: load::downscale_image(&photo.rgb, k, file)?,
-                    mask,
-                    depth_bounds: None,
-                    mask_is_alpha: false,
-                })
-            })
-            .collect(),
-    )?;
+        load::check_camera(&camera, &cam_path, &format!("view {i}"))?;
+        let mask = match &masks {
+            Some(m) => {
+                let mask = load::load_binary_mask(&m[i])?;
+                load::check_size(&mask, &camera, &m[i], "mask")?;
+                Some(load::downscale_mask(&mask, k, true, &m[i])?)
+            }
+            None => None,
+        };
+        Ok(View {
+            name: load::stem(file),
+            camera: load::downscale_camera(&camera, k),
+            image: load::downscale_image(&photo.rgb, k, file)?,
+            mask,
+            depth_bounds: None,
+            mask_is_alpha: false,
+        })
+    }))?;
 
     let (train, test) = load::choose_split(
         opts,

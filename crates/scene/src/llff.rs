@@ -264,7 +264,6 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
                     depth_bounds: Some(bounds[i]),
                 })
             })
-            .collect(),
     )?;
 
     let n_views = views.len();

@@ -11,6 +11,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::camera::{Camera, Intrinsics};
@@ -246,14 +247,17 @@ pub(crate) fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(out)
 }
 
-/// The file stem, for [`crate::View::name`].
 /// The views of a parallel load in order, or the error of the first view (in file order) that
 /// failed. Rayon's own `collect::<Result<_>>` returns whichever error a thread meets first, so
 /// a folder with several bad files would name a different one from run to run.
-pub(crate) fn first_error_in_order<T>(results: Vec<Result<T>>) -> Result<Vec<T>> {
+pub(crate) fn first_error_in_order<T: Send>(
+    loads: impl IndexedParallelIterator<Item = Result<T>>,
+) -> Result<Vec<T>> {
+    let results: Vec<Result<T>> = loads.collect();
     results.into_iter().collect()
 }
 
+/// The file stem, for [`crate::View::name`].
 pub(crate) fn stem(path: &Path) -> String {
     path.file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -427,24 +431,19 @@ mod tests {
 
     #[test]
     fn a_parallel_load_reports_the_first_bad_file_in_order() {
-        use rayon::prelude::*;
         let names = ["a.png", "b.png", "c.png", "d.png"];
         for _ in 0..20 {
-            let results: Vec<Result<usize>> = names
-                .par_iter()
-                .enumerate()
-                .map(|(i, n)| {
-                    if i == 0 {
-                        Ok(i)
-                    } else {
-                        Err(SceneError::invalid(*n, "bad"))
-                    }
-                })
-                .collect();
-            let e = first_error_in_order(results).unwrap_err().to_string();
+            let loads = names.par_iter().enumerate().map(|(i, n)| {
+                if i == 0 {
+                    Ok(i)
+                } else {
+                    Err(SceneError::invalid(*n, "bad"))
+                }
+            });
+            let e = first_error_in_order(loads).unwrap_err().to_string();
             assert!(e.starts_with("b.png"), "{e}");
         }
-        let all_good: Vec<Result<usize>> = (0..3).map(Ok).collect();
+        let all_good = (0..3usize).into_par_iter().map(Ok);
         assert_eq!(first_error_in_order(all_good).unwrap(), vec![0, 1, 2]);
     }
 

@@ -253,12 +253,7 @@ fn load_frame(frame: &Frame, background: [f32; 3], k: u32) -> Result<View> {
 }
 
 fn load_frames(frames: &[&Frame], background: [f32; 3], k: u32) -> Result<Vec<View>> {
-    load::first_error_in_order(
-        frames
-            .par_iter()
-            .map(|f| load_frame(f, background, k))
-            .collect(),
-    )
+    load::first_error_in_order(frames.par_iter().map(|f| load_frame(f, background, k)))
 }
 
 /// Loads NeRF-synthetic data. Training views are the first `n_train` (default 8) entries of the

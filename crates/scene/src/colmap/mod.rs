@@ -275,37 +275,32 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let background = opts.background.unwrap_or([0.0; 3]);
     let image_dir = root.join("images");
     let k = opts.downscale;
-    let views = load::first_error_in_order(
-        images
-            .par_iter()
-            .map(|img| {
-                let cam = &model.cameras[&img.camera_id];
-                let intrinsics = cam
-                    .intrinsics()
-                    .map_err(|m| SceneError::invalid(&dir, format!("camera {}: {m}", cam.id)))?;
-                let pose = img
-                    .world_to_camera()
-                    .map_err(|m| SceneError::invalid(&dir, m))?;
-                let camera = Camera::new(intrinsics, pose);
-                load::check_camera(&camera, &dir, &format!("image {} ({})", img.id, img.name))?;
-                let file = image_dir.join(&img.name);
-                let photo = load::load_photo(&file, background)?;
-                load::check_size(&photo.rgb, &camera, &file, "image")?;
-                let mask = match photo.alpha {
-                    Some(a) => Some(load::downscale_mask(&a, k, false, &file)?),
-                    None => None,
-                };
-                Ok(View {
-                    name: load::stem(Path::new(&img.name)),
-                    camera: load::downscale_camera(&camera, k),
-                    image: load::downscale_image(&photo.rgb, k, &file)?,
-                    mask_is_alpha: mask.is_some(),
-                    mask,
-                    depth_bounds: None,
-                })
-            })
-            .collect(),
-    )?;
+    let views = load::first_error_in_order(images.par_iter().map(|img| {
+        let cam = &model.cameras[&img.camera_id];
+        let intrinsics = cam
+            .intrinsics()
+            .map_err(|m| SceneError::invalid(&dir, format!("camera {}: {m}", cam.id)))?;
+        let pose = img
+            .world_to_camera()
+            .map_err(|m| SceneError::invalid(&dir, m))?;
+        let camera = Camera::new(intrinsics, pose);
+        load::check_camera(&camera, &dir, &format!("image {} ({})", img.id, img.name))?;
+        let file = image_dir.join(&img.name);
+        let photo = load::load_photo(&file, background)?;
+        load::check_size(&photo.rgb, &camera, &file, "image")?;
+        let mask = match photo.alpha {
+            Some(a) => Some(load::downscale_mask(&a, k, false, &file)?),
+            None => None,
+        };
+        Ok(View {
+            name: load::stem(Path::new(&img.name)),
+            camera: load::downscale_camera(&camera, k),
+            image: load::downscale_image(&photo.rgb, k, &file)?,
+            mask_is_alpha: mask.is_some(),
+            mask,
+            depth_bounds: None,
+        })
+    }))?;
     let n_views = views.len();
     let (train, test) = load::choose_split(
         opts,
