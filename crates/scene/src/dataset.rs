@@ -24,6 +24,12 @@ pub struct View {
     pub mask_is_alpha: bool,
     /// Near/far depth bounds of this view when the format gives them (LLFF).
     pub depth_bounds: Option<(f64, f64)>,
+    /// Which entry of the camera file this view was read from, so that refined poses can be
+    /// written back in the input's own format ([`crate::pose_export`]): the LLFF row, the DTU
+    /// `world_mat_i` index, the frame's position in its transforms file (for NeRF-synthetic, in
+    /// `transforms_train.json` for training views and `transforms_test.json` for test views),
+    /// the COLMAP `IMAGE_ID`. In-process scenes number their views from 0.
+    pub source_index: usize,
 }
 
 /// A coloured point cloud (e.g. COLMAP `points3D`), used to initialise Gaussians.

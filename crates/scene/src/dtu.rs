@@ -101,7 +101,7 @@ pub struct IdrCameras {
     pub scale_mat: Matrix4<f64>,
 }
 
-fn matrix4(a: &Array, name: &str, path: &Path) -> Result<Matrix4<f64>> {
+pub(crate) fn matrix4(a: &Array, name: &str, path: &Path) -> Result<Matrix4<f64>> {
     let m = match a.shape.as_slice() {
         [4, 4] => Matrix4::from_row_slice(&a.data),
         [3, 4] => {
@@ -202,7 +202,7 @@ fn camera_from_projection(
 }
 
 /// The camera file: `opts.cameras_file`, else `cameras_sphere.npz`, else `cameras.npz`.
-fn cameras_path(root: &Path, opts: &LoadOptions) -> PathBuf {
+pub(crate) fn cameras_path(root: &Path, opts: &LoadOptions) -> PathBuf {
     match &opts.cameras_file {
         Some(name) => root.join(name),
         None if root.join("cameras_sphere.npz").is_file() => root.join("cameras_sphere.npz"),
@@ -255,6 +255,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
             mask,
             depth_bounds: None,
             mask_is_alpha: false,
+            source_index: i,
         })
     }))?;
 
@@ -277,7 +278,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::image::Image;
     use crate::numpy::test_util::write_npz;
@@ -333,7 +334,7 @@ mod tests {
 
     /// A DTU-like scene: cameras on a sphere of radius 600 mm around (10, −20, 500) looking at
     /// it, a scale_mat of radius 150 mm there, 24×18 images.
-    fn write_scene(dir: &Path, n: usize, k_scale: f64) -> (Matrix3<f64>, Matrix4<f64>) {
+    pub(crate) fn write_scene(dir: &Path, n: usize, k_scale: f64) -> (Matrix3<f64>, Matrix4<f64>) {
         let k = Matrix3::new(40.0, 0.0, 12.2, 0.0, 39.5, 8.9, 0.0, 0.0, 1.0) * k_scale;
         let k = Matrix3::from_fn(|r, c| if (r, c) == (2, 2) { 1.0 } else { k[(r, c)] });
         let centre = Vector3::new(10.0, -20.0, 500.0);

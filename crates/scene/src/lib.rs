@@ -25,6 +25,7 @@ pub mod llff;
 pub mod load;
 mod numpy;
 pub mod ply_scalar;
+pub mod pose_export;
 pub mod split;
 pub mod synthetic;
 pub mod transforms;

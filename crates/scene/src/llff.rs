@@ -262,6 +262,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
                     mask_is_alpha: mask.is_some(),
                     mask,
                     depth_bounds: Some(bounds[i]),
+                    source_index: i,
                 })
             })
     )?;
@@ -289,7 +290,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::image::Image;
     use crate::numpy::test_util::write_npy;
@@ -315,7 +316,12 @@ mod tests {
         row
     }
 
-    fn write_scene(dir: &Path, eyes: &[Vector3<f64>], folder: &str, size: (usize, usize)) {
+    pub(crate) fn write_scene(
+        dir: &Path,
+        eyes: &[Vector3<f64>],
+        folder: &str,
+        size: (usize, usize),
+    ) {
         let mut data = Vec::new();
         for (i, e) in eyes.iter().enumerate() {
             data.extend(llff_row(
@@ -337,7 +343,7 @@ mod tests {
         }
     }
 
-    fn eyes(n: usize) -> Vec<Vector3<f64>> {
+    pub(crate) fn eyes(n: usize) -> Vec<Vector3<f64>> {
         (0..n)
             .map(|i| Vector3::new(0.3 * i as f64 - 0.5, 0.1 * (i % 3) as f64, 5.0))
             .collect()

@@ -1,5 +1,5 @@
 //! Reading float arrays from NumPy `.npy` files and `.npz` archives (through `npyz`), as `f64` in
-//! C order, with errors that name the file and the array.
+//! C order, with errors that name the file and the array; writing them back as float64.
 
 use std::collections::BTreeMap;
 use std::io::Read;
@@ -117,6 +117,43 @@ pub fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>> {
     Ok(out)
 }
 
+/// Writes `array` as a float64 `.npy` file, atomically.
+pub fn save_npy(path: &Path, array: &Array) -> Result<()> {
+    use npyz::WriterBuilder;
+    crate::atomic::write_with(path, |w| {
+        let mut npy = npyz::WriteOptions::new()
+            .default_dtype()
+            .shape(&shape_u64(&array.shape))
+            .writer(w)
+            .begin_nd()?;
+        npy.extend(array.data.iter().copied())?;
+        npy.finish()
+    })
+}
+
+/// Writes `arrays` as float64 entries of an uncompressed `.npz` (what NumPy's `np.savez`
+/// writes), atomically.
+pub fn save_npz(path: &Path, arrays: &BTreeMap<String, Array>) -> Result<()> {
+    use npyz::WriterBuilder;
+    crate::atomic::write_with(path, |w| {
+        let mut npz = npyz::npz::NpzWriter::new(w);
+        for (name, array) in arrays {
+            let mut npy = npz
+                .array::<f64>(name, Default::default())?
+                .default_dtype()
+                .shape(&shape_u64(&array.shape))
+                .begin_nd()?;
+            npy.extend(array.data.iter().copied())?;
+            npy.finish()?;
+        }
+        Ok(())
+    })
+}
+
+fn shape_u64(shape: &[usize]) -> Vec<u64> {
+    shape.iter().map(|&s| s as u64).collect()
+}
+
 #[cfg(test)]
 pub(crate) mod test_util {
     //! Writers for test fixtures (npyz's own writer, so the reader is checked against it).
@@ -180,6 +217,24 @@ mod tests {
         write_npz(&p, &[("m_0", vec![2, 2], vec![1.0, 2.0, 3.0, 0.25])]);
         let m = read_npz(&p).unwrap();
         assert_eq!(m["m_0"].data, vec![1.0, 2.0, 3.0, 0.25]);
+    }
+
+    #[test]
+    fn saved_arrays_read_back_exactly() {
+        let dir = tempfile::tempdir().unwrap();
+        let a = Array {
+            shape: vec![2, 3],
+            data: vec![0.1, -2.5, 1e-300, 3.0, f64::MAX, 7.0],
+        };
+        let p = dir.path().join("a.npy");
+        save_npy(&p, &a).unwrap();
+        assert_eq!(read_npy(&p).unwrap(), a);
+        let arrays: BTreeMap<String, Array> = [("x".to_owned(), a.clone()), ("y".to_owned(), a)]
+            .into_iter()
+            .collect();
+        let z = dir.path().join("b.npz");
+        save_npz(&z, &arrays).unwrap();
+        assert_eq!(read_npz(&z).unwrap(), arrays);
     }
 
     #[test]

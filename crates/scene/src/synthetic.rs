@@ -197,6 +197,7 @@ pub fn demo_dataset(opts: &DemoOptions) -> Dataset {
             mask: None,
             depth_bounds: Some((near * 0.9, far * 1.1)),
             mask_is_alpha: false,
+            source_index: i,
         });
     }
     let train: Vec<usize> = opts

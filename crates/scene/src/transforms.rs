@@ -249,6 +249,7 @@ fn load_frame(frame: &Frame, background: [f32; 3], k: u32) -> Result<View> {
         mask,
         mask_is_alpha,
         depth_bounds: None,
+        source_index: frame.index,
     })
 }
 
@@ -348,7 +349,7 @@ fn gl_matrix(c2w_cv: &Se3) -> [[f64; 4]; 4] {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::image::Image;
     use nalgebra::Vector3;
@@ -356,7 +357,12 @@ mod tests {
 
     /// Writes a Blender-style scene: `n_train` + `n_test` RGBA frames of 20×16 looking at the
     /// origin from a circle.
-    fn write_blender(dir: &Path, n_train: usize, n_test: usize, extra: serde_json::Value) {
+    pub(crate) fn write_blender(
+        dir: &Path,
+        n_train: usize,
+        n_test: usize,
+        extra: serde_json::Value,
+    ) {
         for (split, n) in [("train", n_train), ("test", n_test)] {
             std::fs::create_dir_all(dir.join(split)).unwrap();
             let mut frames = Vec::new();
@@ -556,10 +562,10 @@ mod tests {
         assert!(e.contains("not orthonormal"), "{e}");
     }
 
-    #[test]
-    fn nerfstudio_masks_sorting_and_split() {
-        let dir = tempfile::tempdir().unwrap();
-        std::fs::create_dir_all(dir.path().join("images")).unwrap();
+    /// A nerfstudio scene: ten frames written in reverse file order (`images/f_09.jpg` first),
+    /// each with a mask, OpenCV camera model with zero distortion.
+    pub(crate) fn write_nerfstudio(dir: &Path) {
+        std::fs::create_dir_all(dir.join("images")).unwrap();
         let mut frames = Vec::new();
         for i in (0..10).rev() {
             let eye = Vector3::new(3.0, i as f64 * 0.2, 1.0);
@@ -576,15 +582,21 @@ mod tests {
                 "fl_x": 12.0,
             }));
             Image::filled(8, 6, &[0.1, 0.2, 0.3])
-                .save_png(&dir.path().join(format!("images/f_{i:02}.jpg")))
+                .save_png(&dir.join(format!("images/f_{i:02}.jpg")))
                 .unwrap();
             let mut m = Image::new(8, 6, 1);
             m.set(2, 3, 0, 1.0);
-            m.save_png(&dir.path().join(format!("images/m_{i:02}.png")))
+            m.save_png(&dir.join(format!("images/m_{i:02}.png")))
                 .unwrap();
         }
         let doc = json!({ "camera_model": "OPENCV", "k1": 0.0, "frames": frames });
-        std::fs::write(dir.path().join("transforms.json"), doc.to_string()).unwrap();
+        std::fs::write(dir.join("transforms.json"), doc.to_string()).unwrap();
+    }
+
+    #[test]
+    fn nerfstudio_masks_sorting_and_split() {
+        let dir = tempfile::tempdir().unwrap();
+        write_nerfstudio(dir.path());
         let d = load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
         let names: Vec<&str> = d.views.iter().map(|v| v.name.as_str()).collect();
         assert_eq!(names[..3], ["f_00", "f_01", "f_02"]);

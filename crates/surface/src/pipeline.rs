@@ -8,7 +8,10 @@
 //! - `matches.json` — the correspondences (pixel coordinates, training-view indices,
 //!   confidences), their count and precision against the true poses;
 //! - `poses_initial.json`, `poses_refined.json` — cameras (intrinsics + world-to-camera), and
-//!   `cameras_refined.npz` in the IDR format (`world_mat_i`, `scale_mat_i`) for DTU input;
+//!   the input's camera file with the refined poses mapped into the input's frame by the Alg. 1
+//!   alignment (`cameras_sphere_refined.npz`, `poses_bounds_refined.npy`,
+//!   `transforms_refined.json`, `sparse_refined/`, …; see [`fewview_scene::pose_export`]) when
+//!   the dataset came from a folder;
 //! - `mesh.ply` — marching cubes of the SDF, culled by the training masks, coloured;
 //! - `renders/` — colour, depth and normals of the test views (ground-truth cameras mapped into
 //!   the reconstruction's frame by the Alg. 1 alignment);
@@ -20,8 +23,8 @@ use std::path::{Path, PathBuf};
 use fewview_geom::Mesh;
 use fewview_geom::Similarity;
 use fewview_metrics::pose_error::{PoseError, PoseErrorOptions, pose_error_pairwise};
+use fewview_scene::pose_export::{PoseSource, write_refined_poses};
 use fewview_scene::{Camera, Dataset, Image, Intrinsics, Se3};
-use nalgebra::Matrix4;
 use serde::{Deserialize, Serialize};
 
 use crate::checkpoint;
@@ -63,9 +66,6 @@ pub struct RunConfig {
     pub eval_views: usize,
     /// Render test views at this fraction of their size (1 = full).
     pub eval_scale: u32,
-    /// Also write the refined poses as IDR/NeuS `cameras_refined.npz` (DTU input), using the
-    /// dataset's `to_source_world` as `scale_mat`.
-    pub idr_output: bool,
     /// Deviation, off by default: refine the initial poses on the matches' epipolar
     /// constraints alone before the joint optimisation ([`crate::warmup`]).
     #[serde(default)]
@@ -118,7 +118,6 @@ impl Default for RunConfig {
             mesh_resolution: 256,
             eval_views: 5,
             eval_scale: 1,
-            idr_output: false,
             pose_warmup: None,
             max_pair_angle_deg: default_max_pair_angle(),
             match_refinement: Some(AffineRefineOptions::default()),
@@ -411,6 +410,10 @@ pub struct RunReport {
     pub chamfer_error: Option<String>,
     pub mesh_vertices: usize,
     pub mesh_faces: usize,
+    /// The input's camera file(s) with the refined poses (mapped into the input's frame by the
+    /// Alg. 1 alignment), relative to the run folder ([`fewview_scene::pose_export`]); empty
+    /// for in-process scenes.
+    pub refined_pose_files: Vec<String>,
 }
 
 /// The pose error at one iteration.
@@ -478,49 +481,6 @@ fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
     fewview_scene::atomic::write_bytes(path, text.as_bytes()).map_err(SurfaceError::Scene)
 }
 
-/// Writes IDR/NeuS `world_mat_i` and `scale_mat_i` for the given (dataset) view indices:
-/// `world_mat = K [R | t] · scale_mat⁻¹`, so `world_mat · scale_mat` is the normalised
-/// projection the loader decomposes.
-pub fn write_idr_cameras(
-    path: &Path,
-    cameras: &[Camera],
-    indices: &[usize],
-    scale_mat: &Matrix4<f64>,
-) -> Result<()> {
-    let inv = scale_mat
-        .try_inverse()
-        .ok_or_else(|| SurfaceError::invalid("scale_mat", "is singular"))?;
-    let tmp = path.with_extension("npz.tmp");
-    {
-        let file = std::fs::File::create(&tmp).map_err(|e| SurfaceError::io(&tmp, e))?;
-        let mut npz = npyz::npz::NpzWriter::new(std::io::BufWriter::new(file));
-        let mut put = |name: String, m: &Matrix4<f64>| -> std::io::Result<()> {
-            use npyz::WriterBuilder;
-            let data: Vec<f32> = (0..4)
-                .flat_map(|r| (0..4).map(move |c| (r, c)))
-                .map(|(r, c)| m[(r, c)] as f32)
-                .collect();
-            let mut w = npz
-                .array(&name, Default::default())?
-                .default_dtype()
-                .shape(&[4, 4])
-                .begin_nd()?;
-            w.extend(data)?;
-            w.finish()
-        };
-        for (c, &i) in cameras.iter().zip(indices) {
-            let mut p = Matrix4::identity();
-            p.fixed_view_mut::<3, 4>(0, 0).copy_from(
-                &(c.intrinsics.matrix() * c.world_to_camera.to_matrix4().fixed_view::<3, 4>(0, 0)),
-            );
-            let world = p * inv;
-            put(format!("world_mat_{i}"), &world).map_err(|e| SurfaceError::io(&tmp, e))?;
-            put(format!("scale_mat_{i}"), scale_mat).map_err(|e| SurfaceError::io(&tmp, e))?;
-        }
-    }
-    std::fs::rename(&tmp, path).map_err(|e| SurfaceError::io(path, e))
-}
-
 /// The cameras of `gt` mapped into the reconstruction's world by the inverse of the Alg. 1
 /// alignment `x_gt = s R x_est + t`.
 pub fn camera_in_estimate_frame(gt: &Camera, alignment: &Similarity) -> Camera {
@@ -544,6 +504,8 @@ pub struct RunInputs<'a> {
     /// For each face of `reference`, whether a training view sees it: Chamfer is then also
     /// scored on the observed part (`RunReport::chamfer_observed`), as DTU's protocol does.
     pub reference_observed: Option<&'a [bool]>,
+    /// The folder `dataset` was loaded from, to write the refined poses back in its format.
+    pub source: Option<PoseSource<'a>>,
 }
 
 /// Runs everything and writes the run directory. `resume` continues from `checkpoint.bin`
@@ -561,6 +523,7 @@ pub fn run(
         matching,
         reference,
         reference_observed,
+        source,
     } = inputs;
     std::fs::create_dir_all(out).map_err(|e| SurfaceError::io(out, e))?;
     write_json(&out.join("config.json"), config)?;
@@ -655,18 +618,25 @@ pub fn run(
     let final_err = pose_error(&refined, &prep.ground_truth)?;
     let refined_cams = cams(&refined);
     fewview_geom::io::cameras::write_cameras(&out.join("poses_refined.json"), &refined_cams)?;
-    if let Some(scale) = dataset
-        .to_source_world
-        .as_ref()
-        .filter(|_| config.idr_output)
-    {
-        write_idr_cameras(
-            &out.join("cameras_refined.npz"),
-            &refined_cams,
-            &prep.view_indices,
-            scale,
-        )?;
-    }
+    // Written back in the input's frame: the estimate's gauge is wherever the anchor view's
+    // initial pose put it (with σ = 0.15 noise, some 10–20° and a translation away from the
+    // input's cameras), so its poses are first mapped by the Alg. 1 alignment onto the cameras
+    // they are scored against, which keeps them consistent with the file's untouched views.
+    let refined_pose_files = match source {
+        Some(source) => {
+            let poses: Vec<(usize, Se3)> = prep
+                .view_indices
+                .iter()
+                .copied()
+                .zip(final_err.aligned_world_to_camera.iter().copied())
+                .collect();
+            write_refined_poses(source, dataset, &poses, out)?
+                .iter()
+                .map(|p| p.strip_prefix(out).unwrap_or(p).display().to_string())
+                .collect()
+        }
+        None => Vec::new(),
+    };
     let (field, params) = trainer.field_params();
     let masks: Option<Vec<Image>> = prep.views.iter().map(|v| v.mask.clone()).collect();
     let mesh = final_mesh(
@@ -776,6 +746,7 @@ pub fn run(
         chamfer_error,
         mesh_vertices: mesh.vertices.len(),
         mesh_faces: mesh.faces.len(),
+        refined_pose_files,
     };
     write_json(&out.join("metrics.json"), &report)?;
     Ok(report)

@@ -45,6 +45,7 @@ fn inputs<'a>(ds: &'a Dataset, reference: Option<&'a fewview_geom::Mesh>) -> Run
         matching: None,
         reference,
         reference_observed: None,
+        source: None,
     }
 }
 

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
-use fewview_scene::DatasetFormat;
+use fewview_scene::pose_export::PoseSource;
 use fewview_surface::field::{EncoderKind, FdScheme};
 use fewview_surface::matching::densify::DensifyOptions;
 use fewview_surface::matching::refine::AffineRefineOptions;
@@ -26,9 +26,11 @@ use super::progress;
 /// (`--pose-noise`, BARF/SPARF protocol) unless `--initial-poses loaded` keeps the loaded
 /// poses (e.g. DTU `--cameras-file cameras_linear_init.npz`). Correspondences come from SIFT
 /// (ratio + mutual check + RANSAC). Writes a run directory: `config.json`, `checkpoint.bin`
-/// (resume with `--resume`), `matches.json`, `poses_initial.json`, `poses_refined.json`
-/// (+ `cameras_refined.npz` for DTU), `mesh.ply`, `renders/`, `metrics.json` (pose errors by
-/// paper 001 Alg. 1/2, masked PSNR/SSIM of test views, Chamfer with `--reference`).
+/// (resume with `--resume`), `matches.json`, `poses_initial.json`, `poses_refined.json`, the
+/// input's camera file with the refined poses in its own format (`cameras_sphere_refined.npz`,
+/// `poses_bounds_refined.npy`, `transforms_refined.json`, `sparse_refined/`…), `mesh.ply`,
+/// `renders/`, `metrics.json` (pose errors by paper 001 Alg. 1/2, masked PSNR/SSIM of test
+/// views, Chamfer with `--reference`).
 ///
 /// Without `--data`, `--synthetic` runs on the built-in analytic SDF scene and scores the mesh
 /// against its exact surface.
@@ -233,7 +235,7 @@ fn parse_rates(s: &str) -> anyhow::Result<(f64, f64)> {
 }
 
 impl Args {
-    pub fn config(&self, idr: bool) -> anyhow::Result<RunConfig> {
+    pub fn config(&self) -> anyhow::Result<RunConfig> {
         let mut c = RunConfig::default();
         self.schedule.schedule().apply(&mut c);
         // An explicit pose timing is what the user asked for, warm-up or not.
@@ -348,7 +350,6 @@ impl Args {
         c.eval_views = self.eval_views;
         c.eval_scale = self.eval_scale.max(1);
         c.checkpoint_every = self.checkpoint_every;
-        c.idr_output = idr;
         Ok(c)
     }
 }
@@ -379,21 +380,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.synthetic && args.dataset.data.is_some() {
         bail!("give either --data DIR or --synthetic, not both");
     }
-    let (ds, truth, matching, name, idr, reference) = if args.synthetic {
+    let (ds, truth, matching, name, reference) = if args.synthetic {
         let ds = sdf_dataset(&if args.synthetic_all_around {
             SdfSceneOptions::ring_of_eight_all_around()
         } else {
             SdfSceneOptions::ring_of_eight()
         });
         let reference = fewview_surface::sdf_scene::surface_mesh(256)?;
-        (
-            ds,
-            None,
-            None,
-            "synthetic".to_string(),
-            false,
-            Some(reference),
-        )
+        (ds, None, None, "synthetic".to_string(), Some(reference))
     } else {
         let d = &args.dataset;
         let Some(folder) = d.data.as_deref() else {
@@ -401,8 +395,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
         let matching = matching_images(d, args.match_downscale)?;
         let ds = d.load()?;
-        let is_dtu = fewview_scene::detect_format(folder).ok() == Some(DatasetFormat::DtuIdr)
-            || d.format == Some(DatasetFormat::DtuIdr);
         // With other starting poses, the ground truth is the same folder's default cameras.
         let truth = if args.initial_poses == "loaded" && d.cameras_file.is_some() {
             let mut t = d.clone();
@@ -422,9 +414,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .file_name()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "run".into());
-        (ds, truth, matching, name, is_dtu, reference)
+        (ds, truth, matching, name, reference)
     };
-    let cfg = args.config(idr)?;
+    let cfg = args.config()?;
+    // Where the refined poses go back in the input's format (not for the in-process scene).
+    let load_options = args.dataset.load_options();
+    let source_folder = args.dataset.data.clone().filter(|_| !args.synthetic);
     let out = args
         .out
         .clone()
@@ -457,6 +452,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         matching: matching.as_ref(),
         reference: reference.as_ref(),
         reference_observed: observed.as_deref(),
+        source: source_folder.as_deref().map(|root| PoseSource {
+            root,
+            options: &load_options,
+        }),
     };
     let report = run_pipeline(inputs, &cfg, &out, args.resume, &mut |e| match e {
         Event::Matched {
@@ -576,6 +575,9 @@ fn print_report(r: &RunReport, out: &std::path::Path) {
         "mesh             {} vertices, {} faces",
         r.mesh_vertices, r.mesh_faces
     );
+    if !r.refined_pose_files.is_empty() {
+        println!("refined poses    {}", r.refined_pose_files.join(", "));
+    }
     println!("written to       {}", out.display());
 }
 
@@ -596,11 +598,7 @@ mod tests {
         let argv = std::iter::once("surface")
             .chain(["--synthetic"])
             .chain(flags.iter().copied());
-        Cli::try_parse_from(argv)
-            .unwrap()
-            .args
-            .config(false)
-            .unwrap()
+        Cli::try_parse_from(argv).unwrap().args.config().unwrap()
     }
 
     #[test]
@@ -659,7 +657,7 @@ mod tests {
         let err = Cli::try_parse_from(["surface", "--densify", "dense"])
             .unwrap()
             .args
-            .config(false)
+            .config()
             .unwrap_err()
             .to_string();
         assert!(err.contains("--densify \"dense\""), "{err}");
@@ -673,7 +671,7 @@ mod tests {
         assert!(parse(&["--pose-warmup", "--no-pose-warmup"]).is_err());
         assert!(parse(&["--schedule", "fast"]).is_err());
         let args = parse(&["--pose-start", "1.5"]).unwrap().args;
-        let err = args.config(false).unwrap_err().to_string();
+        let err = args.config().unwrap_err().to_string();
         assert!(err.contains("--pose-start 1.5"), "{err}");
     }
 }

@@ -151,8 +151,17 @@ pub fn read_cameras(path: &Path) -> Result<BTreeMap<u32, ColmapCamera>> {
 
 pub fn read_images(path: &Path) -> Result<Vec<ColmapImage>> {
     let bytes = read_file(path)?;
+    Ok(images_with_pose_offsets(&bytes, path)?
+        .into_iter()
+        .map(|(image, _)| image)
+        .collect())
+}
+
+/// Parses `images.bin` held in memory: each image with the byte offset of its pose (the four
+/// quaternion and three translation `f64`s that follow the image id).
+fn images_with_pose_offsets(bytes: &[u8], path: &Path) -> Result<Vec<(ColmapImage, usize)>> {
     let mut r = Reader {
-        bytes: &bytes,
+        bytes,
         pos: 0,
         path,
     };
@@ -160,6 +169,7 @@ pub fn read_images(path: &Path) -> Result<Vec<ColmapImage>> {
     let mut out = Vec::new();
     for _ in 0..count {
         let id = r.u32("an image id")?;
+        let pose_offset = r.pos;
         let mut qvec = [0.0; 4];
         for q in qvec.iter_mut() {
             *q = r.f64("a quaternion")?;
@@ -172,16 +182,43 @@ pub fn read_images(path: &Path) -> Result<Vec<ColmapImage>> {
         let name = r.name()?;
         let n_points = r.u64("a 2D point count")?;
         r.skip(n_points, 24, "2D points")?;
-        out.push(ColmapImage {
+        let image = ColmapImage {
             id,
             qvec,
             tvec,
             camera_id,
             name,
-        });
+        };
+        out.push((image, pose_offset));
     }
     r.finish()?;
     Ok(out)
+}
+
+/// `images.bin` (read from `path`) with the poses of the images in `poses` (by id:
+/// `cam_from_world` quaternion `(qw, qx, qy, qz)` and translation) replaced; every other byte,
+/// the 2D points included, as stored. An id the file lacks is an error.
+pub fn replace_image_poses(
+    path: &Path,
+    poses: &BTreeMap<u32, ([f64; 4], [f64; 3])>,
+) -> Result<Vec<u8>> {
+    let mut bytes = read_file(path)?;
+    let offsets: BTreeMap<u32, usize> = images_with_pose_offsets(&bytes, path)?
+        .into_iter()
+        .map(|(image, offset)| (image.id, offset))
+        .collect();
+    for (id, (qvec, tvec)) in poses {
+        let offset = *offsets.get(id).ok_or_else(|| {
+            SceneError::invalid(
+                path,
+                format!("no image with id {id} to give a refined pose"),
+            )
+        })?;
+        for (k, v) in qvec.iter().chain(tvec).enumerate() {
+            bytes[offset + 8 * k..offset + 8 * k + 8].copy_from_slice(&v.to_le_bytes());
+        }
+    }
+    Ok(bytes)
 }
 
 pub fn read_points(path: &Path) -> Result<Vec<ColmapPoint>> {

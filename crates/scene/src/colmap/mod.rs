@@ -299,6 +299,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
             mask_is_alpha: mask.is_some(),
             mask,
             depth_bounds: None,
+            source_index: img.id as usize,
         })
     }))?;
     let n_views = views.len();
@@ -321,7 +322,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::image::Image;
     use serde_json::Value;
@@ -336,7 +337,7 @@ mod tests {
     }
 
     /// A scene folder with the fixture model under `sparse/0` and blank photos of the right sizes.
-    fn scene(sub: &str) -> tempfile::TempDir {
+    pub(crate) fn scene(sub: &str) -> tempfile::TempDir {
         let dir = tempfile::tempdir().unwrap();
         let model = dir.path().join("sparse/0");
         std::fs::create_dir_all(&model).unwrap();

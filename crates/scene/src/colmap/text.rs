@@ -85,6 +85,14 @@ pub fn read_cameras(path: &Path) -> Result<BTreeMap<u32, ColmapCamera>> {
 /// be an empty line, so the second line is taken as is, as COLMAP's reader does).
 pub fn read_images(path: &Path) -> Result<Vec<ColmapImage>> {
     let text = read(path)?;
+    Ok(images_with_lines(&text, path)?
+        .into_iter()
+        .map(|(image, _)| image)
+        .collect())
+}
+
+/// Parses `images.txt` held in memory: each image with the index of its line.
+fn images_with_lines(text: &str, path: &Path) -> Result<Vec<(ColmapImage, usize)>> {
     let mut out = Vec::new();
     let mut lines = text.lines().enumerate();
     while let Some((i, line)) = lines.next() {
@@ -103,17 +111,61 @@ pub fn read_images(path: &Path) -> Result<Vec<ColmapImage>> {
             ));
         }
         let num = |k: usize, what: &str| field::<f64>(&f, k, what, path, n);
-        out.push(ColmapImage {
+        let image = ColmapImage {
             id: field(&f, 0, "image id", path, n)?,
             qvec: [num(1, "qw")?, num(2, "qx")?, num(3, "qy")?, num(4, "qz")?],
             tvec: [num(5, "tx")?, num(6, "ty")?, num(7, "tz")?],
             camera_id: field(&f, 8, "camera id", path, n)?,
             name: f[9].to_owned(),
-        });
+        };
+        out.push((image, i));
         // The 2D points line; its contents are not needed. A file that ends here is fine.
         let _ = lines.next();
     }
     Ok(out)
+}
+
+/// `images.txt` (read from `path`) with the poses of the images in `poses` (by id:
+/// `cam_from_world` quaternion `(qw, qx, qy, qz)` and translation) replaced; every other line,
+/// the 2D points included, as stored, and the image line's camera id and name as they were.
+/// An id the file lacks is an error.
+pub fn replace_image_poses(
+    path: &Path,
+    poses: &BTreeMap<u32, ([f64; 4], [f64; 3])>,
+) -> Result<String> {
+    let text = read(path)?;
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    let found: BTreeMap<u32, usize> = images_with_lines(&text, path)?
+        .into_iter()
+        .map(|(image, line)| (image.id, line))
+        .collect();
+    for (id, (qvec, tvec)) in poses {
+        let line = *found.get(id).ok_or_else(|| {
+            SceneError::invalid(
+                path,
+                format!("no image with id {id} to give a refined pose"),
+            )
+        })?;
+        // Fields from CAMERA_ID on (the name may hold spaces) stay as written.
+        let rest = after_fields(&lines[line], 8);
+        let pose: Vec<String> = qvec.iter().chain(tvec).map(f64::to_string).collect();
+        lines[line] = format!("{id} {} {rest}", pose.join(" "));
+    }
+    let mut out = lines.join("\n");
+    if text.ends_with('\n') {
+        out.push('\n');
+    }
+    Ok(out)
+}
+
+/// The part of `line` after its first `n` whitespace-separated fields, leading space removed.
+fn after_fields(line: &str, n: usize) -> &str {
+    let mut rest = line.trim_start();
+    for _ in 0..n {
+        let end = rest.find(char::is_whitespace).unwrap_or(rest.len());
+        rest = rest[end..].trim_start();
+    }
+    rest
 }
 
 /// `POINT3D_ID X Y Z R G B ERROR TRACK[]`.
