@@ -14,7 +14,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use super::{CAMERA_MODELS, ColmapCamera, ColmapImage, ColmapPoint};
+use super::{CAMERA_MODELS, ColmapCamera, ColmapImage, ColmapPoint, PoseFields, locate_poses};
 use crate::error::{Result, SceneError};
 
 /// A bounds-checked little-endian reader over a whole file.
@@ -198,22 +198,10 @@ fn images_with_pose_offsets(bytes: &[u8], path: &Path) -> Result<Vec<(ColmapImag
 /// `images.bin` (read from `path`) with the poses of the images in `poses` (by id:
 /// `cam_from_world` quaternion `(qw, qx, qy, qz)` and translation) replaced; every other byte,
 /// the 2D points included, as stored. An id the file lacks is an error.
-pub fn replace_image_poses(
-    path: &Path,
-    poses: &BTreeMap<u32, ([f64; 4], [f64; 3])>,
-) -> Result<Vec<u8>> {
+pub fn replace_image_poses(path: &Path, poses: &BTreeMap<u32, PoseFields>) -> Result<Vec<u8>> {
     let mut bytes = read_file(path)?;
-    let offsets: BTreeMap<u32, usize> = images_with_pose_offsets(&bytes, path)?
-        .into_iter()
-        .map(|(image, offset)| (image.id, offset))
-        .collect();
-    for (id, (qvec, tvec)) in poses {
-        let offset = *offsets.get(id).ok_or_else(|| {
-            SceneError::invalid(
-                path,
-                format!("no image with id {id} to give a refined pose"),
-            )
-        })?;
+    let offsets = images_with_pose_offsets(&bytes, path)?;
+    for (offset, _, (qvec, tvec)) in locate_poses(offsets, poses, path)? {
         for (k, v) in qvec.iter().chain(tvec).enumerate() {
             bytes[offset + 8 * k..offset + 8 * k + 8].copy_from_slice(&v.to_le_bytes());
         }

@@ -179,6 +179,33 @@ impl ColmapModel {
     }
 }
 
+/// A pose to write into an images file: quaternion `(qw, qx, qy, qz)` and translation.
+pub type PoseFields = ([f64; 4], [f64; 3]);
+
+/// Where each image of `poses` stands in an images file (`found`: each image with its place,
+/// a byte offset or a line), with its id and new pose. An id the file lacks is an error naming
+/// `path`.
+fn locate_poses<'a, L: Copy>(
+    found: Vec<(ColmapImage, L)>,
+    poses: &'a BTreeMap<u32, PoseFields>,
+    path: &Path,
+) -> Result<Vec<(L, u32, &'a PoseFields)>> {
+    let places: BTreeMap<u32, L> = found
+        .into_iter()
+        .map(|(image, place)| (image.id, place))
+        .collect();
+    poses
+        .iter()
+        .map(|(id, pose)| match places.get(id) {
+            Some(&place) => Ok((place, *id, pose)),
+            None => Err(SceneError::invalid(
+                path,
+                format!("no image with id {id} to give a refined pose"),
+            )),
+        })
+        .collect()
+}
+
 /// The folder holding a COLMAP model: `sparse/0/`, `sparse/` or `root` itself, the first with a
 /// `cameras.bin` or `cameras.txt`.
 pub fn find_model_dir(root: &Path) -> Option<PathBuf> {

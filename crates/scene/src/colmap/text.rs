@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::str::FromStr;
 
-use super::{ColmapCamera, ColmapImage, ColmapPoint, model_param_count};
+use super::{ColmapCamera, ColmapImage, ColmapPoint, PoseFields, locate_poses, model_param_count};
 use crate::error::{Result, SceneError};
 
 fn read(path: &Path) -> Result<String> {
@@ -129,23 +129,11 @@ fn images_with_lines(text: &str, path: &Path) -> Result<Vec<(ColmapImage, usize)
 /// `cam_from_world` quaternion `(qw, qx, qy, qz)` and translation) replaced; every other line,
 /// the 2D points included, as stored, and the image line's camera id and name as they were.
 /// An id the file lacks is an error.
-pub fn replace_image_poses(
-    path: &Path,
-    poses: &BTreeMap<u32, ([f64; 4], [f64; 3])>,
-) -> Result<String> {
+pub fn replace_image_poses(path: &Path, poses: &BTreeMap<u32, PoseFields>) -> Result<String> {
     let text = read(path)?;
     let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
-    let found: BTreeMap<u32, usize> = images_with_lines(&text, path)?
-        .into_iter()
-        .map(|(image, line)| (image.id, line))
-        .collect();
-    for (id, (qvec, tvec)) in poses {
-        let line = *found.get(id).ok_or_else(|| {
-            SceneError::invalid(
-                path,
-                format!("no image with id {id} to give a refined pose"),
-            )
-        })?;
+    let found = images_with_lines(&text, path)?;
+    for (line, id, (qvec, tvec)) in locate_poses(found, poses, path)? {
         // Fields from CAMERA_ID on (the name may hold spaces) stay as written.
         let rest = after_fields(&lines[line], 8);
         let pose: Vec<String> = qvec.iter().chain(tvec).map(f64::to_string).collect();

@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::Replacement;
-use crate::colmap::{binary, find_model_dir, text};
+use crate::colmap::{PoseFields, binary, find_model_dir, text};
 use crate::error::{Result, SceneError};
 
 pub(super) fn write(root: &Path, poses: &[Replacement], out_dir: &Path) -> Result<Vec<PathBuf>> {
@@ -14,7 +14,7 @@ pub(super) fn write(root: &Path, poses: &[Replacement], out_dir: &Path) -> Resul
         .ok_or_else(|| SceneError::format(root, "no COLMAP model to write refined poses into"))?;
     let binary_model = dir.join("cameras.bin").is_file();
     let ext = if binary_model { "bin" } else { "txt" };
-    let by_id: BTreeMap<u32, ([f64; 4], [f64; 3])> = poses
+    let by_id: BTreeMap<u32, PoseFields> = poses
         .iter()
         .map(|p| {
             let id = u32::try_from(p.entry).map_err(|_| {
