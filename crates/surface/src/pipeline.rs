@@ -622,6 +622,9 @@ pub fn run(
     // initial pose put it (with σ = 0.15 noise, some 10–20° and a translation away from the
     // input's cameras), so its poses are first mapped by the Alg. 1 alignment onto the cameras
     // they are scored against, which keeps them consistent with the file's untouched views.
+    // Those are `truth`'s when given: its normalised frame (DTU: its own `scale_mat`, which
+    // differs between scan65's `cameras_sphere.npz` and `cameras_linear_init.npz`) is the one
+    // that maps the aligned poses back to the file's world.
     let refined_pose_files = match source {
         Some(source) => {
             let poses: Vec<(usize, Se3)> = prep
@@ -630,7 +633,7 @@ pub fn run(
                 .copied()
                 .zip(final_err.aligned_world_to_camera.iter().copied())
                 .collect();
-            write_refined_poses(source, dataset, &poses, out)?
+            write_refined_poses(source, truth.unwrap_or(dataset), &poses, out)?
                 .iter()
                 .map(|p| p.strip_prefix(out).unwrap_or(p).display().to_string())
                 .collect()

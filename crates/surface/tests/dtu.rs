@@ -80,6 +80,98 @@ fn dtu_scan65_short_run_end_to_end() {
     refined_cameras_file_reloads_as_the_refined_poses(&dir, &options, out.path(), &report);
 }
 
+/// The scene at `scene` with the run's `<camera_file stem>_refined.npz` in place of
+/// `camera_file`, loaded with `options` (the folder is returned to keep it alive).
+fn reload_with(
+    scene: &std::path::Path,
+    run_dir: &std::path::Path,
+    camera_file: &str,
+    options: &LoadOptions,
+) -> (tempfile::TempDir, fewview_scene::Dataset) {
+    let copy = tempfile::tempdir().unwrap();
+    for folder in ["image", "mask"] {
+        std::os::unix::fs::symlink(scene.join(folder), copy.path().join(folder)).unwrap();
+    }
+    let written = camera_file.replace(".npz", "_refined.npz");
+    std::fs::copy(run_dir.join(written), copy.path().join(camera_file)).unwrap();
+    // Named as the format: a folder with only `cameras_linear_init.npz` is not detected as DTU.
+    let options = LoadOptions {
+        format: Some(fewview_scene::DatasetFormat::DtuIdr),
+        ..options.clone()
+    };
+    let reloaded = load_dataset(copy.path(), &options).unwrap_or_else(|e| panic!("{e}"));
+    (copy, reloaded)
+}
+
+/// Starting from scan65's `cameras_linear_init.npz` (`--initial-poses loaded`, a `scale_mat`
+/// 76 mm away from `cameras_sphere.npz`'s), the refined `cameras_linear_init_refined.npz` puts
+/// each camera as far from the true one, in the DTU world's millimetres, as Alg. 2 measures in
+/// the true cameras' normalised frame (times that frame's scale).
+#[test]
+#[ignore = "needs FEWVIEW_DATA (dataset tests)"]
+fn dtu_scan65_linear_init_export_lands_in_the_world_of_the_true_cameras() {
+    let root = std::env::var("FEWVIEW_DATA")
+        .expect("set FEWVIEW_DATA to the data folder (e.g. /work/shared/data)");
+    let dir = std::path::Path::new(&root).join("dtu/scan65");
+    let truth_options = LoadOptions {
+        downscale: 2,
+        train_views: Some(vec![22, 25, 28]),
+        test_views: Some(vec![24]),
+        ..LoadOptions::default()
+    };
+    let options = LoadOptions {
+        cameras_file: Some("cameras_linear_init.npz".into()),
+        ..truth_options.clone()
+    };
+    let ds = load_dataset(&dir, &options).unwrap_or_else(|e| panic!("{e}"));
+    let truth = load_dataset(&dir, &truth_options).unwrap_or_else(|e| panic!("{e}"));
+    let mut config = RunConfig::default();
+    config.train.iterations = 10;
+    config.initial_poses = InitialPoses::AsLoaded;
+    config.checkpoint_every = 0;
+    config.mesh_resolution = 32;
+    config.eval_views = 0;
+    let out = tempfile::tempdir().unwrap();
+    let inputs = RunInputs {
+        dataset: &ds,
+        truth: Some(&truth),
+        matching: None,
+        reference: None,
+        reference_observed: None,
+        source: Some(PoseSource {
+            root: &dir,
+            options: &options,
+        }),
+    };
+    let report = run(inputs, &config, out.path(), false, &mut |_| {}).unwrap();
+    assert_eq!(
+        report.refined_pose_files,
+        ["cameras_linear_init_refined.npz"]
+    );
+    let (_copy, reloaded) = reload_with(&dir, out.path(), "cameras_linear_init.npz", &options);
+    let in_mm = |d: &fewview_scene::Dataset, view: usize| {
+        let m = d.to_source_world.expect("DTU keeps scale_mat");
+        m.transform_point(&d.views[view].camera.center().into())
+            .coords
+    };
+    let truth_scale = truth
+        .to_source_world
+        .unwrap()
+        .fixed_view::<3, 3>(0, 0)
+        .determinant()
+        .cbrt();
+    let err = &report.final_pose_error;
+    for (k, view) in [22, 25, 28].into_iter().enumerate() {
+        let off_mm = (in_mm(&reloaded, view) - in_mm(&truth, view)).norm();
+        let reported_mm = err.per_view_translation[k] * truth_scale;
+        eprintln!("view {view}: {off_mm:.4} mm from the truth, Alg. 2 says {reported_mm:.4} mm");
+        assert!(
+            (off_mm - reported_mm).abs() < 1e-3,
+            "view {view}: {off_mm} mm against {reported_mm} mm"
+        );
+    }
+}
+
 /// The run's `cameras_sphere_refined.npz`, put in place of the scene's camera file, loads (by
 /// the DTU loader, at the run's resolution) to the cameras of `poses_refined.json` mapped by
 /// the Alg. 1 alignment into the ground-truth frame, and those are as close to the true
@@ -91,16 +183,7 @@ fn refined_cameras_file_reloads_as_the_refined_poses(
     report: &fewview_surface::pipeline::RunReport,
 ) {
     assert_eq!(report.refined_pose_files, ["cameras_sphere_refined.npz"]);
-    let copy = tempfile::tempdir().unwrap();
-    for folder in ["image", "mask"] {
-        std::os::unix::fs::symlink(scene.join(folder), copy.path().join(folder)).unwrap();
-    }
-    std::fs::copy(
-        run_dir.join("cameras_sphere_refined.npz"),
-        copy.path().join("cameras_sphere.npz"),
-    )
-    .unwrap();
-    let reloaded = load_dataset(copy.path(), options).unwrap_or_else(|e| panic!("{e}"));
+    let (_copy, reloaded) = reload_with(scene, run_dir, "cameras_sphere.npz", options);
     let refined = fewview_geom::io::cameras::read_cameras(&run_dir.join("poses_refined.json"))
         .unwrap_or_else(|e| panic!("{e}"));
     let alignment = &report.final_pose_error.alignment;
