@@ -13,18 +13,44 @@ use fewview_surface::adam::ExpSchedule;
 use fewview_surface::pipeline::{InitialPoses, RunConfig, RunInputs, run};
 use fewview_surface::schedule::Schedule;
 
-#[test]
-#[ignore = "needs FEWVIEW_DATA (dataset tests)"]
-fn dtu_scan65_short_run_end_to_end() {
+fn scan65() -> std::path::PathBuf {
     let root = std::env::var("FEWVIEW_DATA")
         .expect("set FEWVIEW_DATA to the data folder (e.g. /work/shared/data)");
-    let dir = std::path::Path::new(&root).join("dtu/scan65");
-    let options = LoadOptions {
+    std::path::Path::new(&root).join("dtu/scan65")
+}
+
+/// The wide triplet at 400 × 300 with view 24 held out.
+fn wide_options() -> LoadOptions {
+    LoadOptions {
         downscale: 2,
         train_views: Some(vec![22, 25, 28]),
         test_views: Some(vec![24]),
         ..LoadOptions::default()
-    };
+    }
+}
+
+/// The run's inputs: `ds` (with `truth` for its errors) loaded from `dir` with `options`.
+fn inputs<'a>(
+    ds: &'a fewview_scene::Dataset,
+    truth: Option<&'a fewview_scene::Dataset>,
+    dir: &'a std::path::Path,
+    options: &'a LoadOptions,
+) -> RunInputs<'a> {
+    RunInputs {
+        dataset: ds,
+        truth,
+        matching: None,
+        reference: None,
+        reference_observed: None,
+        source: Some(PoseSource { root: dir, options }),
+    }
+}
+
+#[test]
+#[ignore = "needs FEWVIEW_DATA (dataset tests)"]
+fn dtu_scan65_short_run_end_to_end() {
+    let dir = scan65();
+    let options = wide_options();
     let ds = load_dataset(&dir, &options).unwrap_or_else(|e| panic!("{e}"));
     let mut config = RunConfig::default();
     config.train.iterations = 50;
@@ -38,17 +64,7 @@ fn dtu_scan65_short_run_end_to_end() {
     config.eval_views = 1;
     config.eval_scale = 4;
     let out = tempfile::tempdir().unwrap();
-    let inputs = RunInputs {
-        dataset: &ds,
-        truth: None,
-        matching: None,
-        reference: None,
-        reference_observed: None,
-        source: Some(PoseSource {
-            root: &dir,
-            options: &options,
-        }),
-    };
+    let inputs = inputs(&ds, None, &dir, &options);
     let report = run(inputs, &config, out.path(), false, &mut |_| {}).unwrap();
     let (a, b) = (&report.initial_pose_error, &report.final_pose_error);
     eprintln!(
@@ -110,15 +126,8 @@ fn reload_with(
 #[test]
 #[ignore = "needs FEWVIEW_DATA (dataset tests)"]
 fn dtu_scan65_linear_init_export_lands_in_the_world_of_the_true_cameras() {
-    let root = std::env::var("FEWVIEW_DATA")
-        .expect("set FEWVIEW_DATA to the data folder (e.g. /work/shared/data)");
-    let dir = std::path::Path::new(&root).join("dtu/scan65");
-    let truth_options = LoadOptions {
-        downscale: 2,
-        train_views: Some(vec![22, 25, 28]),
-        test_views: Some(vec![24]),
-        ..LoadOptions::default()
-    };
+    let dir = scan65();
+    let truth_options = wide_options();
     let options = LoadOptions {
         cameras_file: Some("cameras_linear_init.npz".into()),
         ..truth_options.clone()
@@ -132,17 +141,7 @@ fn dtu_scan65_linear_init_export_lands_in_the_world_of_the_true_cameras() {
     config.mesh_resolution = 32;
     config.eval_views = 0;
     let out = tempfile::tempdir().unwrap();
-    let inputs = RunInputs {
-        dataset: &ds,
-        truth: Some(&truth),
-        matching: None,
-        reference: None,
-        reference_observed: None,
-        source: Some(PoseSource {
-            root: &dir,
-            options: &options,
-        }),
-    };
+    let inputs = inputs(&ds, Some(&truth), &dir, &options);
     let report = run(inputs, &config, out.path(), false, &mut |_| {}).unwrap();
     assert_eq!(
         report.refined_pose_files,
@@ -226,9 +225,7 @@ fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
     use fewview_metrics::pose_error::{PoseErrorOptions, pose_error_pairwise};
     use fewview_surface::pipeline::prepare_with_matching;
     use fewview_surface::warmup::WarmupOptions;
-    let root = std::env::var("FEWVIEW_DATA")
-        .expect("set FEWVIEW_DATA to the data folder (e.g. /work/shared/data)");
-    let dir = std::path::Path::new(&root).join("dtu/scan65");
+    let dir = scan65();
     let load = |views: Vec<usize>, downscale: u32| {
         load_dataset(
             &dir,
