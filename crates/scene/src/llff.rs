@@ -39,7 +39,11 @@ pub struct LlffPose {
 
 /// Parses `poses_bounds.npy` into poses, checking shape and finiteness.
 pub fn read_poses_bounds(path: &Path) -> Result<Vec<LlffPose>> {
-    let a = numpy::read_npy(path)?;
+    poses_from_array(&numpy::read_npy(path)?, path)
+}
+
+/// The poses of a `poses_bounds.npy` array already read from `path` (named in errors).
+pub(crate) fn poses_from_array(a: &numpy::Array, path: &Path) -> Result<Vec<LlffPose>> {
     if a.shape.len() != 2 || a.shape[1] != 17 {
         return Err(SceneError::format(
             path,

@@ -166,6 +166,16 @@ impl LoadOptions {
     }
 }
 
+impl LoadOptions {
+    /// The format these options read `path` as: the forced one, else the detected one.
+    pub fn format_of(&self, path: &Path) -> Result<DatasetFormat> {
+        match self.format {
+            Some(f) => Ok(f),
+            None => detect_format(path),
+        }
+    }
+}
+
 /// Loads the dataset in `path`, detecting its format from the folder contents (see
 /// [`detect_format`]) unless `opts.format` forces one.
 pub fn load_dataset(path: &Path, opts: &LoadOptions) -> Result<Dataset> {
@@ -174,11 +184,7 @@ pub fn load_dataset(path: &Path, opts: &LoadOptions) -> Result<Dataset> {
         return Err(SceneError::io(path, e));
     }
     opts.validate(path)?;
-    let format = match opts.format {
-        Some(f) => f,
-        None => detect_format(path)?,
-    };
-    match format {
+    match opts.format_of(path)? {
         DatasetFormat::Llff => crate::llff::load(path, opts),
         DatasetFormat::Blender => crate::transforms::load_blender(path, opts),
         DatasetFormat::Nerfstudio => crate::transforms::load_nerfstudio(path, opts),

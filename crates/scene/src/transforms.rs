@@ -168,7 +168,13 @@ pub struct Frame {
 /// Reads a transforms JSON file: frames in file order, poses converted to OpenCV axes.
 pub fn read_transforms(path: &Path) -> Result<Vec<Frame>> {
     let text = std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))?;
-    let file: TransformsJson = serde_json::from_str(&text)
+    parse_transforms(&text, path)
+}
+
+/// The frames of a transforms JSON text read from `path` (named in errors, and the folder
+/// image paths are relative to).
+pub(crate) fn parse_transforms(text: &str, path: &Path) -> Result<Vec<Frame>> {
+    let file: TransformsJson = serde_json::from_str(text)
         .map_err(|e| SceneError::format(path, format!("invalid transforms JSON: {e}")))?;
     let dir = path.parent().unwrap_or(Path::new("."));
     if file.frames.is_empty() {

@@ -417,9 +417,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (ds, truth, matching, name, reference)
     };
     let cfg = args.config()?;
-    // Where the refined poses go back in the input's format (not for the in-process scene).
+    // Where the refined poses go back in the input's format (`--data` is absent, checked
+    // above, for the in-process scene).
     let load_options = args.dataset.load_options();
-    let source_folder = args.dataset.data.clone().filter(|_| !args.synthetic);
     let out = args
         .out
         .clone()
@@ -452,7 +452,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         matching: matching.as_ref(),
         reference: reference.as_ref(),
         reference_observed: observed.as_deref(),
-        source: source_folder.as_deref().map(|root| PoseSource {
+        source: args.dataset.data.as_deref().map(|root| PoseSource {
             root,
             options: &load_options,
         }),

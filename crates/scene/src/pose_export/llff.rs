@@ -10,9 +10,9 @@ use crate::numpy;
 
 pub(super) fn write(root: &Path, poses: &[Replacement], out_dir: &Path) -> Result<PathBuf> {
     let input = root.join("poses_bounds.npy");
-    // Parsed by the loader's reader first, so a file it refuses is refused here too.
-    let rows = crate::llff::read_poses_bounds(&input)?;
     let mut array = numpy::read_npy(&input)?;
+    // Parsed as the loader parses it, so a file it refuses is refused here too.
+    let rows = crate::llff::poses_from_array(&array, &input)?;
     for p in poses {
         if p.entry >= rows.len() {
             return Err(SceneError::invalid(

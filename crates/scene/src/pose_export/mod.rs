@@ -33,7 +33,7 @@ use nalgebra::{Matrix3, Matrix4};
 use crate::camera::Se3;
 use crate::dataset::Dataset;
 use crate::error::{Result, SceneError};
-use crate::load::{DatasetFormat, LoadOptions, detect_format};
+use crate::load::{DatasetFormat, LoadOptions};
 
 /// Where a dataset was read from: its folder and the options it was loaded with (the format, the
 /// DTU camera file).
@@ -41,15 +41,6 @@ use crate::load::{DatasetFormat, LoadOptions, detect_format};
 pub struct PoseSource<'a> {
     pub root: &'a Path,
     pub options: &'a LoadOptions,
-}
-
-impl PoseSource<'_> {
-    fn format(&self) -> Result<DatasetFormat> {
-        match self.options.format {
-            Some(f) => Ok(f),
-            None => detect_format(self.root),
-        }
-    }
 }
 
 /// Writes the camera file of `source` into `out_dir` with the views `poses` (indices into
@@ -81,7 +72,7 @@ pub fn write_refined_poses(
         })
         .collect::<Result<Vec<_>>>()?;
     std::fs::create_dir_all(out_dir).map_err(|e| SceneError::io(out_dir, e))?;
-    match source.format()? {
+    match source.options.format_of(source.root)? {
         DatasetFormat::Llff => llff::write(source.root, &in_source, out_dir).map(|p| vec![p]),
         DatasetFormat::DtuIdr => dtu::write(source, &in_source, out_dir).map(|p| vec![p]),
         DatasetFormat::Blender => {

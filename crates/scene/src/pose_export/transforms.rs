@@ -37,9 +37,9 @@ pub(super) fn write_blender(
 
 /// One transforms file with the frames of `poses` (by position in `frames`) replaced.
 pub(super) fn write_one(input: &Path, poses: &[Replacement], out_dir: &Path) -> Result<PathBuf> {
-    // Parsed by the loader's reader first, so a file it refuses is refused here too.
-    crate::transforms::read_transforms(input)?;
     let text = std::fs::read_to_string(input).map_err(|e| SceneError::io(input, e))?;
+    // Parsed as the loader parses it, so a file it refuses is refused here too.
+    crate::transforms::parse_transforms(&text, input)?;
     let mut doc: Value = serde_json::from_str(&text)
         .map_err(|e| SceneError::format(input, format!("invalid transforms JSON: {e}")))?;
     let frames = doc
