@@ -171,6 +171,17 @@ pub fn prepare(dataset: &Dataset, truth: Option<&Dataset>, config: &RunConfig) -
     prepare_with_matching(dataset, truth, None, config)
 }
 
+/// Two views at least: one view fixes no relative pose and no correspondence.
+fn check_view_count(dataset: &Dataset) -> Result<()> {
+    if dataset.train.len() < 2 {
+        return Err(SurfaceError::invalid(
+            "training views",
+            format!("{} training views; need at least 2", dataset.train.len()),
+        ));
+    }
+    Ok(())
+}
+
 /// [`prepare`], matching on `matching`: the same views at a finer resolution (an integer
 /// multiple of the training size). The matcher and the warm-up then work on the finer pixels —
 /// on DTU scan65 matching at 800 × 600 instead of 400 × 300 halves the warm-up's pose error
@@ -181,12 +192,7 @@ pub fn prepare_with_matching(
     matching: Option<&Dataset>,
     config: &RunConfig,
 ) -> Result<Prepared> {
-    if dataset.train.len() < 2 {
-        return Err(SurfaceError::invalid(
-            "training views",
-            format!("{} training views; need at least 2", dataset.train.len()),
-        ));
-    }
+    check_view_count(dataset)?;
     let views: Vec<TrainView> = dataset
         .train_views()
         .map(|v| TrainView {
@@ -525,6 +531,9 @@ pub fn run(
         reference_observed,
         source,
     } = inputs;
+    // Refuse what is wrong before the run folder is touched: no half-written output.
+    config.train.validate()?;
+    check_view_count(dataset)?;
     std::fs::create_dir_all(out).map_err(|e| SurfaceError::io(out, e))?;
     write_json(&out.join("config.json"), config)?;
     on_event(Event::Stage("matching"));

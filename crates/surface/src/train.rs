@@ -118,6 +118,25 @@ pub struct TrainConfig {
     pub seed: u64,
 }
 
+impl TrainConfig {
+    /// Checks what the configuration alone decides, so that a run can refuse it before it
+    /// writes anything or spends minutes on matching.
+    pub fn validate(&self) -> Result<()> {
+        self.checked_field().map(|_| ())
+    }
+
+    /// The field this configuration describes, after the checks of [`Self::validate`].
+    fn checked_field(&self) -> Result<Field> {
+        if self.iterations == 0 || self.rays_per_batch == 0 {
+            return Err(SurfaceError::invalid(
+                "config",
+                "iterations and rays per batch must be positive",
+            ));
+        }
+        Field::new(self.field.clone()).map_err(|e| SurfaceError::invalid("field", e))
+    }
+}
+
 impl Default for TrainConfig {
     fn default() -> Self {
         Self {
@@ -273,14 +292,7 @@ impl Trainer {
                 ));
             }
         }
-        if config.iterations == 0 || config.rays_per_batch == 0 {
-            return Err(SurfaceError::invalid(
-                "config",
-                "iterations and rays per batch must be positive",
-            ));
-        }
-        let field =
-            Field::new(config.field.clone()).map_err(|e| SurfaceError::invalid("field", e))?;
+        let field = config.checked_field()?;
         let params = field.init_params(config.seed);
         let adam = params.iter().map(|p| AdamState::new(1, p.len())).collect();
         let poses: Vec<f32> = initial_poses

@@ -207,6 +207,47 @@ fn checkpoint_of_another_configuration_is_refused() {
     assert!(err.contains("not a surface checkpoint"), "{err}");
 }
 
+/// A configuration or dataset the run cannot use is refused before the run folder is made:
+/// no `config.json`, `matches.json` or `poses_initial.json` is left behind (they were, when
+/// the check sat in the trainer, after matching and the warm-up).
+#[test]
+fn bad_configuration_or_single_view_writes_nothing() {
+    let ds = tiny_scene();
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&str, RunConfig, Dataset); 3] = [
+        ("iterations", tiny_config(0), ds.clone()),
+        (
+            "rays",
+            {
+                let mut c = tiny_config(4);
+                c.train.rays_per_batch = 0;
+                c
+            },
+            ds.clone(),
+        ),
+        (
+            "one view",
+            tiny_config(4),
+            Dataset {
+                train: ds.train[..1].to_vec(),
+                ..ds.clone()
+            },
+        ),
+    ];
+    for (name, config, dataset) in cases {
+        let out = dir.path().join(name);
+        let err = run(inputs(&dataset, None), &config, &out, false, &mut silent)
+            .unwrap_err()
+            .to_string();
+        assert!(!err.contains('\n'), "{name}: {err}");
+        assert!(
+            err.contains("must be positive") || err.contains("need at least 2"),
+            "{name}: {err}"
+        );
+        assert!(!out.exists(), "{name}: {} was created", out.display());
+    }
+}
+
 /// The analytic scene from noisy poses, a reduced run that fits the CI budget: 6 views at
 /// 160 × 120, σ = 0.05 se(3) noise, 300 iterations. It bounds the Chamfer-L1 of the extracted
 /// mesh to the true surface (after the Alg. 3 registration) at 5 % of the bounding-box
