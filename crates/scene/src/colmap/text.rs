@@ -139,9 +139,11 @@ pub fn replace_image_poses(path: &Path, poses: &BTreeMap<u32, PoseFields>) -> Re
         let pose: Vec<String> = qvec.iter().chain(tvec).map(f64::to_string).collect();
         lines[line] = format!("{id} {} {rest}", pose.join(" "));
     }
-    let mut out = lines.join("\n");
+    // The file's own line endings are kept (COLMAP on Windows writes CRLF).
+    let newline = if text.contains("\r\n") { "\r\n" } else { "\n" };
+    let mut out = lines.join(newline);
     if text.ends_with('\n') {
-        out.push('\n');
+        out.push_str(newline);
     }
     Ok(out)
 }
@@ -173,4 +175,24 @@ pub fn read_points(path: &Path) -> Result<Vec<ColmapPoint>> {
         });
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A Windows-written `images.txt` comes back with CRLF endings, only the pose replaced.
+    #[test]
+    fn replacing_poses_keeps_crlf_line_endings() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("images.txt");
+        let lf = "# Image list\n1 1 0 0 0 0.5 0 0 1 my image.png\n10 20 -1 30 40 7\n";
+        for newline in ["\n", "\r\n"] {
+            std::fs::write(&path, lf.replace('\n', newline)).unwrap();
+            let poses = BTreeMap::from([(1, ([0.0, 1.0, 0.0, 0.0], [1.0, 2.0, 3.0]))]);
+            let out = replace_image_poses(&path, &poses).unwrap();
+            let expected = "# Image list\n1 0 1 0 0 1 2 3 1 my image.png\n10 20 -1 30 40 7\n";
+            assert_eq!(out, expected.replace('\n', newline));
+        }
+    }
 }
