@@ -56,6 +56,20 @@ impl Similarity {
             .collect()
     }
 
+    /// A copy of `mesh` in the mapped world: vertices mapped, normals rotated (a positive scale
+    /// keeps the faces' orientation), faces and colours as they are.
+    pub fn apply_to_mesh(&self, mesh: &crate::Mesh) -> crate::Mesh {
+        let rotate = |n: &[f32; 3]| crate::mesh::f3(&(self.rotation * crate::mesh::v3(n)));
+        crate::Mesh {
+            vertices: self.apply_points(&mesh.vertices),
+            normals: mesh
+                .normals
+                .as_ref()
+                .map(|ns| ns.iter().map(rotate).collect()),
+            ..mesh.clone()
+        }
+    }
+
     /// `self ∘ other`: first `other`, then `self`.
     pub fn compose(&self, other: &Similarity) -> Similarity {
         Similarity {
@@ -248,5 +262,51 @@ pub(crate) mod tests {
         assert!(umeyama(&line, &line, true).is_err());
         assert!(umeyama(&line[..2], &line[..2], true).is_err());
         assert!(umeyama(&line, &line[..4], true).is_err());
+    }
+
+    /// A mapped tetrahedron: its edges scale by `s`, each face's cross-product normal (from the
+    /// mapped vertices) is the original one turned by `R` (orientation kept), and the stored
+    /// vertex normals are turned alike.
+    #[test]
+    fn a_mapped_mesh_keeps_its_shape_and_orientation() {
+        let mut mesh = crate::Mesh::new(
+            vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.0, 0.0, 1.0],
+            ],
+            vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+        );
+        let third = 1.0 / 3f32.sqrt();
+        mesh.normals = Some(vec![
+            [-third; 3],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+        ]);
+        mesh.colors = Some(vec![[0.1, 0.2, 0.3]; 4]);
+        let sim = random_similarity(7);
+        let mapped = sim.apply_to_mesh(&mesh);
+        let v = |m: &crate::Mesh, i: u32| crate::mesh::v3(&m.vertices[i as usize]);
+        for f in &mesh.faces {
+            let normal =
+                |m: &crate::Mesh| (v(m, f[1]) - v(m, f[0])).cross(&(v(m, f[2]) - v(m, f[0])));
+            let expected = sim.rotation * normal(&mesh).normalize();
+            assert!((normal(&mapped).normalize() - expected).norm() < 1e-6);
+            let edge = |m: &crate::Mesh| (v(m, f[1]) - v(m, f[0])).norm();
+            assert!((edge(&mapped) - sim.scale * edge(&mesh)).abs() < 1e-5 * sim.scale);
+        }
+        for (n, m) in mesh
+            .normals
+            .as_ref()
+            .unwrap()
+            .iter()
+            .zip(mapped.normals.as_ref().unwrap())
+        {
+            let turned = sim.rotation * crate::mesh::v3(n);
+            assert!((crate::mesh::v3(m) - turned).norm() < 1e-6);
+        }
+        assert_eq!((&mapped.faces, &mapped.colors), (&mesh.faces, &mesh.colors));
     }
 }

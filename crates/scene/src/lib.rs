@@ -23,7 +23,7 @@ pub mod error;
 pub mod image;
 pub mod llff;
 pub mod load;
-mod numpy;
+pub mod numpy;
 pub mod ply_scalar;
 pub mod pose_export;
 pub mod split;

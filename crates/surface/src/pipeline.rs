@@ -12,9 +12,12 @@
 //!   alignment (`cameras_sphere_refined.npz`, `poses_bounds_refined.npy`,
 //!   `transforms_refined.json`, `sparse_refined/`, …; see [`fewview_scene::pose_export`]) when
 //!   the dataset came from a folder;
-//! - `mesh.ply` — marching cubes of the SDF, culled by the training masks, coloured;
+//! - `mesh.ply` — marching cubes of the SDF, culled by the training masks, coloured, in the
+//!   reconstruction's frame (that of `poses_refined.json`); `mesh_input_frame.ply` — the same
+//!   mesh in the input's own world, the frame of the refined camera file (DTU: millimetres);
 //! - `renders/` — colour, depth and normals of the test views (ground-truth cameras mapped into
-//!   the reconstruction's frame by the Alg. 1 alignment);
+//!   the reconstruction's frame by the Alg. 1 alignment): PNGs to look at, and `NNN_depth.npy`,
+//!   depth along the optical axis in the input world's units (0 on the background);
 //! - `metrics.json` — pose errors (Alg. 1/2) before and after, masked PSNR/SSIM of the test
 //!   views, Chamfer of the mesh against a reference surface (Alg. 3) when one is given.
 
@@ -23,6 +26,7 @@ use std::path::{Path, PathBuf};
 use fewview_geom::Mesh;
 use fewview_geom::Similarity;
 use fewview_metrics::pose_error::{PoseError, PoseErrorOptions, pose_error_pairwise};
+use fewview_scene::numpy::Array as NpyArray;
 use fewview_scene::pose_export::{PoseSource, write_refined_poses};
 use fewview_scene::{Camera, Dataset, Image, Intrinsics, Se3};
 use serde::{Deserialize, Serialize};
@@ -664,6 +668,11 @@ pub fn run(
             .map(|m| (refined_cams.as_slice(), m.as_slice())),
     )?;
     fewview_geom::io::write_mesh(&out.join("mesh.ply"), &mesh)?;
+    let to_input = input_world(truth.unwrap_or(dataset), &final_err.alignment)?;
+    fewview_geom::io::write_mesh(
+        &out.join("mesh_input_frame.ply"),
+        &to_input.apply_to_mesh(&mesh),
+    )?;
 
     // Test views.
     let renders = out.join("renders");
@@ -703,6 +712,8 @@ pub fn run(
             r.depth.data.iter().map(|d| d / dmax).collect(),
         )
         .save_png(&name("depth"))?;
+        let depth_npy = renders.join(format!("{vi:03}_depth.npy"));
+        fewview_scene::numpy::save_npy(&depth_npy, &z_depth(&r, &cam, to_input.scale))?;
         r.normal.save_png(&name("normal"))?;
         let full = fewview_metrics::psnr::psnr(&r.rgb, &image).unwrap_or(f64::NAN);
         let (pm, sm) = match &mask {
@@ -792,6 +803,44 @@ fn reference_scores(
     (whole, seen, why)
 }
 
+/// The map from the reconstruction's frame to the input's own world, the frame of the refined
+/// camera file: the Alg. 1 alignment onto the cameras the poses are scored against (`scored`,
+/// the truth's when given), then that dataset's map back to its file's frame (DTU: `scale_mat`,
+/// to the millimetres of DTU's reference point clouds; LLFF: NeRF's normalisation undone).
+/// `mesh_input_frame.ply` and the raw depth maps are in this world, so they overlay the
+/// refined cameras in the tools that read the input's format.
+fn input_world(scored: &Dataset, alignment: &Similarity) -> Result<Similarity> {
+    match &scored.to_source_world {
+        None => Ok(*alignment),
+        Some(m) => Ok(Similarity::from_matrix4(m)?.compose(alignment)),
+    }
+}
+
+/// The rendered depth as a `height × width` array of depths along the optical axis (the
+/// convention of COLMAP's and MVSNet's depth maps, not the distance along the ray that NeuS
+/// renders), times `units` (the scale of the map to the input's world); 0 where the rendered
+/// opacity is under one half (background). The weights' expected distance is divided by their
+/// sum first, so that partly covered pixels are not pulled towards the camera.
+fn z_depth(render: &crate::extract::ViewRender, camera: &Camera, units: f64) -> NpyArray {
+    let (w, h) = (render.depth.width, render.depth.height);
+    let axis = camera.world_to_camera.rotation.row(2).transpose();
+    let data = (0..w * h)
+        .map(|i| {
+            let alpha = f64::from(render.alpha.data[i]);
+            if alpha < 0.5 {
+                return 0.0;
+            }
+            let (x, y) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+            let (_, direction) = camera.ray(x, y);
+            f64::from(render.depth.data[i]) / alpha * direction.dot(&axis) * units
+        })
+        .collect();
+    NpyArray {
+        shape: vec![h, w],
+        data,
+    }
+}
+
 /// Paper 001 Alg. 3: the mesh pre-aligned with the pose-evaluation similarity, then
 /// registered to the reference by FPFH + RANSAC and point-to-point ICP (ICP also from the
 /// pre-alignment, see `fewview_geom::registration::IcpStarts`).
@@ -843,4 +892,54 @@ pub fn chamfer_of(
 /// The run directory's checkpoint path.
 pub fn checkpoint_path(out: &Path) -> PathBuf {
     out.join("checkpoint.bin")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    /// A tilted plane seen by a turned camera: where a pixel's opacity reaches one half, the
+    /// written depth is the hit point's camera-frame z (computed by transforming the point, not
+    /// by the projection onto the axis the function uses) times the units, also when the
+    /// opacity is 0.8 and the rendered depth is the weights' unnormalised sum; below one half,
+    /// 0.
+    #[test]
+    fn depth_maps_hold_z_along_the_optical_axis_in_the_input_units() {
+        let (w, h) = (12usize, 9usize);
+        let camera = Camera::look_at(
+            Intrinsics::centered(10.0, w as u32, h as u32),
+            Vector3::new(0.4, -0.3, 3.0),
+            Vector3::new(0.1, 0.2, 0.0),
+            Vector3::new(0.0, 0.0, 1.0),
+        );
+        let (normal, offset) = (Vector3::new(0.2, -0.1, 1.0).normalize(), -0.05);
+        let opacity = |i: usize| [1.0f32, 0.8, 0.3][i % 3];
+        let mut depth = Vec::new();
+        let mut expected = Vec::new();
+        for i in 0..w * h {
+            let (o, d) = camera.ray((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+            let t = (offset - normal.dot(&o)) / normal.dot(&d);
+            assert!(t > 0.0);
+            depth.push(opacity(i) * t as f32);
+            let z = camera.world_to_camera.transform_point(&(o + t * d)).z;
+            expected.push(if opacity(i) >= 0.5 { 2.5 * z } else { 0.0 });
+        }
+        let blank = |c: usize| Image::from_vec(w, h, c, vec![0.0; w * h * c]);
+        let render = crate::extract::ViewRender {
+            rgb: blank(3),
+            depth: Image::from_vec(w, h, 1, depth),
+            normal: blank(3),
+            alpha: Image::from_vec(w, h, 1, (0..w * h).map(opacity).collect()),
+        };
+        let got = z_depth(&render, &camera, 2.5);
+        assert_eq!(got.shape, [h, w]);
+        for (i, (g, e)) in got.data.iter().zip(&expected).enumerate() {
+            assert!(
+                (g - e).abs() < 1e-5 * e.abs().max(1.0),
+                "pixel {i}: {g} vs {e}"
+            );
+        }
+        assert!(expected.iter().filter(|&&e| e > 0.0).count() >= 2 * w * h / 3);
+    }
 }

@@ -94,6 +94,101 @@ fn dtu_scan65_short_run_end_to_end() {
         assert!(out.path().join(f).exists(), "{f} missing");
     }
     refined_cameras_file_reloads_as_the_refined_poses(&dir, &options, out.path(), &report);
+    input_frame_outputs_overlay_the_refined_cameras(&dir, &options, out.path());
+}
+
+/// `mesh_input_frame.ply` is in the world of the run's `cameras_sphere_refined.npz` (DTU's
+/// millimetres): mapped back by the reloaded file's `scale_mat` and projected by its cameras, each
+/// vertex lands where `mesh.ply`'s vertex lands under `poses_refined.json`. The test view's
+/// `024_depth.npy` is in millimetres too: its median depth is the distance along the true test
+/// camera's axis to the mesh's centre, within the object's depth (the skull is about 150 mm deep).
+fn input_frame_outputs_overlay_the_refined_cameras(
+    scene: &std::path::Path,
+    options: &LoadOptions,
+    run_dir: &std::path::Path,
+) {
+    use fewview_geom::io::read_mesh;
+    let (_copy, reloaded) = reload_with(scene, run_dir, "cameras_sphere.npz", options);
+    let refined = fewview_geom::io::cameras::read_cameras(&run_dir.join("poses_refined.json"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let mesh = read_mesh(&run_dir.join("mesh.ply")).unwrap_or_else(|e| panic!("{e}"));
+    let in_mm = read_mesh(&run_dir.join("mesh_input_frame.ply")).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(mesh.faces, in_mm.faces);
+    assert!(
+        mesh.vertices.len() > 100,
+        "{} vertices",
+        mesh.vertices.len()
+    );
+    let to_mm = reloaded.to_source_world.expect("DTU keeps scale_mat");
+    let from_mm = to_mm.try_inverse().unwrap();
+    let v3 = |p: &[f32; 3]| nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+    let mut worst: f64 = 0.0;
+    for (view, cam) in [22, 25, 28].into_iter().zip(&refined) {
+        let file_cam = &reloaded.views[view].camera;
+        for (p, q) in mesh.vertices.iter().zip(&in_mm.vertices) {
+            let (Some(a), Some(b)) = (
+                cam.project(&v3(p).coords),
+                file_cam.project(&from_mm.transform_point(&v3(q)).coords),
+            ) else {
+                panic!("view {view}: a vertex behind the camera");
+            };
+            worst = worst.max((a.0 - b.0).hypot(a.1 - b.1));
+        }
+    }
+    assert!(worst < 1e-2, "vertices land {worst:.2e} px apart");
+    let depth = fewview_scene::numpy::read_npy(&run_dir.join("renders/024_depth.npy"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let truth = load_dataset(scene, options).unwrap_or_else(|e| panic!("{e}"));
+    let test_cam = &truth.views[24].camera;
+    assert_eq!(
+        depth.shape,
+        [
+            test_cam.height() as usize / 4,
+            test_cam.width() as usize / 4
+        ]
+    );
+    // Back-projected through the true test camera and mapped to millimetres, the depth pixels
+    // fall on the mesh: each one's distance to the nearest vertex of `mesh_input_frame.ply`.
+    let mm_per_unit = to_mm.fixed_view::<3, 3>(0, 0).determinant().cbrt();
+    let small = test_cam.resized(depth.shape[1] as u32, depth.shape[0] as u32);
+    let width = depth.shape[1];
+    let mut off_mm: Vec<f64> = (0..depth.data.len())
+        .filter(|&i| depth.data[i] > 0.0)
+        .map(|i| {
+            let (u, v) = ((i % width) as f64 + 0.5, (i / width) as f64 + 0.5);
+            let p = small.unproject(u, v, depth.data[i] / mm_per_unit);
+            let p_mm = to_mm.transform_point(&p.into());
+            in_mm
+                .vertices
+                .iter()
+                .map(|q| (v3(q) - p_mm).norm())
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect();
+    assert!(
+        off_mm.len() > depth.data.len() / 10,
+        "{} foreground pixels",
+        off_mm.len()
+    );
+    off_mm.sort_by(f64::total_cmp);
+    let median = off_mm[off_mm.len() / 2];
+    eprintln!(
+        "test view 24: depth pixels lie {median:.2} mm (median) from the mesh; vertices agree to {worst:.1e} px"
+    );
+    // Points on a surface lie within about half an edge of its nearest vertex (64³ marching cubes:
+    // edges of several millimetres); a depth map in the wrong units or frame lands hundreds of
+    // millimetres off (the skull is 600 mm from the camera).
+    let edge = in_mm
+        .faces
+        .iter()
+        .map(|f| (v3(&in_mm.vertices[f[0] as usize]) - v3(&in_mm.vertices[f[1] as usize])).norm())
+        .sum::<f64>()
+        / in_mm.faces.len() as f64;
+    eprintln!("mean edge {edge:.2} mm");
+    assert!(
+        median < 2.0 * edge,
+        "depth pixels {median} mm from the mesh (edges {edge} mm)"
+    );
 }
 
 /// The scene at `scene` with the run's `<camera_file stem>_refined.npz` in place of

@@ -28,8 +28,9 @@ use super::progress;
 /// (ratio + mutual check + RANSAC). Writes a run directory: `config.json`, `checkpoint.bin`
 /// (resume with `--resume`), `matches.json`, `poses_initial.json`, `poses_refined.json`, the
 /// input's camera file with the refined poses in its own format (`cameras_sphere_refined.npz`,
-/// `poses_bounds_refined.npy`, `transforms_refined.json`, `sparse_refined/`…), `mesh.ply`,
-/// `renders/`, `metrics.json` (pose errors by paper 001 Alg. 1/2, masked PSNR/SSIM of test
+/// `poses_bounds_refined.npy`, `transforms_refined.json`, `sparse_refined/`…), `mesh.ply`
+/// (the estimate's frame) and `mesh_input_frame.ply` (the input's world, e.g. DTU millimetres),
+/// `renders/` (PNGs and `NNN_depth.npy` depth maps in the input's units), `metrics.json` (pose errors by paper 001 Alg. 1/2, masked PSNR/SSIM of test
 /// views, Chamfer with `--reference`).
 ///
 /// Without `--data`, `--synthetic` runs on the built-in analytic SDF scene and scores the mesh
