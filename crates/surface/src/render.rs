@@ -44,6 +44,25 @@ impl SampleConfig {
     pub fn samples_per_ray(&self) -> usize {
         self.n_coarse + self.n_importance
     }
+
+    /// The coarse samples must make at least one interval, and each of the up-sampling steps
+    /// (which share `n_importance`) must add at least one sample.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.n_coarse < 2 {
+            return Err(format!(
+                "{} coarse samples per ray; need at least 2",
+                self.n_coarse
+            ));
+        }
+        let steps = self.up_sample_steps.max(1);
+        if self.n_importance > 0 && self.n_importance < steps {
+            return Err(format!(
+                "{} importance samples cannot be shared by {steps} up-sampling steps; use 0 or at least {steps}",
+                self.n_importance
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// Near and far distances of NeuS's `near_far_from_sphere` (unit `dir`): the closest point to

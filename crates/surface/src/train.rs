@@ -61,6 +61,37 @@ pub struct LossConfig {
     pub patch_step: f32,
 }
 
+impl LossConfig {
+    /// Every weight finite and not negative: a NaN weight would turn the whole loss into NaN
+    /// and a negative one would reward the error it weighs.
+    pub fn validate(&self) -> Result<()> {
+        let weights = [
+            ("lambda_mc", self.lambda_mc),
+            ("lambda_u", self.lambda_u),
+            ("lambda_gc", self.lambda_gc),
+            ("lambda_geo", self.lambda_geo),
+            ("lambda_psdf", self.lambda_psdf),
+            ("lambda_b", self.lambda_b),
+            ("lambda_mask", self.lambda_mask),
+        ];
+        for (name, w) in weights {
+            if !(w.is_finite() && w >= 0.0) {
+                return Err(SurfaceError::invalid(
+                    "loss weights",
+                    format!("{name} = {w}; expected a finite weight ≥ 0"),
+                ));
+            }
+        }
+        if !(self.patch_step.is_finite() && self.patch_step > 0.0) {
+            return Err(SurfaceError::invalid(
+                "loss weights",
+                format!("patch step {}; expected > 0 pixels", self.patch_step),
+            ));
+        }
+        Ok(())
+    }
+}
+
 impl Default for LossConfig {
     fn default() -> Self {
         Self {
@@ -133,6 +164,10 @@ impl TrainConfig {
                 "iterations and rays per batch must be positive",
             ));
         }
+        self.sample
+            .validate()
+            .map_err(|e| SurfaceError::invalid("samples", e))?;
+        self.losses.validate()?;
         Field::new(self.field.clone()).map_err(|e| SurfaceError::invalid("field", e))
     }
 }

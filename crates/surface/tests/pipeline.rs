@@ -209,12 +209,34 @@ fn checkpoint_of_another_configuration_is_refused() {
 
 /// A configuration or dataset the run cannot use is refused before the run folder is made:
 /// no `config.json`, `matches.json` or `poses_initial.json` is left behind (they were, when
-/// the check sat in the trainer, after matching and the warm-up).
+/// the check sat in the trainer, after matching and the warm-up). Fewer importance samples
+/// than up-sampling steps panicked in the sampler (a step of zero samples), and a NaN loss
+/// weight was accepted.
 #[test]
 fn bad_configuration_or_single_view_writes_nothing() {
     let ds = tiny_scene();
     let dir = tempfile::tempdir().unwrap();
-    let cases: [(&str, RunConfig, Dataset); 3] = [
+    let with = |change: &dyn Fn(&mut RunConfig)| {
+        let mut c = tiny_config(4);
+        change(&mut c);
+        c
+    };
+    let cases: [(&str, RunConfig, Dataset); 6] = [
+        (
+            "importance samples fewer than the up-sampling steps",
+            with(&|c| c.train.sample.n_importance = 3),
+            ds.clone(),
+        ),
+        (
+            "one coarse sample",
+            with(&|c| c.train.sample.n_coarse = 1),
+            ds.clone(),
+        ),
+        (
+            "NaN loss weight",
+            with(&|c| c.train.losses.lambda_mc = f32::NAN),
+            ds.clone(),
+        ),
         ("iterations", tiny_config(0), ds.clone()),
         (
             "rays",
@@ -240,10 +262,13 @@ fn bad_configuration_or_single_view_writes_nothing() {
             .unwrap_err()
             .to_string();
         assert!(!err.contains('\n'), "{name}: {err}");
-        assert!(
-            err.contains("must be positive") || err.contains("need at least 2"),
-            "{name}: {err}"
-        );
+        let expected = [
+            "must be positive",
+            "need at least 2",
+            "cannot be shared by 4 up-sampling steps",
+            "lambda_mc = NaN",
+        ];
+        assert!(expected.iter().any(|e| err.contains(e)), "{name}: {err}");
         assert!(!out.exists(), "{name}: {} was created", out.display());
     }
 }

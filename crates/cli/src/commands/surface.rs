@@ -458,6 +458,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             options: &load_options,
         }),
     };
+    let checkpoint = out.join("checkpoint.bin");
+    if args.resume && !checkpoint.exists() {
+        eprintln!(
+            "note: --resume: no {} yet, starting from the first iteration",
+            checkpoint.display()
+        );
+    }
     let report = run_pipeline(inputs, &cfg, &out, args.resume, &mut |e| match e {
         Event::Matched {
             matches,

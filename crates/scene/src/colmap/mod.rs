@@ -263,6 +263,24 @@ pub fn read_model(dir: &Path) -> Result<ColmapModel> {
             ),
         ));
     }
+    // Ids and names must each name one image: the views are looked up by name and the refined
+    // poses are written back by id.
+    let mut ids = std::collections::BTreeSet::new();
+    let mut names = std::collections::BTreeSet::new();
+    for img in &model.images {
+        if !ids.insert(img.id) {
+            return Err(SceneError::invalid(
+                path("images"),
+                format!("image id {} appears twice", img.id),
+            ));
+        }
+        if !names.insert(img.name.as_str()) {
+            return Err(SceneError::invalid(
+                path("images"),
+                format!("image name {} appears twice", img.name),
+            ));
+        }
+    }
     Ok(model)
 }
 
@@ -446,6 +464,26 @@ pub(crate) mod tests {
         }
         // Text (17 significant digits) and binary agree exactly.
         assert_eq!(models[0], models[1]);
+    }
+
+    /// Two images with one id, or with one name, are refused: the views are found by name and
+    /// the refined poses written back by id.
+    #[test]
+    fn duplicate_image_ids_and_names_are_refused() {
+        let dir = scene("text");
+        let images = dir.path().join("sparse/0/images.txt");
+        let original = std::fs::read_to_string(&images).unwrap();
+        for (from, to, expected) in [
+            ("\n4 0.5469", "\n2 0.5469", "image id 2 appears twice"),
+            ("1 b.png", "1 c.png", "image name c.png appears twice"),
+        ] {
+            assert!(original.contains(from));
+            std::fs::write(&images, original.replace(from, to)).unwrap();
+            let e = load::load_dataset(dir.path(), &LoadOptions::default())
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("images.txt") && e.contains(expected), "{e}");
+        }
     }
 
     #[test]

@@ -118,9 +118,24 @@ fn images_with_lines(text: &str, path: &Path) -> Result<Vec<(ColmapImage, usize)
             camera_id: field(&f, 8, "camera id", path, n)?,
             name: f[9].to_owned(),
         };
+        let id = image.id;
         out.push((image, i));
-        // The 2D points line; its contents are not needed. A file that ends here is fine.
-        let _ = lines.next();
+        // The 2D points line (X Y POINT3D_ID triples, possibly none); its contents are not
+        // needed. A file that ends here is fine. A line whose fields are not triples is the
+        // next image's: a file without 2D points lines would otherwise lose every other image.
+        if let Some((j, points)) = lines.next() {
+            let fields = points.split_whitespace().count();
+            if fields % 3 != 0 {
+                return Err(SceneError::format(
+                    path,
+                    format!(
+                        "line {}: expected the 2D points of image {} (X Y POINT3D_ID triples), found {fields} fields; each image takes two lines",
+                        j + 1,
+                        id
+                    ),
+                ));
+            }
+        }
     }
     Ok(out)
 }
@@ -194,5 +209,23 @@ mod tests {
             let expected = "# Image list\n1 0 1 0 0 1 2 3 1 my image.png\n10 20 -1 30 40 7\n";
             assert_eq!(out, expected.replace('\n', newline));
         }
+    }
+
+    /// An images file without its 2D points lines is refused (it lost every other image), and
+    /// an image with no 2D points (an empty line) is read.
+    #[test]
+    fn images_need_their_points_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("images.txt");
+        let image = |id: u32| format!("{id} 1 0 0 0 0 0 0 1 view{id}.png");
+        std::fs::write(&path, format!("{}\n{}\n{}\n", image(1), image(2), image(3))).unwrap();
+        let err = read_images(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("line 2: expected the 2D points of image 1"),
+            "{err}"
+        );
+        std::fs::write(&path, format!("{}\n\n{}\n1 2 -1\n", image(1), image(2))).unwrap();
+        let ids: Vec<u32> = read_images(&path).unwrap().iter().map(|i| i.id).collect();
+        assert_eq!(ids, [1, 2]);
     }
 }
