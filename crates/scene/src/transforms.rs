@@ -202,6 +202,16 @@ pub(crate) fn parse_transforms(text: &str, path: &Path) -> Result<Vec<Frame>> {
                     ),
                 ));
             }
+            // An orthonormal matrix of determinant −1 is a mirror, which no camera pose is.
+            if gl.rotation.determinant() < 0.0 {
+                return Err(SceneError::invalid(
+                    path,
+                    format!(
+                        "frame {i} ({}): transform_matrix rotation is a reflection (determinant −1)",
+                        f.file_path
+                    ),
+                ));
+            }
             let camera = f.camera.or(&file.camera);
             camera
                 .check_pinhole()
@@ -566,6 +576,13 @@ pub(crate) mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("not orthonormal"), "{e}");
+        // A mirror: orthonormal, determinant −1.
+        let doc = json!({ "camera_angle_x": 0.5, "frames": [{ "file_path": "a", "transform_matrix": [[-1.0,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]] }] });
+        std::fs::write(dir.path().join("transforms_test.json"), doc.to_string()).unwrap();
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("is a reflection"), "{e}");
     }
 
     /// A nerfstudio scene: ten frames written in reverse file order (`images/f_09.jpg` first),
