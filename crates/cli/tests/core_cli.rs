@@ -313,6 +313,89 @@ fn bad_inputs_give_one_line_errors() {
     );
 }
 
+/// Held-out views too small for SSIM (or whose mask a downscale empties) used to fail only at
+/// the evaluation, after config.json and point_cloud.ply were written.
+#[test]
+fn train_refuses_views_too_small_to_score_before_writing() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = write_llff(&dir.path().join("scene"), |_, _| {});
+    let run = dir.path().join("run");
+    assert_clean_error(
+        &fewview(&[
+            "train",
+            "--data",
+            s(&data),
+            "--downscale",
+            "5",
+            "--iterations",
+            "2",
+            "--out",
+            s(&run),
+        ]),
+        &["SSIM window", "downscale"],
+    );
+    assert!(!run.exists(), "nothing written");
+}
+
+/// 10¹² random initial points used to abort on allocation.
+#[test]
+fn train_refuses_too_many_initial_points() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = write_llff(&dir.path().join("scene"), |_, _| {});
+    let run = dir.path().join("run");
+    assert_clean_error(
+        &fewview(&[
+            "train",
+            "--data",
+            s(&data),
+            "--init-points",
+            "1000000000000",
+            "--out",
+            s(&run),
+        ]),
+        &["--init-points 1000000000000", "allowed"],
+    );
+    assert!(!run.exists(), "nothing written");
+}
+
+/// A huge --frames-per-segment used to hang building the path before the output's container
+/// was even looked at; now both are checked before anything is read or rendered.
+#[test]
+fn render_checks_the_path_flags_before_rendering() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = write_llff(&dir.path().join("scene"), |_, _| {});
+    let mut model = fewview_splat::model::GaussianModel::new(0);
+    model.push_isotropic([0.0, 0.0, -4.0], 0.3, [0.5; 3], 0.9);
+    let ply = dir.path().join("m.ply");
+    fewview_splat::ply::write_ply(&ply, &model).unwrap();
+    let renders = dir.path().join("renders");
+    let render = |path: &Path, per_segment: &str| {
+        fewview(&[
+            "render",
+            "--ply",
+            s(&ply),
+            "--data",
+            s(&data),
+            "--out",
+            s(&renders),
+            "--path",
+            s(path),
+            "--frames-per-segment",
+            per_segment,
+        ])
+    };
+    let json = dir.path().join("p.json");
+    assert_clean_error(&render(&json, "100000000000"), &["p.json", ".json"]);
+    let gif = dir.path().join("p.gif");
+    assert_clean_error(
+        &render(&gif, "100000000000"),
+        &["--frames-per-segment 100000000000", "10000"],
+    );
+    // 3 training views: 2 segments of 6000 frames are over the cap too.
+    assert_clean_error(&render(&gif, "6000"), &["12001-frame"]);
+    assert!(!renders.exists() && !gif.exists(), "nothing written");
+}
+
 #[test]
 fn surface_runs_on_the_built_in_analytic_scene_without_a_dataset() {
     let dir = tempfile::tempdir().unwrap();

@@ -236,6 +236,61 @@ fn blend_writes_an_image_and_rejects_bad_masks() {
     assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
 }
 
+/// `-o o.jpg` used to get PNG bytes; σ = 10⁴ used to hang the feather blur.
+#[test]
+fn blend_refuses_a_non_png_output_and_takes_a_huge_sigma() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (20, 12);
+    let mut mf = Image::new(w, h, 1);
+    let mut mg = Image::new(w, h, 1);
+    for j in 0..h {
+        for i in 0..w {
+            mf.set(i, j, 0, (i < 12) as u8 as f32);
+            mg.set(i, j, 0, (i >= 8) as u8 as f32);
+        }
+    }
+    let paths: Vec<PathBuf> = ["f.png", "g.png", "mf.png", "mg.png"]
+        .iter()
+        .map(|n| dir.path().join(n))
+        .collect();
+    save(&Image::filled(w, h, &[0.2, 0.4, 0.6]), &paths[0]);
+    save(&Image::filled(w, h, &[0.6, 0.4, 0.2]), &paths[1]);
+    save(&mf, &paths[2]);
+    save(&mg, &paths[3]);
+    let blend = |out: &Path, sigma: &str| {
+        fewview(&[
+            "blend",
+            "--f",
+            s(&paths[0]),
+            "--g",
+            s(&paths[1]),
+            "--mask-f",
+            s(&paths[2]),
+            "--mask-g",
+            s(&paths[3]),
+            "--method",
+            "feather",
+            "--sigma",
+            sigma,
+            "-o",
+            s(out),
+        ])
+    };
+    let jpg = dir.path().join("o.jpg");
+    let (ok, _, err) = blend(&jpg, "8");
+    assert!(
+        !ok && err.contains("o.jpg") && err.contains(".png"),
+        "{err}"
+    );
+    assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
+    assert!(!jpg.exists());
+    let png = dir.path().join("o.PNG");
+    let (ok, _, err) = blend(&png, "10000");
+    assert!(ok, "{err}");
+    let o = Image::load(&png).unwrap();
+    assert!(o.data.iter().all(|v| v.is_finite()));
+}
+
 #[test]
 fn mcubes_of_a_sphere_grid_is_watertight() {
     let dir = tempfile::tempdir().unwrap();
@@ -344,6 +399,45 @@ fn chamfer_of_a_shifted_plane_and_a_non_manifold_mesh() {
     );
 }
 
+/// A huge triangle (or a tiny density, or a huge --samples) used to allocate gigabytes.
+#[test]
+fn chamfer_refuses_more_samples_than_the_cap() {
+    let dir = tempfile::tempdir().unwrap();
+    let big = dir.path().join("big.ply");
+    let small = dir.path().join("a.ply");
+    write_mesh(
+        &big,
+        &Mesh::new(
+            vec![[0., 0., 0.], [10_000., 0., 0.], [0., 10_000., 0.]],
+            vec![[0, 1, 2]],
+        ),
+    )
+    .unwrap();
+    write_mesh(&small, &plane(0.0)).unwrap();
+    let runs: [&[&str]; 3] = [
+        &["--pred", s(&big), "--gt", s(&small), "--density", "0.5"],
+        &["--pred", s(&small), "--gt", s(&small), "--density", "1e-6"],
+        &[
+            "--pred",
+            s(&small),
+            "--gt",
+            s(&small),
+            "--protocol",
+            "synthetic",
+            "--samples",
+            "100000000000",
+        ],
+    ];
+    for extra in runs {
+        let mut args = vec!["chamfer"];
+        args.extend_from_slice(extra);
+        let (ok, _, err) = fewview(&args);
+        assert!(!ok && err.contains("allowed"), "{extra:?}: {err}");
+        assert!(err.contains("density") || err.contains("samples"), "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
+    }
+}
+
 #[test]
 fn pose_error_of_identical_poses_is_the_floor() {
     let dir = tempfile::tempdir().unwrap();
@@ -362,6 +456,25 @@ fn pose_error_of_identical_poses_is_the_floor() {
     std::fs::write(&q, "[[[1,0,0,0],[0,1,0,0],[0,0,1,1],[0,0,0,1]]]").unwrap();
     let (ok, _, err) = fewview(&["pose-error", "--est", s(&q), "--gt", s(&p)]);
     assert!(!ok && err.contains("1 estimated poses but 3"), "{err}");
+}
+
+/// ε ≥ 1 (or NaN) used to panic in the arccos clamp; a negative one gave NaN errors.
+#[test]
+fn pose_error_refuses_an_eps_outside_zero_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let poses = r#"[[[1,0,0,0],[0,1,0,0],[0,0,1,1],[0,0,0,1]],
+                    [[0,0,1,0],[0,1,0,0],[-1,0,0,2],[0,0,0,1]]]"#;
+    let p = dir.path().join("p.json");
+    std::fs::write(&p, poses).unwrap();
+    for eps in ["--eps=2", "--eps=NaN", "--eps=-1"] {
+        let (ok, _, err) = fewview(&["pose-error", "--est", s(&p), "--gt", s(&p), eps]);
+        assert!(
+            !ok && err.contains("eps") && err.contains("[0, 1)"),
+            "{eps}: {err}"
+        );
+        assert!(!err.contains("panicked"), "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
+    }
 }
 
 #[test]

@@ -24,7 +24,9 @@ use serde::Serialize;
 use crate::error::{GeomError, Result};
 use crate::knn::PointTree;
 use crate::mesh::Mesh;
-use crate::sampling::{dtu_sample, radius_downsample, sample_surface_with_faces};
+use crate::sampling::{
+    check_sample_count, dtu_sample, radius_downsample, sample_surface_with_faces,
+};
 
 /// The DTU observation mask (`ObsMask{scan}_10.mat`): a boolean voxel grid `mask[(i·ny + j)·nz
 /// + k]` with voxel `(i, j, k)` centred at `bb_min + res·(i, j, k)`.
@@ -276,6 +278,7 @@ fn metrics_on(
     if samples == 0 {
         return Err(GeomError::invalid("samples", "must be at least 1"));
     }
+    check_sample_count(samples)?;
     let (pp, pf) = sample_surface_with_faces(pred, samples, seed)
         .map_err(|e| GeomError::invalid("prediction", e.to_string()))?;
     let (gp, gf) = sample_surface_with_faces(gt, samples, seed.wrapping_add(1))

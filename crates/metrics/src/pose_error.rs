@@ -95,7 +95,15 @@ pub struct PoseError {
     pub aligned_world_to_camera: Vec<Se3>,
 }
 
-fn check(est: &[Se3], gt: &[Se3]) -> Result<(), PoseErrorError> {
+fn check(est: &[Se3], gt: &[Se3], options: &PoseErrorOptions) -> Result<(), PoseErrorError> {
+    // Alg. 2 clamps the cosine to [−1 + ε, 1 − ε]: ε > 1 makes that interval empty (and the clamp
+    // panic), ε < 0 lets acos see values outside [−1, 1], NaN poisons every error.
+    if !(options.eps.is_finite() && (0.0..1.0).contains(&options.eps)) {
+        return Err(PoseErrorError::Invalid(format!(
+            "eps (the arccos clamp margin) is {}; it must be in [0, 1)",
+            options.eps
+        )));
+    }
     if est.len() != gt.len() {
         return Err(PoseErrorError::Invalid(format!(
             "{} estimated poses but {} ground-truth poses",
@@ -190,7 +198,7 @@ pub fn pose_error_pairwise(
     gt: &[Se3],
     options: &PoseErrorOptions,
 ) -> Result<PoseError, PoseErrorError> {
-    check(est, gt)?;
+    check(est, gt, options)?;
     let n = est.len().min(options.max_anchor_views.max(2));
     let est_c2w: Vec<Se3> = est.iter().map(Se3::inverse).collect();
     let gt_c2w: Vec<Se3> = gt.iter().map(Se3::inverse).collect();
@@ -237,7 +245,7 @@ pub fn pose_error_umeyama(
     gt: &[Se3],
     options: &PoseErrorOptions,
 ) -> Result<PoseError, PoseErrorError> {
-    check(est, gt)?;
+    check(est, gt, options)?;
     let c_est: Vec<Vector3<f64>> = est.iter().map(|p| p.inverse().translation).collect();
     let c_gt: Vec<Vector3<f64>> = gt.iter().map(|p| p.inverse().translation).collect();
     let sim = umeyama(&c_est, &c_gt, true).map_err(|e| {
@@ -363,5 +371,31 @@ mod tests {
         let mut nan = gt.clone();
         nan[1].translation.x = f64::NAN;
         assert!(pose_error_umeyama(&nan, &gt, &PoseErrorOptions::default()).is_err());
+    }
+
+    /// ε outside [0, 1) used to reach `f64::clamp` with min > max (a panic) or acos of
+    /// values beyond ±1 (NaN errors).
+    #[test]
+    fn an_eps_outside_zero_one_is_an_error() {
+        let gt = ring(4);
+        let est = reframe(&gt, &frame());
+        for eps in [2.0, 1.0, -1.0, f64::NAN, f64::INFINITY] {
+            let opts = PoseErrorOptions {
+                eps,
+                ..Default::default()
+            };
+            for r in [
+                pose_error_pairwise(&est, &gt, &opts),
+                pose_error_umeyama(&est, &gt, &opts),
+            ] {
+                let e = r.unwrap_err().to_string();
+                assert!(e.contains("eps"), "{e}");
+            }
+        }
+        let zero = PoseErrorOptions {
+            eps: 0.0,
+            ..Default::default()
+        };
+        assert!(pose_error_pairwise(&est, &gt, &zero).is_ok());
     }
 }

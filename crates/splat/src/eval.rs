@@ -94,6 +94,36 @@ pub fn score(
     })
 }
 
+/// Checks that [`score`] can score `view`: SSIM needs an image at least as large as its window
+/// and, with a mask, a mask pixel inside the region SSIM evaluates (the masked PSNR's region
+/// contains it). A run checks its held-out views with this before it writes anything, so that
+/// e.g. a too-large `--downscale` is reported up front rather than after training.
+pub fn check_scorable(view: &View) -> Result<(), String> {
+    let r = SsimOptions::default().radius();
+    let (w, h) = (view.image.width, view.image.height);
+    let side = 2 * r + 1;
+    if w < side || h < side {
+        return Err(format!(
+            "held-out view `{}` is {w}x{h} pixels, smaller than the {side}x{side} SSIM window \
+             (use a smaller downscale)",
+            view.name
+        ));
+    }
+    if let Some(mask) = &view.mask {
+        let inside = mask.data.len() == w * h
+            && (r..h - r).any(|y| (r..w - r).any(|x| mask.data[y * w + x] > 0.5));
+        if !inside {
+            return Err(format!(
+                "the mask of held-out view `{}` selects no pixel at least {r} pixels from the \
+                 border of its {w}x{h} image, so masked PSNR/SSIM cannot score it \
+                 (use a smaller downscale)",
+                view.name
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Renders every view and scores it. Returns the report and the renders (same order).
 pub fn evaluate(
     model: &GaussianModel,

@@ -18,7 +18,7 @@ use fewview_scene::{Camera, Dataset, Image, SceneError};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use crate::eval::{EvalReport, evaluate, render_model};
+use crate::eval::{EvalReport, check_scorable, evaluate, render_model};
 use crate::init::{FrustumView, from_points, random_in_box, random_in_frustums};
 use crate::model::GaussianModel;
 use crate::ply::{read_ply, write_ply};
@@ -52,6 +52,11 @@ pub struct RunConfig {
     /// Number of random initial points (random strategies).
     pub init_points: usize,
 }
+
+/// The most random initial points a run accepts. Each Gaussian costs about 1 KB while training
+/// (parameters, gradients and Adam moments at SH degree 3), so this is ~10 GB; sparse-view scenes
+/// use 10⁴–10⁵. A larger count is refused up front instead of aborting on allocation.
+pub const MAX_INIT_POINTS: usize = 10_000_000;
 
 impl RunConfig {
     pub fn new(train: TrainConfig) -> Self {
@@ -190,6 +195,12 @@ const ITERATIONS_PER_VIEW: usize = 50;
 pub fn initial_model(ds: &Dataset, cfg: &RunConfig) -> Result<GaussianModel, PipelineError> {
     let degree = cfg.train.sh_degree;
     let seed = cfg.train.seed;
+    if cfg.init_points > MAX_INIT_POINTS {
+        return Err(PipelineError::Init(format!(
+            "{} initial points is more than the {MAX_INIT_POINTS} allowed",
+            cfg.init_points
+        )));
+    }
     let strategy = match &cfg.init {
         InitStrategy::Auto if ds.points.as_ref().is_some_and(|p| !p.is_empty()) => {
             InitStrategy::DatasetPoints
@@ -275,6 +286,11 @@ pub fn train_run(
     on_progress: impl FnMut(&Progress),
 ) -> Result<RunSummary, PipelineError> {
     let run = RunDir(dir.to_path_buf());
+    // Before anything is written: a run that cannot score its held-out views would otherwise
+    // leave config.json and point_cloud.ply behind and fail only after training.
+    for v in ds.test_views() {
+        check_scorable(v).map_err(PipelineError::Eval)?;
+    }
     std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
     let device = Device::flex().autodiff();
     let (_, extent) = ds.camera_extent();

@@ -51,7 +51,7 @@ pub struct Args {
     /// Where G is valid (Ω_g*); for `--method poisson`, the region G is pasted into.
     #[arg(long)]
     pub mask_g: PathBuf,
-    /// Output PNG.
+    /// Output PNG (the name must end in `.png`).
     #[arg(long, short)]
     pub out: PathBuf,
     #[arg(long, value_enum, default_value = "occlusion-aware")]
@@ -83,6 +83,18 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    // The result is always encoded as PNG: PNG bytes in a `.jpg` file mislead every reader, and
+    // checking first spares the solve.
+    if !args
+        .out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    {
+        anyhow::bail!(
+            "{}: the blended image is written as PNG; name the output *.png",
+            args.out.display()
+        );
+    }
     let f = load_image(&args.f)?;
     let g = load_image(&args.g)?;
     let (mf, wf, hf) = load_mask(&args.mask_f)?;

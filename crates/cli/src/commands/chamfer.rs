@@ -144,7 +144,15 @@ pub fn run(args: Args) -> Result<()> {
                 }
                 require_edge_manifold(m, &p.display().to_string())?;
             }
-            let r = surface_metrics(&pred, &gt, args.samples, &args.tau, args.seed)?;
+            let r = surface_metrics(&pred, &gt, args.samples, &args.tau, args.seed).with_context(
+                || {
+                    format!(
+                        "synthetic metrics of {} against {}",
+                        args.pred.display(),
+                        args.gt.display()
+                    )
+                },
+            )?;
             serde_json::to_value(&r)?
         }
     };

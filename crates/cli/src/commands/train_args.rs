@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 use clap::{Args, ValueEnum};
-use fewview_splat::pipeline::{InitStrategy, RunConfig};
+use fewview_splat::pipeline::{InitStrategy, MAX_INIT_POINTS, RunConfig};
 use fewview_splat::train::TrainConfig;
 
 /// What the Gaussians are composited over during training on images with alpha.
@@ -68,6 +68,13 @@ impl TrainArgs {
         let init = parse_init(&self.init)?;
         if self.init_points == 0 {
             bail!("--init-points must be at least 1");
+        }
+        if self.init_points > MAX_INIT_POINTS {
+            bail!(
+                "--init-points {}: more than the {MAX_INIT_POINTS} initial Gaussians allowed \
+                 (each needs about 1 KB while training)",
+                self.init_points
+            );
         }
         Ok(RunConfig {
             train,

@@ -274,6 +274,70 @@ fn feather_and_pyramid_respect_masks() {
     assert!((py.get(2, 10, 0) - f.get(2, 10, 0)).abs() < 1e-4);
 }
 
+/// The blur as first written: a kernel of radius ⌈3σ⌉ over an index mirrored one bounce at a
+/// time (slow for wide kernels, exact).
+fn reference_blur(plane: &[f32], w: usize, h: usize, sigma: f32) -> Vec<f64> {
+    let r = (3.0 * sigma).ceil() as isize;
+    let k: Vec<f64> = (-r..=r)
+        .map(|x| (-(x * x) as f64 / (2.0 * sigma as f64 * sigma as f64)).exp())
+        .collect();
+    let s: f64 = k.iter().sum();
+    let reflect = |mut x: isize, n: usize| -> usize {
+        let n = n as isize;
+        loop {
+            if x < 0 {
+                x = -x - 1;
+            } else if x >= n {
+                x = 2 * n - x - 1;
+            } else {
+                return x as usize;
+            }
+        }
+    };
+    let mut tmp = vec![0.0; w * h];
+    for j in 0..h {
+        for i in 0..w {
+            tmp[j * w + i] = (-r..=r)
+                .map(|d| k[(d + r) as usize] / s * plane[j * w + reflect(i as isize + d, w)] as f64)
+                .sum();
+        }
+    }
+    let mut out = vec![0.0; w * h];
+    for j in 0..h {
+        for i in 0..w {
+            out[j * w + i] = (-r..=r)
+                .map(|d| k[(d + r) as usize] / s * tmp[reflect(j as isize + d, h) * w + i])
+                .sum();
+        }
+    }
+    out
+}
+
+/// σ = 10⁴ used to hang (a 3·10⁴ kernel, each tap mirrored one width at a time); a kernel wider
+/// than the mirrored image is now folded onto it, and a huge σ averages the whole plane.
+#[test]
+fn feather_with_a_huge_sigma_finishes_and_matches_the_plain_blur() {
+    let (w, h) = (12, 9);
+    let plane: Vec<f32> = (0..w * h).map(|p| ((p * 37) % 11) as f32 / 10.0).collect();
+    for sigma in [0.7, 2.5, 3.0, 5.0, 40.0] {
+        let got = gaussian_blur(&plane, w, h, sigma);
+        let want = reference_blur(&plane, w, h, sigma);
+        for (a, b) in got.iter().zip(&want) {
+            assert!((*a as f64 - b).abs() < 1e-5, "σ {sigma}: {a} vs {b}");
+        }
+    }
+    let mean = plane.iter().sum::<f32>() / plane.len() as f32;
+    for sigma in [1e6, 1e30, f32::MAX] {
+        let flat = gaussian_blur(&plane, w, h, sigma);
+        assert!(flat.iter().all(|v| (v - mean).abs() < 1e-3), "σ {sigma}");
+    }
+    let f = image(40, 30, 3, 8);
+    let g = image(40, 30, 3, 9);
+    let (mf, mg) = masks(40, 30);
+    let out = gaussian_feather_blend(&f, &g, &mf, &mg, 1e6, Weights::default()).unwrap();
+    assert!(out.data.iter().all(|v| v.is_finite()));
+}
+
 #[test]
 fn bad_inputs_give_clear_errors() {
     let f = image(10, 8, 3, 1);
