@@ -151,28 +151,33 @@ fn save(img: &Image, p: &Path) {
     img.save_png(p).unwrap();
 }
 
-#[test]
-fn blend_writes_an_image_and_rejects_bad_masks() {
-    let dir = tempfile::tempdir().unwrap();
-    let (w, h) = (40, 30);
-    let f = Image::filled(w, h, &[0.2, 0.4, 0.6]);
-    let g = Image::filled(w, h, &[0.6, 0.4, 0.2]);
+/// `f.png`, `g.png` (flat colours (0.2, 0.4, 0.6) and (0.6, 0.4, 0.2)) and their masks
+/// `mf.png` (columns left of `f_until`) and `mg.png` (columns from `g_from` on), in `dir`.
+fn blend_inputs(dir: &Path, (w, h): (usize, usize), f_until: usize, g_from: usize) -> Vec<PathBuf> {
     let mut mf = Image::new(w, h, 1);
     let mut mg = Image::new(w, h, 1);
     for j in 0..h {
         for i in 0..w {
-            mf.set(i, j, 0, (i < 25) as u8 as f32);
-            mg.set(i, j, 0, (i >= 15) as u8 as f32);
+            mf.set(i, j, 0, (i < f_until) as u8 as f32);
+            mg.set(i, j, 0, (i >= g_from) as u8 as f32);
         }
     }
     let paths: Vec<PathBuf> = ["f.png", "g.png", "mf.png", "mg.png"]
         .iter()
-        .map(|n| dir.path().join(n))
+        .map(|n| dir.join(n))
         .collect();
-    save(&f, &paths[0]);
-    save(&g, &paths[1]);
+    save(&Image::filled(w, h, &[0.2, 0.4, 0.6]), &paths[0]);
+    save(&Image::filled(w, h, &[0.6, 0.4, 0.2]), &paths[1]);
     save(&mf, &paths[2]);
     save(&mg, &paths[3]);
+    paths
+}
+
+#[test]
+fn blend_writes_an_image_and_rejects_bad_masks() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (40, 30);
+    let paths = blend_inputs(dir.path(), (w, h), 25, 15);
     let out = dir.path().join("o.png");
     for method in ["occlusion-aware", "poisson", "pyramid", "feather"] {
         let (ok, stdout, err) = fewview(&[
@@ -240,23 +245,7 @@ fn blend_writes_an_image_and_rejects_bad_masks() {
 #[test]
 fn blend_refuses_a_non_png_output_and_takes_a_huge_sigma() {
     let dir = tempfile::tempdir().unwrap();
-    let (w, h) = (20, 12);
-    let mut mf = Image::new(w, h, 1);
-    let mut mg = Image::new(w, h, 1);
-    for j in 0..h {
-        for i in 0..w {
-            mf.set(i, j, 0, (i < 12) as u8 as f32);
-            mg.set(i, j, 0, (i >= 8) as u8 as f32);
-        }
-    }
-    let paths: Vec<PathBuf> = ["f.png", "g.png", "mf.png", "mg.png"]
-        .iter()
-        .map(|n| dir.path().join(n))
-        .collect();
-    save(&Image::filled(w, h, &[0.2, 0.4, 0.6]), &paths[0]);
-    save(&Image::filled(w, h, &[0.6, 0.4, 0.2]), &paths[1]);
-    save(&mf, &paths[2]);
-    save(&mg, &paths[3]);
+    let paths = blend_inputs(dir.path(), (20, 12), 12, 8);
     let blend = |out: &Path, sigma: &str| {
         fewview(&[
             "blend",
