@@ -554,3 +554,26 @@ fn register_the_bunny_fixture() {
         "{err}"
     );
 }
+
+/// NaN (and ∞, and out-of-range values) for these numbers used to be accepted and to run; they
+/// are refused while the arguments are parsed, with a one-line error naming the value.
+#[test]
+fn non_finite_numbers_are_refused_while_parsing() {
+    for (command, flag, value) in [
+        ("blend", "--tolerance", "NaN"),
+        ("blend", "--tolerance", "0"),
+        ("depth-mesh", "--tau", "NaN"),
+        ("depth-mesh", "--tau", "-1"),
+        ("depth-points", "--tau", "inf"),
+        ("depth-points", "--subsample", "NaN"),
+        ("depth-points", "--subsample", "1.5"),
+        ("chamfer", "--tau", "NaN"),
+    ] {
+        let (ok, _, err) = fewview(&[command, flag, value]);
+        assert!(!ok, "{command} {flag} {value} was accepted");
+        assert!(
+            err.contains(value) && err.contains("expected a"),
+            "{command} {flag} {value}: {err}"
+        );
+    }
+}

@@ -108,9 +108,28 @@ impl Similarity {
             ));
         }
         let s = det.cbrt();
+        let rotation = a / s;
+        // A shear or an uneven scale has a positive determinant too; it is no similarity. The
+        // tolerance admits matrices printed with five or six significant digits.
+        let off = (rotation.transpose() * rotation - Matrix3::identity())
+            .abs()
+            .max();
+        if off > 1e-4 {
+            return Err(GeomError::invalid(
+                "transform",
+                format!("3×3 part is not a scaled rotation (|RᵀR − I| = {off:.1e})"),
+            ));
+        }
+        let bottom = [m[(3, 0)], m[(3, 1)], m[(3, 2)], m[(3, 3)] - 1.0];
+        if bottom.iter().any(|v| v.abs() > 1e-9) {
+            return Err(GeomError::invalid(
+                "transform",
+                "last row is not 0 0 0 1 (a projective map, not a similarity)",
+            ));
+        }
         Ok(Similarity {
             scale: s,
-            rotation: a / s,
+            rotation,
             translation: m.fixed_view::<3, 1>(0, 3).into_owned(),
         })
     }
@@ -308,5 +327,26 @@ pub(crate) mod tests {
             assert!((crate::mesh::v3(m) - turned).norm() < 1e-6);
         }
         assert_eq!((&mapped.faces, &mapped.colors), (&mesh.faces, &mesh.colors));
+    }
+
+    /// Only scaled rotations plus a translation are similarities: a shear, an uneven scale, a
+    /// mirror or a projective last row are refused; a matrix printed to six digits is taken.
+    #[test]
+    fn only_similarities_are_read_from_matrices() {
+        let t = random_similarity(3);
+        let mut printed = t.to_matrix4();
+        printed
+            .iter_mut()
+            .for_each(|v| *v = (*v * 1e5).round() / 1e5);
+        let back = Similarity::from_matrix4(&printed).unwrap();
+        assert!((back.scale - t.scale).abs() < 1e-4 * t.scale);
+        let mut bad = [Matrix4::identity(); 4];
+        bad[0][(0, 1)] = 0.1; // shear
+        bad[1][(2, 2)] = 2.0; // uneven scale
+        bad[2][(0, 0)] = -1.0; // mirror
+        bad[3][(3, 0)] = 0.5; // projective
+        for (k, m) in bad.iter().enumerate() {
+            assert!(Similarity::from_matrix4(m).is_err(), "case {k} accepted");
+        }
     }
 }

@@ -10,7 +10,7 @@ use fewview_geom::blend::{
 };
 use fewview_geom::io::read_npy;
 
-use super::geom_common::{load_image, load_mask, write_json};
+use super::geom_common::{load_image, load_mask, positive, write_json};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Method {
@@ -66,7 +66,7 @@ pub struct Args {
     #[arg(long, value_enum, default_value = "mg-cg")]
     pub solver: SolverArg,
     /// Relative residual at which the iterative solver stops.
-    #[arg(long, default_value_t = 1e-7)]
+    #[arg(long, default_value_t = 1e-7, value_parser = positive)]
     pub tolerance: f64,
     /// Pérez's mixed gradients (the larger of the two images' differences), `--method poisson`.
     #[arg(long)]

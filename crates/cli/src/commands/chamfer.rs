@@ -11,7 +11,7 @@ use fewview_geom::chamfer::{
 use fewview_geom::io::{read_mesh, read_npy};
 use fewview_geom::topology::require_edge_manifold;
 
-use super::geom_common::{numbers, write_json};
+use super::geom_common::{numbers, positive, write_json};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Protocol {
@@ -63,7 +63,7 @@ pub struct Args {
     #[arg(long, default_value_t = 100_000)]
     pub samples: usize,
     /// Synthetic: F-score thresholds (repeatable).
-    #[arg(long, default_values_t = [0.01])]
+    #[arg(long, default_values_t = [0.01], value_parser = positive)]
     pub tau: Vec<f64>,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,

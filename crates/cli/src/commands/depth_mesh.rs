@@ -8,7 +8,7 @@ use fewview_geom::depth::{DepthOptions, EdgeTest, TAU_DEPTH, depth_to_mesh_with}
 use fewview_geom::io::{cameras::read_cameras, read_depth, write_mesh};
 use fewview_scene::Camera;
 
-use super::geom_common::load_image;
+use super::geom_common::{load_image, non_negative_f32};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum EdgeTestArg {
@@ -33,7 +33,7 @@ impl From<EdgeTestArg> for EdgeTest {
 pub struct DepthInput {
     /// τ_depth of Eq. (1); pixels whose edge measure reaches it are dropped. 0 disables the
     /// filter.
-    #[arg(long, default_value_t = TAU_DEPTH)]
+    #[arg(long, default_value_t = TAU_DEPTH, value_parser = non_negative_f32)]
     pub tau: f32,
     #[arg(long, value_enum, default_value = "area")]
     pub edge_test: EdgeTestArg,

@@ -11,6 +11,7 @@ use fewview_geom::io::write_points;
 use fewview_geom::mesh::{Points, f3, v3};
 
 use super::depth_mesh::{DepthInput, load_depth_view};
+use super::geom_common::fraction;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum ContractArg {
@@ -49,7 +50,7 @@ pub struct Args {
     pub quantile: f64,
     /// Keep this random fraction of the points (0.1 for Gaussian initialisation, 0.01 for the
     /// sparse alternative (a)); 1 keeps all.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = fraction)]
     pub subsample: f64,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,

@@ -580,7 +580,7 @@ fn print_report(r: &RunReport, out: &std::path::Path) {
         println!("chamfer-L1       not scored: {why}");
     }
     println!(
-        "mesh             {} vertices, {} faces",
+        "mesh             {} vertices, {} faces (mesh.ply; mesh_input_frame.ply in the input's world)",
         r.mesh_vertices, r.mesh_faces
     );
     if !r.refined_pose_files.is_empty() {
