@@ -589,7 +589,7 @@ pub fn run(
         &prep.start,
         prep.matches.clone(),
     )?;
-    let ckpt = out.join("checkpoint.bin");
+    let ckpt = checkpoint_path(out);
     if resume && ckpt.exists() {
         let state = checkpoint::load(&ckpt, &train_config)?;
         trainer.restore(state)?;
@@ -631,6 +631,8 @@ pub fn run(
     let final_err = pose_error(&refined, &prep.ground_truth)?;
     let refined_cams = cams(&refined);
     fewview_geom::io::cameras::write_cameras(&out.join("poses_refined.json"), &refined_cams)?;
+    // The cameras the poses are scored against, and whose file frame the outputs go back to.
+    let scored = truth.unwrap_or(dataset);
     // Written back in the input's frame: the estimate's gauge is wherever the anchor view's
     // initial pose put it (with σ = 0.15 noise, some 10–20° and a translation away from the
     // input's cameras), so its poses are first mapped by the Alg. 1 alignment onto the cameras
@@ -646,7 +648,7 @@ pub fn run(
                 .copied()
                 .zip(final_err.aligned_world_to_camera.iter().copied())
                 .collect();
-            write_refined_poses(source, truth.unwrap_or(dataset), &poses, out)?
+            write_refined_poses(source, scored, &poses, out)?
                 .iter()
                 .map(|p| p.strip_prefix(out).unwrap_or(p).display().to_string())
                 .collect()
@@ -668,7 +670,7 @@ pub fn run(
             .map(|m| (refined_cams.as_slice(), m.as_slice())),
     )?;
     fewview_geom::io::write_mesh(&out.join("mesh.ply"), &mesh)?;
-    let to_input = input_world(truth.unwrap_or(dataset), &final_err.alignment)?;
+    let to_input = input_world(scored, &final_err.alignment)?;
     fewview_geom::io::write_mesh(
         &out.join("mesh_input_frame.ply"),
         &to_input.apply_to_mesh(&mesh),
@@ -679,7 +681,7 @@ pub fn run(
     std::fs::create_dir_all(&renders).map_err(|e| SurfaceError::io(&renders, e))?;
     let mut test_metrics = Vec::new();
     for &vi in dataset.test.iter().take(config.eval_views) {
-        let gt_view = &truth.unwrap_or(dataset).views[vi];
+        let gt_view = &scored.views[vi];
         let mut cam = camera_in_estimate_frame(&gt_view.camera, &final_err.alignment);
         let (mut image, mut mask) = (gt_view.image.clone(), gt_view.mask.clone());
         if config.eval_scale > 1 {

@@ -84,7 +84,7 @@ impl LossConfig {
         }
         if !(self.patch_step.is_finite() && self.patch_step > 0.0) {
             return Err(SurfaceError::invalid(
-                "loss weights",
+                "NCC patches",
                 format!("patch step {}; expected > 0 pixels", self.patch_step),
             ));
         }

@@ -10,7 +10,8 @@ use fewview_geom::blend::{
 };
 use fewview_geom::io::read_npy;
 
-use super::geom_common::{load_image, load_mask, positive, write_json};
+use super::geom_common::{load_image, load_mask, write_json};
+use super::number_args::positive;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Method {

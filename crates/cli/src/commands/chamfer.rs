@@ -11,7 +11,8 @@ use fewview_geom::chamfer::{
 use fewview_geom::io::{read_mesh, read_npy};
 use fewview_geom::topology::require_edge_manifold;
 
-use super::geom_common::{numbers, positive, write_json};
+use super::geom_common::{numbers, write_json};
+use super::number_args::positive;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Protocol {

@@ -8,7 +8,8 @@ use fewview_geom::depth::{DepthOptions, EdgeTest, TAU_DEPTH, depth_to_mesh_with}
 use fewview_geom::io::{cameras::read_cameras, read_depth, write_mesh};
 use fewview_scene::Camera;
 
-use super::geom_common::{load_image, non_negative_f32};
+use super::geom_common::load_image;
+use super::number_args::non_negative_f32;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum EdgeTestArg {

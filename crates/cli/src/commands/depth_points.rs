@@ -11,7 +11,7 @@ use fewview_geom::io::write_points;
 use fewview_geom::mesh::{Points, f3, v3};
 
 use super::depth_mesh::{DepthInput, load_depth_view};
-use super::geom_common::fraction;
+use super::number_args::fraction;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum ContractArg {

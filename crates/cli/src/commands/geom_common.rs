@@ -52,35 +52,3 @@ pub fn numbers<const N: usize>(s: &str, what: &str) -> Result<[f64; N]> {
     out.copy_from_slice(&v);
     Ok(out)
 }
-
-/// Clap parser of a finite number ≥ 0. NaN passes every `<` and `>` check unnoticed (and then
-/// poisons the result), so it is refused here with ±∞ and negatives.
-pub fn non_negative(s: &str) -> std::result::Result<f64, String> {
-    let v: f64 = s.parse().map_err(|e| format!("{s:?}: {e}"))?;
-    if v.is_finite() && v >= 0.0 {
-        Ok(v)
-    } else {
-        Err(format!("{s}: expected a finite number ≥ 0"))
-    }
-}
-
-/// [`non_negative`] as `f32`.
-pub fn non_negative_f32(s: &str) -> std::result::Result<f32, String> {
-    non_negative(s).map(|v| v as f32)
-}
-
-/// Clap parser of a finite number > 0.
-pub fn positive(s: &str) -> std::result::Result<f64, String> {
-    match non_negative(s)? {
-        0.0 => Err(format!("{s}: expected a finite number > 0")),
-        v => Ok(v),
-    }
-}
-
-/// Clap parser of a fraction in (0, 1].
-pub fn fraction(s: &str) -> std::result::Result<f64, String> {
-    match positive(s)? {
-        v if v <= 1.0 => Ok(v),
-        _ => Err(format!("{s}: expected a fraction in (0, 1]")),
-    }
-}

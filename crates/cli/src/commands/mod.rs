@@ -11,6 +11,7 @@ mod eval;
 pub mod eval_video;
 mod geom_common;
 mod mcubes;
+mod number_args;
 mod pose_error;
 mod progress;
 mod register;

@@ -11,6 +11,7 @@ use fewview_splat::ply::read_ply;
 use fewview_splat::raster::{RenderCamera, RenderSettings};
 
 use super::dataset_args::DatasetArgs;
+use super::number_args::positive_f32;
 use super::progress;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -53,7 +54,7 @@ pub struct Args {
     #[arg(long, default_value_t = 30)]
     pub frames_per_segment: usize,
     /// Frame rate of the path video.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = 30.0, value_parser = positive_f32)]
     pub fps: f32,
 }
 
@@ -74,12 +75,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bail!(
                 "--frames-per-segment {}: a camera path has at most {MAX_PATH_FRAMES} frames",
                 args.frames_per_segment
-            );
-        }
-        if !(args.fps.is_finite() && args.fps > 0.0) {
-            bail!(
-                "--fps {}: the frame rate must be a positive number",
-                args.fps
             );
         }
     }

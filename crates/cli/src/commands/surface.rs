@@ -30,8 +30,8 @@ use super::progress;
 /// input's camera file with the refined poses in its own format (`cameras_sphere_refined.npz`,
 /// `poses_bounds_refined.npy`, `transforms_refined.json`, `sparse_refined/`…), `mesh.ply`
 /// (the estimate's frame) and `mesh_input_frame.ply` (the input's world, e.g. DTU millimetres),
-/// `renders/` (PNGs and `NNN_depth.npy` depth maps in the input's units), `metrics.json` (pose errors by paper 001 Alg. 1/2, masked PSNR/SSIM of test
-/// views, Chamfer with `--reference`).
+/// `renders/` (PNGs and `NNN_depth.npy` depth maps in the input's units), `metrics.json` (pose
+/// errors by paper 001 Alg. 1/2, masked PSNR/SSIM of test views, Chamfer with `--reference`).
 ///
 /// Without `--data`, `--synthetic` runs on the built-in analytic SDF scene and scores the mesh
 /// against its exact surface.
@@ -458,7 +458,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             options: &load_options,
         }),
     };
-    let checkpoint = out.join("checkpoint.bin");
+    let checkpoint = fewview_surface::pipeline::checkpoint_path(&out);
     if args.resume && !checkpoint.exists() {
         eprintln!(
             "note: --resume: no {} yet, starting from the first iteration",
