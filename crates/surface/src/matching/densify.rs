@@ -30,7 +30,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::Match;
-use super::refine::{AffineRefineOptions, Plane, Window, end_a, end_b, local_affine, refine_one};
+use super::refine::{
+    AffineRefineOptions, Plane, WarpModel, Window, end_a, end_b, local_affine, refine_one,
+};
 
 /// Options of [`densify_matches`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -111,6 +113,8 @@ pub fn densify_matches(
             mask_b: masks.get(vb).copied().flatten(),
             window: &lk,
             lk_iterations: window.max_iterations,
+            warp_model: window.warp,
+            max_bend_px: window.max_bend_px,
             options,
         };
         let margin = window.half_window as f64 + 1.0;
@@ -252,6 +256,8 @@ struct PairContext<'a> {
     mask_b: Option<&'a Image>,
     window: &'a Window,
     lk_iterations: usize,
+    warp_model: WarpModel,
+    max_bend_px: Option<f64>,
     options: &'a DensifyOptions,
 }
 
@@ -326,9 +332,11 @@ impl PairContext<'_> {
             affine,
             self.window,
             self.lk_iterations,
+            self.warp_model,
         )?;
         if fwd.ncc < o.min_ncc
             || (fwd.b - predicted).norm() > o.max_shift_px
+            || self.max_bend_px.is_some_and(|limit| fwd.bend_px > limit)
             || !in_mask(self.mask_b, fwd.b)
         {
             return None;
@@ -341,6 +349,7 @@ impl PairContext<'_> {
             fwd.warp.try_inverse()?,
             self.window,
             self.lk_iterations,
+            self.warp_model,
         )?;
         ((back.b - p).norm() <= o.max_forward_backward_px).then_some((p, fwd.b, fwd.ncc))
     }
