@@ -209,16 +209,17 @@ pub fn epipolar_warmup(
             break;
         }
         let scales = halving_scales(start, options.cauchy_px);
-        let (annealed, _, iterations) = anneal(poses, intrinsics, matches, &scales, options);
+        let (annealed, d, iterations) = anneal(poses, intrinsics, matches, &scales, options);
         report.iterations += iterations;
+        // The mirrored set's distances are these with their signs flipped: the same cost and
+        // the same median.
+        let cost: f64 = d
+            .iter()
+            .zip(matches)
+            .map(|(x, m)| m.confidence.max(0.0) as f64 * cauchy(*x, options.cauchy_px).0)
+            .sum();
         for candidate in [mirrored(&annealed), annealed] {
-            let d = distances(&candidate, intrinsics, matches);
             let front = in_front_fraction(&candidate, intrinsics, matches);
-            let cost: f64 = d
-                .iter()
-                .zip(matches)
-                .map(|(x, m)| m.confidence.max(0.0) as f64 * cauchy(*x, options.cauchy_px).0)
-                .sum();
             let better = match &best {
                 None => true,
                 Some(b) => {
@@ -232,7 +233,7 @@ pub fn epipolar_warmup(
                     in_front: front,
                     cost,
                     poses: candidate,
-                    distances: d,
+                    distances: d.clone(),
                     scales: scales.clone(),
                 });
             }

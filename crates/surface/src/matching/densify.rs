@@ -30,9 +30,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::Match;
-use super::refine::{
-    AffineRefineOptions, Plane, WarpModel, Window, end_a, end_b, local_affine, refine_one,
-};
+use super::refine::{AffineRefineOptions, Plane, Window, end_a, end_b, local_affine, refine_one};
 
 /// Options of [`densify_matches`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -112,9 +110,7 @@ pub fn densify_matches(
             mask_a: masks.get(va).copied().flatten(),
             mask_b: masks.get(vb).copied().flatten(),
             window: &lk,
-            lk_iterations: window.max_iterations,
-            warp_model: window.warp,
-            max_bend_px: window.max_bend_px,
+            refine: window,
             options,
         };
         let margin = window.half_window as f64 + 1.0;
@@ -255,9 +251,8 @@ struct PairContext<'a> {
     mask_a: Option<&'a Image>,
     mask_b: Option<&'a Image>,
     window: &'a Window,
-    lk_iterations: usize,
-    warp_model: WarpModel,
-    max_bend_px: Option<f64>,
+    /// The Lucas–Kanade settings: iterations, warp model and bend limit.
+    refine: &'a AffineRefineOptions,
     options: &'a DensifyOptions,
 }
 
@@ -331,12 +326,12 @@ impl PairContext<'_> {
             predicted,
             affine,
             self.window,
-            self.lk_iterations,
-            self.warp_model,
+            self.refine.max_iterations,
+            self.refine.warp,
         )?;
         if fwd.ncc < o.min_ncc
             || (fwd.b - predicted).norm() > o.max_shift_px
-            || self.max_bend_px.is_some_and(|limit| fwd.bend_px > limit)
+            || !self.refine.bend_allowed(fwd.bend_px)
             || !in_mask(self.mask_b, fwd.b)
         {
             return None;
@@ -348,8 +343,8 @@ impl PairContext<'_> {
             p,
             fwd.warp.try_inverse()?,
             self.window,
-            self.lk_iterations,
-            self.warp_model,
+            self.refine.max_iterations,
+            self.refine.warp,
         )?;
         ((back.b - p).norm() <= o.max_forward_backward_px).then_some((p, fwd.b, fwd.ncc))
     }

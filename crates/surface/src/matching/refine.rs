@@ -76,16 +76,6 @@ pub enum WarpModel {
     Quadratic,
 }
 
-impl WarpModel {
-    /// Parameters of the Gauss–Newton fit: the warp's and the photometric gain and bias.
-    fn parameters(self) -> usize {
-        match self {
-            Self::Affine => 8,
-            Self::Quadratic => 14,
-        }
-    }
-}
-
 impl Default for AffineRefineOptions {
     /// Settings chosen on DTU scan65 views 22–24 at 800×600 (see crates/surface/README.md):
     /// windows of 10 px half-size and blurs of 0.5–1 px gave the same gain.
@@ -100,6 +90,14 @@ impl Default for AffineRefineOptions {
             warp: WarpModel::default(),
             max_bend_px: None,
         }
+    }
+}
+
+impl AffineRefineOptions {
+    /// Whether a fit whose second-order part moves the window by `bend_px` is kept
+    /// ([`Self::max_bend_px`]).
+    pub(super) fn bend_allowed(&self, bend_px: f64) -> bool {
+        self.max_bend_px.is_none_or(|limit| bend_px <= limit)
     }
 }
 
@@ -242,7 +240,7 @@ pub fn refine_matches(
             let moved = (fit.b - start).norm();
             let kept = fit.ncc >= options.min_ncc
                 && moved <= options.max_shift_px
-                && options.max_bend_px.is_none_or(|limit| fit.bend_px <= limit);
+                && options.bend_allowed(fit.bend_px);
             kept.then(|| Match {
                 b: [fit.b.x as f32, fit.b.y as f32],
                 ..*m
@@ -341,14 +339,13 @@ impl Warp {
         Vector2::new(self.quadratic[0].dot(&m), self.quadratic[1].dot(&m))
     }
 
-    /// Adds a Gauss–Newton step ordered as [`jacobian_row`]'s warp entries.
-    fn update(&mut self, step: &[f64]) {
+    /// Adds a Gauss–Newton step ordered as [`jacobian_row`]'s warp entries (the second-order
+    /// ones zero under [`WarpModel::Affine`]).
+    fn update(&mut self, step: &[f64; FULL_STEP]) {
         self.centre += Vector2::new(step[0], step[1]);
         self.linear += Matrix2::new(step[2], step[3], step[4], step[5]);
-        if step.len() >= 14 {
-            self.quadratic[0] += Vector3::new(step[8], step[9], step[10]);
-            self.quadratic[1] += Vector3::new(step[11], step[12], step[13]);
-        }
+        self.quadratic[0] += Vector3::new(step[8], step[9], step[10]);
+        self.quadratic[1] += Vector3::new(step[11], step[12], step[13]);
     }
 }
 
@@ -380,15 +377,18 @@ fn jacobian_row<const N: usize>(gx: f64, gy: f64, d: &Vector2<f64>, t: f64) -> S
     SVector::<f64, N>::from_fn(|i, _| full[i])
 }
 
-/// One Gauss–Newton step over the first `N` parameters of [`jacobian_row`]; `None` when the
-/// normal system is singular.
+/// Parameters of [`jacobian_row`] in all: the affine warp's 6, gain and bias, the quadratic 6.
+const FULL_STEP: usize = 14;
+
+/// One Gauss–Newton step over the first `N` parameters of [`jacobian_row`], the rest of the
+/// [`FULL_STEP`] entries zero; `None` when the normal system is singular.
 fn gauss_newton_step<const N: usize>(
     b: &Plane,
     window: &Window,
     template: &[f64],
     warp: &Warp,
     (gain, bias): (f64, f64),
-) -> Option<SVector<f64, N>> {
+) -> Option<[f64; FULL_STEP]> {
     let mut normal = SMatrix::<f64, N, N>::zeros();
     let mut rhs = SVector::<f64, N>::zeros();
     for ((d, &w), &t) in window.offsets.iter().zip(&window.weights).zip(template) {
@@ -403,7 +403,10 @@ fn gauss_newton_step<const N: usize>(
     for i in 0..N {
         normal[(i, i)] += 1e-9;
     }
-    Some(-normal.cholesky()?.solve(&rhs))
+    let solved = -normal.cholesky()?.solve(&rhs);
+    let mut step = [0.0; FULL_STEP];
+    step[..N].copy_from_slice(solved.as_slice());
+    Some(step)
 }
 
 /// Gauss–Newton over the warp of `model` and a photometric gain and bias, from the centre
@@ -436,17 +439,12 @@ pub(super) fn refine_one(
     let (mut gain, mut bias) = (1.0, 0.0);
     for _ in 0..max_iterations {
         let photometric = (gain, bias);
-        let step: Vec<f64> = match model {
-            WarpModel::Affine => gauss_newton_step::<8>(b, window, &template, &warp, photometric)?
-                .as_slice()
-                .to_vec(),
+        let step = match model {
+            WarpModel::Affine => gauss_newton_step::<8>(b, window, &template, &warp, photometric)?,
             WarpModel::Quadratic => {
-                gauss_newton_step::<14>(b, window, &template, &warp, photometric)?
-                    .as_slice()
-                    .to_vec()
+                gauss_newton_step::<FULL_STEP>(b, window, &template, &warp, photometric)?
             }
         };
-        debug_assert_eq!(step.len(), model.parameters());
         warp.update(&step);
         gain += step[6];
         bias += step[7];
