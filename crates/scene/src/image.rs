@@ -33,6 +33,20 @@ impl Image {
         }
     }
 
+    /// This image divided by its largest value, so that its brightest pixel is white: the
+    /// preview PNG of a depth map, whose units (scene units, millimetres) a PNG cannot hold. An
+    /// image without a positive value comes back unchanged.
+    pub fn scaled_to_unit_max(&self) -> Self {
+        let max = self.data.iter().copied().fold(0.0f32, f32::max);
+        let scale = if max > 0.0 && max.is_finite() {
+            1.0 / max
+        } else {
+            1.0
+        };
+        let data = self.data.iter().map(|v| v * scale).collect();
+        Self::from_vec(self.width, self.height, self.channels, data)
+    }
+
     pub fn filled(width: usize, height: usize, value: &[f32]) -> Self {
         let mut data = Vec::with_capacity(width * height * value.len());
         for _ in 0..width * height {
@@ -210,6 +224,14 @@ impl Image {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scaling_to_unit_max_makes_the_largest_value_one() {
+        let depth = Image::from_vec(3, 1, 1, vec![0.0, 2.5, 10.0]);
+        assert_eq!(depth.scaled_to_unit_max().data, vec![0.0, 0.25, 1.0]);
+        let empty = Image::from_vec(2, 1, 1, vec![0.0, -1.0]);
+        assert_eq!(empty.scaled_to_unit_max().data, vec![0.0, -1.0]);
+    }
 
     #[test]
     fn png_roundtrip_is_exact_at_8_bits() {

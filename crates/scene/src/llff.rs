@@ -18,7 +18,7 @@ use crate::axes::opengl_to_opencv;
 use crate::camera::{Camera, Intrinsics, Se3};
 use crate::dataset::{Dataset, PointCloud, View};
 use crate::error::{Result, SceneError};
-use crate::load::{self, LoadOptions};
+use crate::load::{self, LoadOptions, MAX_CAMERA_MAGNITUDE};
 use crate::numpy;
 use crate::split;
 
@@ -61,6 +61,15 @@ pub(crate) fn poses_from_array(a: &numpy::Array, path: &Path) -> Result<Vec<Llff
                 return Err(SceneError::invalid(
                     path,
                     format!("row {i} has a non-finite value in column {k}"),
+                ));
+            }
+            if let Some(k) = row.iter().position(|v| v.abs() > MAX_CAMERA_MAGNITUDE) {
+                return Err(SceneError::invalid(
+                    path,
+                    format!(
+                        "row {i}, column {k} holds {:.3e}, beyond the {MAX_CAMERA_MAGNITUDE:.0e} a camera value may have",
+                        row[k]
+                    ),
                 ));
             }
             // Row-major 3×5: element (r, c) is row[5r + c].
@@ -512,6 +521,23 @@ pub(crate) mod tests {
             e.contains("poses_bounds.npy") && e.contains("row 1 has a non-finite value"),
             "{e}"
         );
+        // Finite but absurd: a camera 10³⁰⁰ away (which used to pass the loader and make a
+        // run diverge after it had written its first files), and a far bound of 10³⁰⁰.
+        for (index, what) in [(17 + 3, "camera centre"), (2 * 17 + 16, "far depth bound")] {
+            let mut huge = data.clone();
+            huge[17 + 3] = 0.0;
+            huge[index] = 1e300;
+            write_npy(&dir.path().join("poses_bounds.npy"), &[3, 17], &huge);
+            let e = load::load_dataset(dir.path(), &opts)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("poses_bounds.npy")
+                    && e.contains(&format!("row {}, column {}", index / 17, index % 17))
+                    && e.contains("beyond the 1e12"),
+                "{what}: {e}"
+            );
+        }
         // Wrong shape.
         write_npy(&dir.path().join("poses_bounds.npy"), &[3, 15], &data[..45]);
         let e = load::load_dataset(dir.path(), &opts)

@@ -184,13 +184,52 @@ pub fn load_dataset(path: &Path, opts: &LoadOptions) -> Result<Dataset> {
         return Err(SceneError::io(path, e));
     }
     opts.validate(path)?;
-    match opts.format_of(path)? {
+    let dataset = match opts.format_of(path)? {
         DatasetFormat::Llff => crate::llff::load(path, opts),
         DatasetFormat::Blender => crate::transforms::load_blender(path, opts),
         DatasetFormat::Nerfstudio => crate::transforms::load_nerfstudio(path, opts),
         DatasetFormat::DtuIdr => crate::dtu::load(path, opts),
         DatasetFormat::Colmap => crate::colmap::load(path, opts),
+    }?;
+    check_camera_magnitudes(path, &dataset)?;
+    Ok(dataset)
+}
+
+/// The largest magnitude a loaded camera centre, focal length, principal point or depth bound
+/// may have. Training and rendering compute in single precision, where a squared distance
+/// overflows near 1.8·10¹⁹; 10¹² leaves that margin and lies far beyond any capture's
+/// coordinates (geocentric ones are about 6.4·10⁶ m).
+pub const MAX_CAMERA_MAGNITUDE: f64 = 1e12;
+
+/// Refuses a dataset whose cameras, after the format's own normalisation, hold a value the
+/// single-precision maths cannot use (e.g. a camera file with a 10³⁰⁰ that is finite but
+/// corrupt), so that a run fails before it writes anything instead of diverging to NaN.
+fn check_camera_magnitudes(path: &Path, dataset: &Dataset) -> Result<()> {
+    for view in &dataset.views {
+        let k = &view.camera.intrinsics;
+        let bounds = view.depth_bounds.map_or([0.0; 2], |(n, f)| [n, f]);
+        let values = [
+            ("camera centre", view.camera.center().norm()),
+            ("focal length fx", k.fx),
+            ("focal length fy", k.fy),
+            ("principal point cx", k.cx),
+            ("principal point cy", k.cy),
+            ("near depth bound", bounds[0]),
+            ("far depth bound", bounds[1]),
+        ];
+        for (what, v) in values {
+            if !v.is_finite() || v.abs() > MAX_CAMERA_MAGNITUDE {
+                return Err(SceneError::invalid(
+                    path,
+                    format!(
+                        "view {} (entry {} of the camera file): {what} {v:.3e} is not a finite value within {MAX_CAMERA_MAGNITUDE:.0e} after loading; is the camera file corrupt?",
+                        view.name, view.source_index
+                    ),
+                ));
+            }
+        }
     }
+    Ok(())
 }
 
 /// The format of a dataset folder, from the files it holds, checked in this order:

@@ -583,6 +583,31 @@ pub(crate) mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("is a reflection"), "{e}");
+        // Finite but absurd: a camera 10³⁰⁰ away, and a focal length of 10³⁰⁰ (caught by the
+        // loader-independent check that every loaded camera fits single precision).
+        write_blender(dir.path(), 100, 2, json!({}));
+        for (frame, what) in [
+            (
+                json!({ "file_path": "./test/r_0", "transform_matrix": [[1.0,0,0,1e300],[0,1,0,0],[0,0,1,0],[0,0,0,1]] }),
+                "camera centre",
+            ),
+            (
+                json!({ "file_path": "./test/r_0", "fl_x": 1e300, "transform_matrix": [[1.0,0,0,0],[0,1,0,0],[0,0,1,4],[0,0,0,1]] }),
+                "focal length fx",
+            ),
+        ] {
+            let doc = json!({ "camera_angle_x": 0.5, "frames": [frame] });
+            std::fs::write(dir.path().join("transforms_test.json"), doc.to_string()).unwrap();
+            let e = load::load_dataset(dir.path(), &LoadOptions::default())
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(what)
+                    && e.contains("r_0")
+                    && e.contains("not a finite value within 1e12"),
+                "{what}: {e}"
+            );
+        }
     }
 
     /// A nerfstudio scene: ten frames written in reverse file order (`images/f_09.jpg` first),

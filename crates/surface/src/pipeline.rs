@@ -700,20 +700,7 @@ pub fn run(
         );
         let name = |s: &str| renders.join(format!("{:03}_{s}.png", vi));
         r.rgb.save_png(&name("rgb"))?;
-        let dmax = r
-            .depth
-            .data
-            .iter()
-            .copied()
-            .fold(0.0f32, f32::max)
-            .max(1e-6);
-        Image::from_vec(
-            r.depth.width,
-            r.depth.height,
-            1,
-            r.depth.data.iter().map(|d| d / dmax).collect(),
-        )
-        .save_png(&name("depth"))?;
+        r.depth.scaled_to_unit_max().save_png(&name("depth"))?;
         let depth_npy = renders.join(format!("{vi:03}_depth.npy"));
         fewview_scene::numpy::save_npy(&depth_npy, &z_depth(&r, &cam, to_input.scale))?;
         r.normal.save_png(&name("normal"))?;

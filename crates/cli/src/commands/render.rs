@@ -117,15 +117,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let r = render_model(&model, &RenderCamera::from(&v.camera), &settings);
         r.rgb.save_png(&args.out.join(format!("{}.png", v.name)))?;
         if args.depth {
-            let d = r.normalized_depth();
-            let max = d.data.iter().copied().fold(0.0f32, f32::max).max(1e-12);
-            let scaled = fewview_scene::Image::from_vec(
-                d.width,
-                d.height,
-                1,
-                d.data.iter().map(|x| x / max).collect(),
-            );
-            scaled.save_png(&args.out.join(format!("{}_depth.png", v.name)))?;
+            r.normalized_depth()
+                .scaled_to_unit_max()
+                .save_png(&args.out.join(format!("{}_depth.png", v.name)))?;
         }
         bar.inc(1);
     }
