@@ -1,6 +1,11 @@
 //! COLMAP sparse models with the images' `cam_from_world` replaced, in the model's own encoding
 //! (text or binary): `images` is patched in place (2D points, camera ids and names as stored),
 //! `cameras` and `points3D` are copied. The points are not re-triangulated.
+//!
+//! COLMAP 3.12+'s `rigs` and `frames` files are left out on purpose: a frame holds its own
+//! `rig_from_world` pose, so copying them beside the patched `images` would keep the old poses
+//! there, while a model without them is read as the legacy layout, one trivial rig per camera
+//! and one frame per image, posed from `images`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
