@@ -505,3 +505,184 @@ fn surface_runs_on_the_built_in_analytic_scene_without_a_dataset() {
         serde_json::from_str(&std::fs::read_to_string(run.join("config.json")).unwrap()).unwrap();
     assert_eq!(config["match_refinement"]["half_window"], 10, "{config}");
 }
+
+/// `surface` flags that used to be checked only after matching (leaving config.json,
+/// matches.json and more in the run folder), or never (a huge mesh resolution ran for ever),
+/// are refused while parsing or before the run folder is created.
+#[test]
+fn surface_refuses_bad_numbers_before_writing() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let surface = |flags: &[&str]| {
+        let mut args = vec!["surface", "--synthetic", "--out", s(&run)];
+        args.extend_from_slice(flags);
+        fewview(&args)
+    };
+    for (flag, value) in [
+        ("--mesh-resolution", "100000"),
+        ("--mesh-resolution", "0"),
+        ("--mesh-resolution", "1"),
+        ("--pose-noise", "NaN"),
+        ("--pose-noise", "-1"),
+        ("--pose-noise", "1e300"),
+        ("--lambda-mc", "NaN"),
+        ("--lambda-u", "-1"),
+        ("--lambda-gc", "inf"),
+        ("--lambda-geo", "1e300"),
+        ("--lambda-psdf", "NaN"),
+        ("--eval-scale", "0"),
+    ] {
+        let out = surface(&[&format!("{flag}={value}")]);
+        assert_clean_error(&out, &[flag, value]);
+        assert!(!run.exists(), "{flag} {value}: nothing written");
+    }
+    // Larger than the scored test views: checked once the views are known.
+    let out = surface(&["--eval-scale", "100000", "--eval-views", "1"]);
+    assert_clean_error(&out, &["--eval-scale 100000", "320×240"]);
+    assert!(!run.exists(), "nothing written");
+}
+
+/// An `--init` the dataset cannot serve used to fail after the run folder was created.
+#[test]
+fn train_refuses_an_unusable_init_before_writing() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = write_llff(&dir.path().join("scene"), |_, _| {});
+    let run = dir.path().join("run");
+    let corrupt = dir.path().join("corrupt.ply");
+    std::fs::write(&corrupt, b"not a ply at all").unwrap();
+    let missing = dir.path().join("missing.ply");
+    let inits = [
+        (format!("ply:{}", missing.display()), "missing.ply"),
+        (format!("ply:{}", corrupt.display()), "corrupt.ply"),
+        ("points".to_string(), "no sparse points"),
+        ("box:1e300".to_string(), "half-size"),
+    ];
+    for (init, needle) in &inits {
+        let out = fewview(&[
+            "train",
+            "--data",
+            s(&data),
+            "--iterations",
+            "2",
+            "--init",
+            init,
+            "--out",
+            s(&run),
+        ]);
+        assert_clean_error(&out, &["--init", needle]);
+        assert!(!run.exists(), "--init {init}: nothing written");
+    }
+}
+
+/// `render` checks its outputs before rendering: a path video in a missing folder used to be
+/// found only after every view was rendered and written, a GIF frame rate over 50 fps after
+/// the folder was created, and `--views none` without `--path` created an empty folder.
+#[test]
+fn render_checks_its_outputs_before_rendering() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = write_llff(&dir.path().join("scene"), |_, _| {});
+    let mut model = fewview_splat::model::GaussianModel::new(0);
+    model.push_isotropic([0.0, 0.0, -4.0], 0.3, [0.5; 3], 0.9);
+    let ply = dir.path().join("m.ply");
+    fewview_splat::ply::write_ply(&ply, &model).unwrap();
+    let renders = dir.path().join("renders");
+    let render = |extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            "--ply",
+            s(&ply),
+            "--data",
+            s(&data),
+            "--out",
+            s(&renders),
+            "--frames-per-segment",
+            "2",
+        ];
+        args.extend_from_slice(extra);
+        fewview(&args)
+    };
+    let nodir = dir.path().join("nodir");
+    let gif = nodir.join("p.gif");
+    assert_clean_error(
+        &render(&["--path", s(&gif)]),
+        &["--path", "nodir/p.gif", "does not exist"],
+    );
+    let gif = dir.path().join("p.gif");
+    assert_clean_error(
+        &render(&["--views", "none", "--path", s(&gif), "--fps", "1000000"]),
+        &["--fps 1000000", "GIF"],
+    );
+    assert_clean_error(
+        &render(&["--views", "none"]),
+        &["--views none", "nothing to render"],
+    );
+    // A file where the output folder goes.
+    let file = dir.path().join("file");
+    std::fs::write(&file, b"x").unwrap();
+    let out = fewview(&[
+        "render",
+        "--ply",
+        s(&ply),
+        "--data",
+        s(&data),
+        "--out",
+        s(&file.join("renders")),
+    ]);
+    assert_clean_error(&out, &["--out", "is not a folder"]);
+    assert!(
+        !renders.exists() && !gif.exists() && !nodir.exists(),
+        "nothing written"
+    );
+    // `--views none` with a path writes the path only.
+    let out = render(&["--views", "none", "--path", s(&gif)]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(gif.exists() && !renders.exists());
+}
+
+/// `eval --json` and `eval-video --json` in a missing folder used to print the whole report
+/// and then fail on the write.
+#[test]
+fn eval_reports_in_a_missing_folder_are_refused_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = write_llff(&dir.path().join("scene"), |_, _| {});
+    let mut model = fewview_splat::model::GaussianModel::new(0);
+    model.push_isotropic([0.0, 0.0, -4.0], 0.3, [0.5; 3], 0.9);
+    let ply = dir.path().join("m.ply");
+    fewview_splat::ply::write_ply(&ply, &model).unwrap();
+    let json = dir.path().join("nodir/e.json");
+    let out = fewview(&[
+        "eval",
+        "--ply",
+        s(&ply),
+        "--data",
+        s(&data),
+        "--json",
+        s(&json),
+    ]);
+    assert_clean_error(&out, &["--json", "nodir/e.json", "does not exist"]);
+    assert!(out.stdout.is_empty(), "report printed before failing");
+
+    let frames: Vec<fewview_scene::Image> = (0..3)
+        .map(|k| fewview_scene::Image::filled(16, 12, &[0.1 * k as f32, 0.5, 0.5]))
+        .collect();
+    let video = dir.path().join("frames");
+    fewview_scene::video::write_video(&video, &frames, 10.0, &Default::default()).unwrap();
+    let out = fewview(&[
+        "eval-video",
+        "--lpips",
+        "none",
+        "--output",
+        s(&video),
+        "--ground-truth",
+        s(&video),
+        "--json",
+        s(&json),
+    ]);
+    assert_clean_error(&out, &["--json", "nodir/e.json", "does not exist"]);
+    assert!(out.stdout.is_empty(), "report printed before failing");
+    assert!(!dir.path().join("nodir").exists(), "nothing written");
+}

@@ -78,7 +78,7 @@ fn gif_against_frame_folder() {
         d[0] == 0.0 && d[3] == 0.0 && d[1] > 0.0 && d[2] > 0.0,
         "{d:?}"
     );
-    // Mismatched lengths are a one-line error naming the problem.
+    // Mismatched lengths are a one-line error naming both inputs and the problem.
     let short = dir.path().join("short.gif");
     write_video(&short, &out[..3], 10.0, &VideoOptions::default()).unwrap();
     let output = Command::new(env!("CARGO_BIN_EXE_fewview"))
@@ -91,7 +91,9 @@ fn gif_against_frame_folder() {
     assert!(!output.status.success());
     let err = String::from_utf8_lossy(&output.stderr);
     assert!(
-        err.contains("3 output frames vs 5 ground-truth frames"),
+        err.contains("3 output frames vs 5 ground-truth frames")
+            && err.contains("short.gif against")
+            && err.contains(&gt_dir.display().to_string()),
         "{err}"
     );
 }

@@ -147,6 +147,30 @@ fn depth_mesh_and_points_from_files() {
     );
 }
 
+#[test]
+fn a_contraction_without_valid_depth_names_the_depth_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let (depth, cam) = two_planes_depth(dir.path());
+    write_npy(&depth, &[60, 80], &[0f32; 80 * 60]).unwrap();
+    let out = dir.path().join("p.ply");
+    let (ok, _, err) = fewview(&[
+        "depth-points",
+        "--depth",
+        s(&depth),
+        "--cameras",
+        s(&cam),
+        "--contract",
+        "paper",
+        "-o",
+        s(&out),
+    ]);
+    assert!(
+        !ok && err.contains("no valid depth") && err.contains(s(&depth)),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
 fn save(img: &Image, p: &Path) {
     img.save_png(p).unwrap();
 }
@@ -576,4 +600,177 @@ fn non_finite_numbers_are_refused_while_parsing() {
             "{command} {flag} {value}: {err}"
         );
     }
+}
+
+/// `fewview` with arguments that need not be UTF-8: (success, stdout, stderr).
+fn fewview_os(args: &[&std::ffi::OsStr]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_fewview"))
+        .args(args)
+        .output()
+        .expect("run fewview");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// An output path that is not UTF-8 used to panic after the mesh was written: the summary line
+/// put the `PathBuf` into `json!`, which serde refuses unless it is UTF-8.
+#[test]
+fn non_utf8_output_paths_are_written_and_reported() {
+    use std::ffi::OsStr;
+    use std::os::unix::ffi::OsStrExt;
+
+    let dir = tempfile::tempdir().unwrap();
+    let (depth, cam) = two_planes_depth(dir.path());
+    let mesh = dir.path().join(OsStr::from_bytes(b"m\xff.ply"));
+    let (ok, stdout, err) = fewview_os(&[
+        OsStr::new("depth-mesh"),
+        OsStr::new("--depth"),
+        depth.as_os_str(),
+        OsStr::new("--camera"),
+        cam.as_os_str(),
+        OsStr::new("-o"),
+        mesh.as_os_str(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(stdout.contains("\"out\""), "{stdout}");
+    assert!(!read_mesh(&mesh).unwrap().faces.is_empty());
+
+    let n = 8;
+    let grid: Vec<f32> = (0..n * n * n)
+        .map(|i| {
+            let p = [i / (n * n), (i / n) % n, i % n].map(|x| x as f32 - 3.5);
+            (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - 2.5
+        })
+        .collect();
+    let grid_path = dir.path().join("g.npy");
+    write_npy(&grid_path, &[n, n, n], &grid).unwrap();
+    let sphere = dir.path().join(OsStr::from_bytes(b"s\xff.obj"));
+    let (ok, stdout, err) = fewview_os(&[
+        OsStr::new("mcubes"),
+        OsStr::new("--grid"),
+        grid_path.as_os_str(),
+        OsStr::new("-o"),
+        sphere.as_os_str(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(stdout.contains("\"watertight\":true"), "{stdout}");
+    assert!(!read_mesh(&sphere).unwrap().faces.is_empty());
+}
+
+/// A report whose folder is missing used to fail only after the main output was written (blend's
+/// image, register's moved cloud) or the work was done; every output path is now checked first,
+/// with an error naming the flag and the path, and nothing is written.
+#[test]
+fn outputs_that_cannot_be_written_are_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    let nodir = root.join("nodir");
+    let paths = blend_inputs(root, (20, 12), 12, 8);
+    let image = root.join("b.png");
+    let stats = nodir.join("s.json");
+    let (ok, _, err) = fewview(&[
+        "blend",
+        "--f",
+        s(&paths[0]),
+        "--g",
+        s(&paths[1]),
+        "--mask-f",
+        s(&paths[2]),
+        "--mask-g",
+        s(&paths[3]),
+        "--out",
+        s(&image),
+        "--stats",
+        s(&stats),
+    ]);
+    assert!(!ok, "blend with a missing --stats folder succeeded");
+    assert!(
+        err.contains("--stats") && err.contains("nodir/s.json") && err.contains("does not exist"),
+        "{err}"
+    );
+    assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
+    assert!(!image.exists(), "blend wrote its image before failing");
+
+    let fx = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../geom/tests/fixtures/registration");
+    let moved = root.join("r.ply");
+    let report = nodir.join("r.json");
+    let (ok, _, err) = fewview(&[
+        "register",
+        "--source",
+        s(&fx.join("source.ply")),
+        "--target",
+        s(&fx.join("target.ply")),
+        "--voxel",
+        "0.008",
+        "--out",
+        s(&moved),
+        "--report",
+        s(&report),
+    ]);
+    assert!(!ok, "register with a missing --report folder succeeded");
+    assert!(
+        err.contains("--report") && err.contains("nodir/r.json"),
+        "{err}"
+    );
+    assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
+    assert!(
+        !moved.exists(),
+        "register wrote the moved cloud before failing"
+    );
+
+    // A folder where a file goes, and a file where a folder goes.
+    let (depth, cam) = two_planes_depth(root);
+    let (ok, _, err) = fewview(&[
+        "depth-mesh",
+        "--depth",
+        s(&depth),
+        "--camera",
+        s(&cam),
+        "-o",
+        s(root),
+    ]);
+    assert!(
+        !ok && err.contains("--out") && err.contains("is a folder"),
+        "{err}"
+    );
+    let under_a_file = depth.join("m.ply");
+    let (ok, _, err) = fewview(&[
+        "depth-points",
+        "--depth",
+        s(&depth),
+        "--cameras",
+        s(&cam),
+        "-o",
+        s(&under_a_file),
+    ]);
+    assert!(
+        !ok && err.contains("--out") && err.contains("depth.npy is not a folder"),
+        "{err}"
+    );
+    let mesh = root.join("plane.ply");
+    write_mesh(&mesh, &plane(0.0)).unwrap();
+    let json = nodir.join("c.json");
+    let (ok, stdout, err) = fewview(&[
+        "chamfer",
+        "--pred",
+        s(&mesh),
+        "--gt",
+        s(&mesh),
+        "--json",
+        s(&json),
+    ]);
+    assert!(
+        !ok && err.contains("--json") && err.contains("nodir/c.json"),
+        "{err}"
+    );
+    assert!(
+        stdout.is_empty(),
+        "chamfer printed its report before failing: {stdout}"
+    );
+    assert!(!nodir.exists(), "nothing written");
 }

@@ -1,6 +1,8 @@
 //! Mesh cleanup after marching cubes: keep the largest connected component, drop small pieces,
 //! and cull what falls outside the object masks of the input views.
 
+use std::path::Path;
+
 use fewview_scene::{Camera, Image};
 
 use crate::error::{GeomError, Result};
@@ -30,11 +32,41 @@ impl Default for CullOptions {
 /// Removes the vertices (and their faces) that project onto the background of the masks: for
 /// each vertex and camera, the pixel containing its projection (`⌊u⌋, ⌊v⌋`, pixel centres at
 /// half-integers) is looked up when the vertex is in front of the camera and inside the image.
+/// Errors name a mask by its index ("mask 0"); [`cull_by_mask_files`] names the files.
 pub fn cull_by_masks(
     mesh: &Mesh,
     cameras: &[Camera],
     masks: &[Image],
     options: &CullOptions,
+) -> Result<Mesh> {
+    cull(mesh, cameras, masks, options, |i| format!("mask {i}"))
+}
+
+/// [`cull_by_masks`] with the masks read from `paths` (one per camera, in order): an unreadable
+/// mask, one whose size differs from its camera's, or one without a foreground pixel is an error
+/// naming the mask file.
+pub fn cull_by_mask_files<P: AsRef<Path>>(
+    mesh: &Mesh,
+    cameras: &[Camera],
+    paths: &[P],
+    options: &CullOptions,
+) -> Result<Mesh> {
+    let masks = paths
+        .iter()
+        .map(|p| Image::load(p.as_ref()).map_err(GeomError::from))
+        .collect::<Result<Vec<_>>>()?;
+    cull(mesh, cameras, &masks, options, |i| {
+        format!("{}: mask {i}", paths[i].as_ref().display())
+    })
+}
+
+/// [`cull_by_masks`], naming mask `i` by `name(i)` in errors.
+fn cull(
+    mesh: &Mesh,
+    cameras: &[Camera],
+    masks: &[Image],
+    options: &CullOptions,
+    name: impl Fn(usize) -> String,
 ) -> Result<Mesh> {
     mesh.validate("mesh")?;
     if cameras.len() != masks.len() {
@@ -46,7 +78,7 @@ pub fn cull_by_masks(
     for (i, (c, m)) in cameras.iter().zip(masks).enumerate() {
         if (m.width, m.height) != (c.width() as usize, c.height() as usize) {
             return Err(GeomError::invalid(
-                format!("mask {i}"),
+                name(i),
                 format!(
                     "is {}×{} but camera {i} is {}×{}",
                     m.width,
@@ -63,8 +95,8 @@ pub fn cull_by_masks(
             .any(|&v| v > options.threshold)
         {
             return Err(GeomError::invalid(
-                format!("mask {i}"),
-                "is empty (no foreground pixel)",
+                name(i),
+                format!("is empty (no foreground pixel above {})", options.threshold),
             ));
         }
     }
@@ -148,5 +180,41 @@ mod tests {
         assert!(e.to_string().contains("mask 0") && e.to_string().contains("empty"));
         let small = Image::new(10, 10, 1);
         assert!(cull_by_masks(&cube, &[cam], &[small], &CullOptions::default()).is_err());
+    }
+
+    /// Masks read from files name the file when empty, of the wrong size or unreadable.
+    #[test]
+    fn mask_file_errors_name_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let cam = test_camera(32, 24, 30.0);
+        let mut cube = test_cube();
+        for v in &mut cube.vertices {
+            v[2] += 2.0;
+        }
+        let cull = |p: &Path| {
+            cull_by_mask_files(
+                &cube,
+                std::slice::from_ref(&cam),
+                &[p],
+                &CullOptions::default(),
+            )
+        };
+        let empty = dir.path().join("empty_mask.png");
+        Image::new(32, 24, 1).save_png(&empty).unwrap();
+        let e = cull(&empty).unwrap_err().to_string();
+        assert!(e.contains("empty_mask.png: mask 0: is empty"), "{e}");
+        let small = dir.path().join("small_mask.png");
+        Image::filled(10, 10, &[1.0]).save_png(&small).unwrap();
+        let e = cull(&small).unwrap_err().to_string();
+        assert!(
+            e.contains("small_mask.png: mask 0: is 10×10 but camera 0 is 32×24"),
+            "{e}"
+        );
+        let missing = dir.path().join("missing_mask.png");
+        let e = cull(&missing).unwrap_err().to_string();
+        assert!(e.contains("missing_mask.png"), "{e}");
+        let full = dir.path().join("full_mask.png");
+        Image::filled(32, 24, &[1.0]).save_png(&full).unwrap();
+        assert!(cull(&full).is_ok());
     }
 }

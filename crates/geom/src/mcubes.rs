@@ -31,6 +31,10 @@ use std::collections::HashMap;
 use crate::error::{GeomError, Result};
 use crate::mesh::Mesh;
 
+/// The largest coordinate a grid sample may have: the scene loaders' camera bound, far beyond
+/// any scene yet well inside single precision.
+pub const MAX_GRID_MAGNITUDE: f64 = fewview_scene::load::MAX_CAMERA_MAGNITUDE;
+
 /// Geometry of a sample grid.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GridSpec {
@@ -43,19 +47,56 @@ pub struct GridSpec {
 }
 
 impl GridSpec {
-    fn check(&self) -> Result<()> {
+    /// Refuses a grid that marching cubes cannot use, naming the parameter: fewer than 2 samples
+    /// along an axis, a voxel size that is not finite and positive, an origin that is not
+    /// finite, or a grid whose corners lie beyond [`MAX_GRID_MAGNITUDE`] (the mesh is stored in
+    /// single precision, where such positions overflow or lose all precision).
+    pub fn check(&self) -> Result<()> {
         if self.dims.iter().any(|&d| d < 2) {
             return Err(GeomError::invalid(
                 "grid",
                 format!("dims {:?}: need at least 2 samples per axis", self.dims),
             ));
         }
-        if self.voxel.iter().any(|v| !(v.is_finite() && *v > 0.0))
-            || self.origin.iter().any(|v| !v.is_finite())
+        if let Some(v) = self.voxel.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
+            return Err(GeomError::invalid(
+                "voxel",
+                format!(
+                    "size {v} in {:?} must be a finite positive number",
+                    self.voxel
+                ),
+            ));
+        }
+        if let Some(v) = self.voxel.iter().find(|v| **v > MAX_GRID_MAGNITUDE) {
+            return Err(GeomError::invalid(
+                "voxel",
+                format!("size {v:.3e} is beyond the {MAX_GRID_MAGNITUDE:.0e} a grid may span"),
+            ));
+        }
+        if let Some(v) = self
+            .origin
+            .iter()
+            .find(|v| !v.is_finite() || v.abs() > MAX_GRID_MAGNITUDE)
         {
             return Err(GeomError::invalid(
-                "grid",
-                format!("bad origin {:?} or voxel {:?}", self.origin, self.voxel),
+                "origin",
+                format!(
+                    "coordinate {v:.3e} in {:?} is not a finite value within {MAX_GRID_MAGNITUDE:.0e}",
+                    self.origin
+                ),
+            ));
+        }
+        let far = self.position(self.dims[0] - 1, self.dims[1] - 1, self.dims[2] - 1);
+        if let Some(v) = far
+            .iter()
+            .find(|v| !v.is_finite() || v.abs() > MAX_GRID_MAGNITUDE)
+        {
+            return Err(GeomError::invalid(
+                "voxel",
+                format!(
+                    "the grid's far corner reaches {v:.3e}, beyond {MAX_GRID_MAGNITUDE:.0e} (origin {:?}, voxel {:?}, dims {:?})",
+                    self.origin, self.voxel, self.dims
+                ),
             ));
         }
         Ok(())
@@ -295,6 +336,17 @@ fn check_values(values: &[f32], what: &str) -> Result<()> {
     Ok(())
 }
 
+/// A dense grid must hold finite values: an infinite sample puts vertices at NaN.
+fn check_finite(values: &[f32], what: &str) -> Result<()> {
+    if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+        return Err(GeomError::invalid(
+            what,
+            format!("value {i} is {} (values must be finite)", values[i]),
+        ));
+    }
+    Ok(())
+}
+
 /// Marching cubes of a dense grid (layout in the module docs) at level `iso`.
 pub fn marching_cubes(grid: &[f32], spec: &GridSpec, iso: f32) -> Result<Mesh> {
     spec.check()?;
@@ -308,7 +360,7 @@ pub fn marching_cubes(grid: &[f32], spec: &GridSpec, iso: f32) -> Result<Mesh> {
     if !iso.is_finite() {
         return Err(GeomError::invalid("iso", "level is not finite"));
     }
-    check_values(grid, "grid")?;
+    check_finite(grid, "grid")?;
     let mut b = Builder::new(*spec, iso);
     let block = Block {
         values: grid,
@@ -576,5 +628,60 @@ mod tests {
             ..spec
         };
         assert!(marching_cubes(&[0.0; 4], &bad, 0.0).is_err());
+    }
+
+    /// ±inf in a grid, and a voxel size or origin beyond the bound, are errors naming the
+    /// value or parameter (not a mesh of non-finite vertices).
+    #[test]
+    fn infinite_values_and_huge_voxel_or_origin_are_rejected() {
+        let spec = GridSpec {
+            dims: [2; 3],
+            origin: [0.0; 3],
+            voxel: [1.0; 3],
+        };
+        let mut g = [1.0f32; 8];
+        g[0] = -1.0;
+        assert!(marching_cubes(&g, &spec, 0.0).is_ok());
+        g[5] = f32::INFINITY;
+        let e = marching_cubes(&g, &spec, 0.0).unwrap_err().to_string();
+        assert!(e.contains("grid: value 5 is inf"), "{e}");
+        g[5] = 1.0;
+        let cases = [
+            (
+                GridSpec {
+                    voxel: [1.0, 1e300, 1.0],
+                    ..spec
+                },
+                "voxel: size 1.000e300",
+            ),
+            (
+                GridSpec {
+                    origin: [0.0, 0.0, 1e300],
+                    ..spec
+                },
+                "origin: coordinate 1.000e300",
+            ),
+            (
+                GridSpec {
+                    origin: [f64::NAN, 0.0, 0.0],
+                    ..spec
+                },
+                "origin: coordinate NaN",
+            ),
+            (
+                GridSpec {
+                    origin: [5e11; 3],
+                    voxel: [6e11; 3],
+                    ..spec
+                },
+                "voxel: the grid's far corner reaches 1.100e12",
+            ),
+        ];
+        for (bad, expected) in cases {
+            let e = bad.check().unwrap_err().to_string();
+            assert!(e.contains(expected), "{e}");
+            let e = marching_cubes(&g, &bad, 0.0).unwrap_err().to_string();
+            assert!(e.contains(expected), "{e}");
+        }
     }
 }

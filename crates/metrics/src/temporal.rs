@@ -55,6 +55,9 @@ pub struct Flow {
     pub data: Vec<[f32; 2]>,
     /// Optional validity mask (1 = the point is visible in both frames), row-major.
     pub valid: Option<Vec<bool>>,
+    /// The file the flow was read from ([`read_flo`] sets it), named in the errors of
+    /// [`warping_errors`].
+    pub source: Option<std::path::PathBuf>,
 }
 
 /// Mean and population standard deviation of a series.
@@ -228,8 +231,11 @@ pub fn warping_errors(frames: &[Image], flows: &[Flow]) -> Result<Vec<f64>> {
     }
     (1..frames.len())
         .map(|t| {
-            warping_error(&frames[t - 1], &frames[t], &flows[t - 1])
-                .map_err(|e| MetricsError::invalid(format!("transition {t}: {e}")))
+            let flow = &flows[t - 1];
+            warping_error(&frames[t - 1], &frames[t], flow).map_err(|e| match &flow.source {
+                Some(path) => MetricsError::format(path, format!("transition {t}: {e}")),
+                None => MetricsError::invalid(format!("transition {t}: {e}")),
+            })
         })
         .collect()
 }
@@ -340,11 +346,17 @@ pub fn read_flo(path: &std::path::Path) -> Result<Flow> {
         valid.push(ok);
         data.push(if ok { [u, v] } else { [0.0, 0.0] });
     }
+    if !valid.contains(&true) {
+        return Err(bad(
+            "no valid flow vector: every value is NaN, infinite or above 1e9 (unknown flow)",
+        ));
+    }
     Ok(Flow {
         width: w,
         height: h,
         data,
         valid: Some(valid),
+        source: Some(path.to_owned()),
     })
 }
 
@@ -494,6 +506,7 @@ mod tests {
             height: 16,
             data: vec![[-2.0, 0.0]; 30 * 16],
             valid: None,
+            source: None,
         };
         // Pixels x < 2 sample outside frame t−1 and are excluded.
         assert!(warping_error(&prev, &cur, &flow).unwrap() < 1e-12);
@@ -503,6 +516,7 @@ mod tests {
             height: 16,
             data: vec![[-1.5, 0.0]; 30 * 16],
             valid: None,
+            source: None,
         };
         let e = warping_error(&prev, &cur, &half).unwrap();
         let mut reference = (0.0, 0);
@@ -540,11 +554,47 @@ mod tests {
                 [0.0, 9.0],
             ],
             valid: Some(vec![true, true, false, true, true, true]),
+            source: None,
         };
         write_flo(&path, &flow).unwrap();
-        assert_eq!(read_flo(&path).unwrap(), flow);
+        let back = read_flo(&path).unwrap();
+        assert_eq!(back.source.as_deref(), Some(path.as_path()));
+        assert_eq!(
+            Flow {
+                source: None,
+                ..back
+            },
+            flow
+        );
         std::fs::write(&path, b"nope").unwrap();
         assert!(read_flo(&path).unwrap_err().to_string().contains("f.flo"));
+    }
+
+    /// A flow file of the wrong size names the file (and the transition); one with no valid
+    /// vector (all NaN or 1e30) is refused when read, naming the file.
+    #[test]
+    fn flow_errors_name_the_flow_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames = [pattern(4, 3, 0.0), pattern(4, 3, 0.5), pattern(4, 3, 1.0)];
+        let flow = |w: usize, h: usize, v: f32| Flow {
+            width: w,
+            height: h,
+            data: vec![[v, 0.0]; w * h],
+            valid: None,
+            source: None,
+        };
+        let (good, small) = (dir.path().join("0.flo"), dir.path().join("1.flo"));
+        write_flo(&good, &flow(4, 3, 0.0)).unwrap();
+        write_flo(&small, &flow(2, 2, 0.0)).unwrap();
+        let flows = [read_flo(&good).unwrap(), read_flo(&small).unwrap()];
+        let e = warping_errors(&frames, &flows).unwrap_err().to_string();
+        assert!(e.contains("1.flo: transition 2: "), "{e}");
+        assert!(e.contains("flow is 2x2, frames are 4x3"), "{e}");
+        for bad in [f32::NAN, 1e30] {
+            write_flo(&small, &flow(4, 3, bad)).unwrap();
+            let e = read_flo(&small).unwrap_err().to_string();
+            assert!(e.contains("1.flo: no valid flow vector"), "{e}");
+        }
     }
 
     #[test]

@@ -291,7 +291,6 @@ pub fn train_run(
     for v in ds.test_views() {
         check_scorable(v).map_err(PipelineError::Eval)?;
     }
-    std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
     let device = Device::flex().autodiff();
     let (_, extent) = ds.camera_extent();
     let first = ds
@@ -344,6 +343,10 @@ pub fn train_run(
     } else {
         (Some(initial_model(ds, cfg)?), None)
     };
+    // The run folder is made only now, once the initial Gaussians exist: an `--init` the
+    // dataset cannot serve (a missing PLY, `points` without sparse points) fails with nothing
+    // written.
+    std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
     let json =
         serde_json::to_vec_pretty(&resolved).map_err(|e| PipelineError::Eval(e.to_string()))?;
     fewview_scene::atomic::write_bytes(&run.config(), &json)?;

@@ -133,6 +133,12 @@ pub fn read_ply(path: &Path) -> Result<GaussianModel, SceneError> {
     }
     let format = format.ok_or_else(|| bad("missing `format` line".into()))?;
     let n = vertex_count.ok_or_else(|| bad("no `vertex` element".into()))?;
+    if n == 0 {
+        return Err(SceneError::invalid(
+            path,
+            "the model has no Gaussians (element vertex 0); was it written by a run that pruned every Gaussian?",
+        ));
+    }
     let col = |name: &str| props.iter().position(|(p, _)| p == name);
     let need = |name: &str| col(name).ok_or_else(|| bad(format!("missing property `{name}`")));
     let xyz = [need("x")?, need("y")?, need("z")?];
@@ -328,6 +334,22 @@ mod tests {
                 "{name}: {e}"
             );
         }
+        // A model with no Gaussians, as written by `write_ply` or by hand, is refused.
+        let empty = dir.path().join("empty.ply");
+        let none = GaussianModel {
+            sh_coeffs: 1,
+            ..Default::default()
+        };
+        write_ply(&empty, &none).unwrap();
+        let e = read_ply(&empty).unwrap_err().to_string();
+        assert!(e.contains("empty.ply: the model has no Gaussians"), "{e}");
+        std::fs::write(
+            &empty,
+            "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nend_header\n",
+        )
+        .unwrap();
+        let e = read_ply(&empty).unwrap_err().to_string();
+        assert!(e.contains("empty.ply: the model has no Gaussians"), "{e}");
         let e = read_ply(&dir.path().join("missing.ply"))
             .unwrap_err()
             .to_string();

@@ -133,6 +133,37 @@ fn non_finite_loss_is_reported_with_its_iteration() {
     }
 }
 
+/// When densification/pruning removes every Gaussian, training stops with an error naming the
+/// iteration (and suggesting more initial points) instead of going on with an empty model.
+#[test]
+fn pruning_every_gaussian_is_an_error() {
+    let ds = small_demo();
+    let mut cfg = short_config(20);
+    // Every Gaussian is below this opacity, so the first densification (iteration 10: after
+    // `from_iter` 5, at a multiple of the interval 5) prunes them all.
+    cfg.train.densify.min_opacity = 2.0;
+    cfg.init_points = 50;
+    let mut t = trainer(&ds, &cfg);
+    let err = loop {
+        match t.step() {
+            Ok(p) => assert!(p.gaussians > 0 && p.iteration < 10, "{p:?}"),
+            Err(e) => break e,
+        }
+    };
+    match &err {
+        TrainError::NoGaussiansLeft { iteration, before } => {
+            assert_eq!(*iteration, 10);
+            assert!(*before > 0);
+        }
+        other => panic!("expected NoGaussiansLeft, got {other:?}"),
+    }
+    let text = err.to_string();
+    assert!(
+        text.contains("iteration 10") && text.contains("--init-points"),
+        "{text}"
+    );
+}
+
 fn mean_psnr(model: &fewview_splat::model::GaussianModel, ds: &Dataset) -> f64 {
     let views: Vec<_> = ds.test_views().collect();
     let settings = RenderSettings {

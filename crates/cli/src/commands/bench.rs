@@ -8,6 +8,8 @@ use fewview_scene::load::{LoadOptions, load_dataset};
 use fewview_scene::synthetic::{DemoOptions, demo_dataset};
 use serde::Serialize;
 
+use super::output_paths::check_folder;
+
 /// Measure speed and memory, beside references measured in the same run.
 ///
 /// Measures the rasterizer (forward and backward splat–pixel pairs per CPU-second at 100k
@@ -73,6 +75,17 @@ fn peak_memory_mib() -> Option<f64> {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // The report's folder is created at the end; a path that cannot be written is refused
+    // before the minutes of measuring.
+    if args.json.is_dir() {
+        anyhow::bail!(
+            "--json {}: is a folder, expected a file name",
+            args.json.display()
+        );
+    }
+    if let Some(parent) = args.json.parent() {
+        check_folder(parent, "--json")?;
+    }
     #[cfg(target_arch = "x86_64")]
     let avx2_fma =
         std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma");

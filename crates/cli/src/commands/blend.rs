@@ -12,6 +12,7 @@ use fewview_geom::io::read_npy;
 
 use super::geom_common::{load_image, load_mask, write_json};
 use super::number_args::positive;
+use super::output_paths::{check_file, check_optional_file};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Method {
@@ -96,6 +97,8 @@ pub fn run(args: Args) -> Result<()> {
             args.out.display()
         );
     }
+    check_file(&args.out, "--out")?;
+    check_optional_file(args.stats.as_deref(), "--stats")?;
     let f = load_image(&args.f)?;
     let g = load_image(&args.g)?;
     let (mf, wf, hf) = load_mask(&args.mask_f)?;

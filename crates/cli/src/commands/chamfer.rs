@@ -13,6 +13,7 @@ use fewview_geom::topology::require_edge_manifold;
 
 use super::geom_common::{numbers, write_json};
 use super::number_args::positive;
+use super::output_paths::check_optional_file;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Protocol {
@@ -74,6 +75,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    check_optional_file(args.json.as_deref(), "--json")?;
     let pred = read_mesh(&args.pred)?;
     let gt = read_mesh(&args.gt)?;
     let report = match args.protocol {

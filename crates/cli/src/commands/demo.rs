@@ -9,7 +9,8 @@ use fewview_splat::pipeline::render_path;
 use fewview_splat::ply::read_ply;
 use fewview_splat::raster::RenderSettings;
 
-use super::train::{print_summary, train_with_progress};
+use super::output_paths::check_folder;
+use super::train::{check_init, print_summary, train_with_progress};
 use super::train_args::TrainArgs;
 
 /// Run the whole pipeline on a scene built in-process (no data needed).
@@ -47,13 +48,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "ray tracing {} ground-truth views at {}x{} ...",
         opts.views, opts.width, opts.height
     );
+    check_folder(&args.out, "--out")?;
     let ds = demo_dataset(&opts);
+    // Checked before anything is written.
+    let cfg = args.train.run_config(ds.background, 2000)?;
+    check_init(&ds, &cfg, &args.train.init, args.resume)?;
     let gt = args.out.join("ground_truth");
     std::fs::create_dir_all(&gt)?;
     for v in &ds.views {
         v.image.save_png(&gt.join(format!("{}.png", v.name)))?;
     }
-    let cfg = args.train.run_config(ds.background, 2000)?;
     eprintln!(
         "training from views {:?}, holding out {} views",
         ds.train,

@@ -10,6 +10,7 @@ use fewview_scene::Camera;
 
 use super::geom_common::load_image;
 use super::number_args::non_negative_f32;
+use super::output_paths::check_file;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum EdgeTestArg {
@@ -107,6 +108,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    check_file(&args.out, "--out")?;
     let (depth, cam, img) = load_depth_view(
         &args.depth,
         &args.input,
@@ -123,7 +125,9 @@ pub fn run(args: Args) -> Result<()> {
     write_mesh(&args.out, &mesh)?;
     println!(
         "{}",
-        serde_json::json!({"vertices": mesh.vertices.len(), "faces": mesh.faces.len(), "out": args.out})
+        serde_json::json!({"vertices": mesh.vertices.len(), "faces": mesh.faces.len(),
+            // Not the `PathBuf`: serde refuses a path that is not UTF-8.
+            "out": args.out.display().to_string()})
     );
     Ok(())
 }

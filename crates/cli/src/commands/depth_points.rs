@@ -12,6 +12,7 @@ use fewview_geom::mesh::{Points, f3, v3};
 
 use super::depth_mesh::{DepthInput, load_depth_view};
 use super::number_args::fraction;
+use super::output_paths::check_file;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum ContractArg {
@@ -60,6 +61,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    check_file(&args.out, "--out")?;
     let n = args.depth.len();
     if !(args.cameras.len() == n || args.cameras.len() == 1) {
         bail!("{n} depth maps but {} camera files", args.cameras.len());
@@ -108,7 +110,10 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(kind) = kind {
         let refs: Vec<(&[f32], &fewview_scene::Camera)> =
             views.iter().map(|(d, c, _)| (d.as_slice(), c)).collect();
-        let c = contraction_reference(&refs, &opts, args.quantile, kind)?;
+        let c = contraction_reference(&refs, &opts, args.quantile, kind).with_context(|| {
+            let names: Vec<String> = args.depth.iter().map(|d| d.display().to_string()).collect();
+            format!("--contract over {}", names.join(", "))
+        })?;
         all.positions = all.positions.iter().map(|p| f3(&c.apply(&v3(p)))).collect();
         report["contraction"] = serde_json::json!({
             "view": c.view, "b_near": c.b_near, "b_far": c.b_far,

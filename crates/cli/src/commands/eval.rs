@@ -9,6 +9,7 @@ use fewview_splat::ply::read_ply;
 use fewview_splat::raster::RenderSettings;
 
 use super::dataset_args::DatasetArgs;
+use super::output_paths::check_optional_file;
 
 /// Score a trained model on a dataset's held-out views.
 ///
@@ -28,6 +29,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    check_optional_file(args.json.as_deref(), "--json")?;
     let model = read_ply(&args.ply).context("cannot read the model")?;
     let ds = args.dataset.load()?;
     let settings = RenderSettings {

@@ -11,6 +11,8 @@ use fewview_metrics::temporal::{self, Flow, MetricSeries, PerceptualDistance};
 use fewview_metrics::{SsimBorder, SsimOptions};
 use fewview_scene::video;
 
+use super::output_paths::check_optional_file;
+
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Rendered sequence: an .mp4 or .gif file, or a folder of PNG/JPEG frames (natural order).
@@ -64,6 +66,7 @@ fn row(s: &MetricSeries) -> String {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    check_optional_file(args.json.as_deref(), "--json")?;
     let background = match args.background.as_str() {
         "white" => [1.0; 3],
         "black" => [0.0; 3],
@@ -105,7 +108,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         lpips.as_ref().map(|l| l as &dyn PerceptualDistance),
         flows.as_deref(),
-    )?;
+    )
+    .with_context(|| {
+        format!(
+            "{} against {}",
+            args.output.display(),
+            args.ground_truth.display()
+        )
+    })?;
     println!(
         "{} frames; Δ = |m_t − m_(t−1)| over consecutive frames (mean, std)",
         report.frames

@@ -4,12 +4,13 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use clap::Args as ClapArgs;
-use fewview_geom::cleanup::{CullOptions, cull_by_masks, largest_component};
+use fewview_geom::cleanup::{CullOptions, cull_by_mask_files, largest_component};
 use fewview_geom::io::{cameras::read_cameras, read_npy, write_mesh};
 use fewview_geom::mcubes::{GridSpec, marching_cubes};
 use fewview_geom::topology::edge_report;
 
 use super::geom_common::numbers;
+use super::output_paths::check_file;
 
 /// Extract the level set of a scalar grid as a watertight, outward-oriented triangle mesh.
 ///
@@ -45,6 +46,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    check_file(&args.out, "--out")?;
     let a = read_npy(&args.grid)?;
     let dims: [usize; 3] = match a.shape.as_slice() {
         [x, y, z] => [*x, *y, *z],
@@ -76,15 +78,7 @@ pub fn run(args: Args) -> Result<()> {
                 args.masks.len()
             );
         }
-        let masks = args
-            .masks
-            .iter()
-            .map(|p| {
-                fewview_scene::Image::load(p)
-                    .with_context(|| format!("reading mask {}", p.display()))
-            })
-            .collect::<Result<Vec<_>>>()?;
-        mesh = cull_by_masks(&mesh, &cams, &masks, &CullOptions::default())?;
+        mesh = cull_by_mask_files(&mesh, &cams, &args.masks, &CullOptions::default())?;
     } else if !args.masks.is_empty() {
         bail!("--masks needs --cameras");
     }
@@ -98,7 +92,8 @@ pub fn run(args: Args) -> Result<()> {
         serde_json::json!({
             "vertices": mesh.vertices.len(), "faces": mesh.faces.len(),
             "watertight": r.is_watertight(), "boundary_edges": r.boundary_edges,
-            "out": args.out,
+            // Not the `PathBuf`: serde refuses a path that is not UTF-8.
+            "out": args.out.display().to_string(),
         })
     );
     Ok(())

@@ -12,6 +12,7 @@ pub mod eval_video;
 mod geom_common;
 mod mcubes;
 mod number_args;
+mod output_paths;
 mod pose_error;
 mod progress;
 mod register;

@@ -11,6 +11,7 @@ use fewview_metrics::pose_error::{
 };
 
 use super::geom_common::write_json;
+use super::output_paths::check_optional_file;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Method {
@@ -46,6 +47,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    check_optional_file(args.json.as_deref(), "--json")?;
     let est = read_poses(&args.est)?;
     let gt = read_poses(&args.gt)?;
     let opts = PoseErrorOptions {

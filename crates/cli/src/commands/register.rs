@@ -12,6 +12,7 @@ use fewview_geom::similarity::Similarity;
 use fewview_metrics::pose_error::{PoseErrorOptions, pose_error_pairwise};
 
 use super::geom_common::write_json;
+use super::output_paths::check_optional_file;
 
 /// Where ICP starts (`--icp-start`).
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -113,6 +114,8 @@ fn read_similarity(path: &std::path::Path) -> Result<Similarity> {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    check_optional_file(args.out.as_deref(), "--out")?;
+    check_optional_file(args.report.as_deref(), "--report")?;
     let source = read_points(&args.source)?;
     let target = read_points(&args.target)?;
     let pre = match (&args.prealign, &args.est_poses, &args.gt_poses) {

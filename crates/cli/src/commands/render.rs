@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::{Args as ClapArgs, ValueEnum};
-use fewview_scene::video::{Container, VideoOptions, write_video};
+use fewview_scene::video::{Container, MAX_GIF_FPS, VideoOptions, write_video};
 use fewview_splat::eval::render_model;
 use fewview_splat::pipeline::render_path;
 use fewview_splat::ply::read_ply;
@@ -12,6 +12,7 @@ use fewview_splat::raster::{RenderCamera, RenderSettings};
 
 use super::dataset_args::DatasetArgs;
 use super::number_args::positive_f32;
+use super::output_paths::{check_file, check_folder};
 use super::progress;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -40,7 +41,8 @@ pub struct Args {
     /// Which dataset views to render.
     #[arg(long, value_enum, default_value_t = Which::Test)]
     pub views: Which,
-    /// Output folder for the PNGs (`<name>.png`, and `<name>_depth.png` with `--depth`).
+    /// Output folder for the PNGs (`<name>.png`, and `<name>_depth.png` with `--depth`); not
+    /// created with `--views none`.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
     /// Also write expected depth, normalised by alpha and scaled to the frame's range.
@@ -53,7 +55,7 @@ pub struct Args {
     /// Frames between consecutive training views on the path.
     #[arg(long, default_value_t = 30)]
     pub frames_per_segment: usize,
-    /// Frame rate of the path video.
+    /// Frame rate of the path video (a GIF plays at most 50).
     #[arg(long, default_value_t = 30.0, value_parser = positive_f32)]
     pub fps: f32,
 }
@@ -64,10 +66,28 @@ pub struct Args {
 const MAX_PATH_FRAMES: usize = 10_000;
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    // The path's flags are checked before any work: a bad container or frame count used to be
-    // found only after every view was rendered (or never, for a huge count).
+    // The outputs and the path's flags are checked before any work: a bad container, frame
+    // count, frame rate or output folder used to be found only after every view was rendered
+    // and written (or never, for a huge count).
+    if args.views == Which::None && args.path.is_none() {
+        bail!("--views none without --path: nothing to render");
+    }
+    if args.views != Which::None {
+        check_folder(&args.out, "--out")?;
+    }
     if let Some(path) = &args.path {
-        Container::for_path(path)?;
+        let container = Container::for_path(path)?;
+        match container {
+            Container::FrameFolder => check_folder(path, "--path")?,
+            Container::Gif | Container::Mp4 => check_file(path, "--path")?,
+        }
+        if container == Container::Gif && args.fps > MAX_GIF_FPS {
+            bail!(
+                "--fps {}: a GIF plays at most {MAX_GIF_FPS} fps (browsers cap its frame delay \
+                 at 2 cs); write an .mp4 or lower --fps",
+                args.fps
+            );
+        }
         if args.frames_per_segment == 0 {
             bail!("--frames-per-segment must be at least 1");
         }
@@ -109,8 +129,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Which::All => (0..ds.views.len()).collect(),
         Which::None => vec![],
     };
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    if indices.is_empty() && args.path.is_none() {
+        bail!(
+            "--views {}: the split has no such views and there is no --path: nothing to render",
+            format!("{:?}", args.views).to_lowercase()
+        );
+    }
+    if !indices.is_empty() {
+        std::fs::create_dir_all(&args.out)
+            .with_context(|| format!("cannot create {}", args.out.display()))?;
+    }
     let bar = progress::iterations(indices.len() as u64, "render");
     for &i in &indices {
         let v = &ds.views[i];
@@ -124,7 +152,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    println!("rendered {} views to {}", indices.len(), args.out.display());
+    if !indices.is_empty() {
+        println!("rendered {} views to {}", indices.len(), args.out.display());
+    }
     if let Some(path) = &args.path {
         let frames = render_path(&model, &keys, args.frames_per_segment, &settings);
         write_video(path, &frames, args.fps, &VideoOptions::default())?;

@@ -18,7 +18,29 @@ use fewview_surface::sdf_scene::{SdfSceneOptions, sdf_dataset};
 use fewview_surface::warmup::{Connectivity, WarmupOptions};
 
 use super::dataset_args::DatasetArgs;
+use super::number_args::{non_negative, non_negative_f32};
+use super::output_paths::check_folder;
 use super::progress;
+
+/// The largest `--pose-noise`. σ is the standard deviation of every se(3) component: radians
+/// for the rotation and units of the normalised scene (radius 1) for the translation. At σ = π
+/// the rotations are already close to uniformly random and the cameras land several scene
+/// radii away, so a larger σ describes no pose refinement problem (1e300 used to reach the
+/// pose sampler and fail after the run folder was written).
+const MAX_POSE_NOISE: f64 = std::f64::consts::PI;
+
+/// `--pose-noise`: a finite σ in [0, [`MAX_POSE_NOISE`]].
+fn pose_noise(s: &str) -> Result<f64, String> {
+    match non_negative(s)? {
+        v if v <= MAX_POSE_NOISE => Ok(v),
+        _ => Err(format!("{s}: expected σ ≤ π (radians of rotation noise)")),
+    }
+}
+
+/// The largest `--mesh-resolution`. Marching cubes evaluates the field at n³ grid points and
+/// the mesh grows as n²: at 2048 that is 8.6·10⁹ field evaluations (hours on a CPU) and tens of
+/// millions of triangles (gigabytes), 4× the 512 NeuS meshes at; 100000 ran for ever.
+const MAX_MESH_RESOLUTION: i64 = 2048;
 
 /// Reconstruct a surface (NeuS SDF) and refine noisy camera poses from a few views.
 ///
@@ -64,8 +86,8 @@ pub struct Args {
     /// Correspondences per iteration (two rays each).
     #[arg(long, default_value_t = 128)]
     pub matches_per_batch: usize,
-    /// σ of the se(3) pose noise (0 = ground-truth poses).
-    #[arg(long, default_value_t = 0.15)]
+    /// σ of the se(3) pose noise (0 = ground-truth poses; at most π).
+    #[arg(long, default_value_t = 0.15, value_parser = pose_noise)]
     pub pose_noise: f64,
     /// `noisy` (perturbed ground truth) or `loaded` (the dataset's poses as the start).
     #[arg(long, default_value = "noisy")]
@@ -180,28 +202,29 @@ pub struct Args {
     /// Do not use object masks (colour loss on all pixels, no mask loss, no culling).
     #[arg(long)]
     pub no_masks: bool,
-    /// Loss weights (defaults: paper 001 §B.1; `--lambda-geo` see the README).
-    #[arg(long)]
+    /// Loss weights, finite and ≥ 0 (defaults: paper 001 §B.1; `--lambda-geo` see the README).
+    #[arg(long, value_parser = non_negative_f32)]
     pub lambda_mc: Option<f32>,
-    #[arg(long)]
+    #[arg(long, value_parser = non_negative_f32)]
     pub lambda_u: Option<f32>,
-    #[arg(long)]
+    #[arg(long, value_parser = non_negative_f32)]
     pub lambda_gc: Option<f32>,
-    #[arg(long)]
+    #[arg(long, value_parser = non_negative_f32)]
     pub lambda_geo: Option<f32>,
-    #[arg(long)]
+    #[arg(long, value_parser = non_negative_f32)]
     pub lambda_psdf: Option<f32>,
     /// Coarse-to-fine window (α₁, α₂) as fractions of the iterations, e.g. `0.4,0.7`.
     #[arg(long, value_name = "A1,A2")]
     pub c2f: Option<String>,
-    /// Marching-cubes resolution over [−1, 1]³.
-    #[arg(long, default_value_t = 256)]
-    pub mesh_resolution: usize,
+    /// Marching-cubes resolution over [−1, 1]³ (2 to 2048).
+    #[arg(long, default_value_t = 256,
+          value_parser = clap::value_parser!(u32).range(2..=MAX_MESH_RESOLUTION))]
+    pub mesh_resolution: u32,
     /// Test views rendered and scored.
     #[arg(long, default_value_t = 5)]
     pub eval_views: usize,
     /// Render test views at 1/K of their size.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     pub eval_scale: u32,
     /// Reference surface (PLY/OBJ, in the dataset's normalised frame) for Chamfer.
     #[arg(long, value_name = "FILE")]
@@ -373,9 +396,9 @@ impl Args {
                 });
             }
         }
-        c.mesh_resolution = self.mesh_resolution;
+        c.mesh_resolution = self.mesh_resolution as usize;
         c.eval_views = self.eval_views;
-        c.eval_scale = self.eval_scale.max(1);
+        c.eval_scale = self.eval_scale;
         c.checkpoint_every = self.checkpoint_every;
         Ok(c)
     }
@@ -444,6 +467,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (ds, truth, matching, name, reference)
     };
     let cfg = args.config()?;
+    // Every scored test view must keep a pixel at 1/--eval-scale: a larger factor used to fail
+    // on the first render, after the mesh and the poses were written.
+    let k = cfg.eval_scale as usize;
+    for &vi in ds.test.iter().take(cfg.eval_views) {
+        let v = &ds.views[vi];
+        if v.image.width < k || v.image.height < k {
+            bail!(
+                "--eval-scale {k}: test view {} is {}×{}, which leaves no pixel at 1/{k}",
+                v.name,
+                v.image.width,
+                v.image.height
+            );
+        }
+    }
     // Where the refined poses go back in the input's format (`--data` is absent, checked
     // above, for the in-process scene).
     let load_options = args.dataset.load_options();
@@ -451,6 +488,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("runs").join(format!("surface-{name}")));
+    check_folder(&out, "--out")?;
     eprintln!(
         "surface on {} ({} train views, {}x{}, {} iterations) → {}",
         ds.name,

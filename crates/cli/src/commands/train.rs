@@ -4,9 +4,12 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args as ClapArgs;
-use fewview_splat::pipeline::{RunSummary, default_iterations, train_run};
+use fewview_splat::pipeline::{
+    RunConfig, RunSummary, default_iterations, initial_model, train_run,
+};
 
 use super::dataset_args::DatasetArgs;
+use super::output_paths::check_folder;
 use super::progress;
 use super::train_args::TrainArgs;
 
@@ -44,6 +47,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .unwrap_or_else(|| "run".into());
         PathBuf::from("runs").join(name)
     });
+    check_folder(&out, "--out")?;
     eprintln!(
         "training on {} ({} train / {} held-out views, {}x{}) → {}",
         ds.name,
@@ -55,6 +59,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let summary = train_with_progress(&ds, &cfg, &out, args.resume)?;
     print_summary(&summary, &out);
+    Ok(())
+}
+
+/// Builds the initial Gaussians once, for a caller that writes something before it trains
+/// (`demo` writes its ground-truth images): an `--init` the dataset cannot serve (a missing or
+/// corrupt `ply:FILE`, `points` without sparse points) then fails with nothing written.
+/// [`train_run`] itself creates the run folder only after building them. A resumed run starts
+/// from its checkpoint instead.
+pub fn check_init(
+    ds: &fewview_scene::Dataset,
+    cfg: &RunConfig,
+    init: &str,
+    resume: bool,
+) -> anyhow::Result<()> {
+    if !resume {
+        initial_model(ds, cfg).with_context(|| format!("--init {init}"))?;
+    }
     Ok(())
 }
 

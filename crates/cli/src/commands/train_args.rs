@@ -84,6 +84,13 @@ impl TrainArgs {
     }
 }
 
+/// The largest `--init box:HALF_SIZE`. Gaussian positions, scales and their squares are single
+/// precision: 1e300 became an infinite position and failed only once the run folder existed.
+/// 10⁶ units is beyond any scene a camera rig sees (LLFF and COLMAP scenes span units to
+/// hundreds, DTU's millimetres about a thousand) while the scales' squares (about (half/15)²)
+/// and their projections stay far inside single precision.
+const MAX_BOX_HALF_SIZE: f64 = 1e6;
+
 fn parse_init(s: &str) -> anyhow::Result<InitStrategy> {
     Ok(match s {
         "auto" => InitStrategy::Auto,
@@ -96,6 +103,11 @@ fn parse_init(s: &str) -> anyhow::Result<InitStrategy> {
                 .map_err(|_| anyhow::anyhow!("--init {s}: `{}` is not a number", &s[4..]))?;
             if !(v.is_finite() && v > 0.0) {
                 bail!("--init {s}: the half-size must be positive");
+            }
+            if v > MAX_BOX_HALF_SIZE {
+                bail!(
+                    "--init {s}: the half-size must be at most {MAX_BOX_HALF_SIZE:e} scene units"
+                );
             }
             InitStrategy::RandomBox { half_size: Some(v) }
         }

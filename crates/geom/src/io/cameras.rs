@@ -38,9 +38,12 @@ fn matrix_from_rows(v: &Value) -> Option<Matrix4<f64>> {
     Some(m)
 }
 
-fn camera_from_value(v: &Value) -> std::result::Result<Camera, String> {
+/// A camera of either form, with its world-to-camera matrix as written (the serde form has no
+/// last row, so its matrix has `[0, 0, 0, 1]`).
+fn camera_from_value(v: &Value) -> std::result::Result<(Camera, Matrix4<f64>), String> {
     if let Ok(c) = serde_json::from_value::<Camera>(v.clone()) {
-        return Ok(c);
+        let m = c.world_to_camera.to_matrix4();
+        return Ok((c, m));
     }
     let intr: Intrinsics = serde_json::from_value(
         v.get("intrinsics")
@@ -52,21 +55,80 @@ fn camera_from_value(v: &Value) -> std::result::Result<Camera, String> {
         .get("world_to_camera")
         .and_then(matrix_from_rows)
         .ok_or("'world_to_camera' must be a row-major 4×4 (or 3×4) matrix")?;
-    Ok(Camera::new(intr, Se3::from_matrix4(&m)))
+    Ok((Camera::new(intr, Se3::from_matrix4(&m)), m))
 }
 
-fn check(c: &Camera, i: usize) -> std::result::Result<(), String> {
-    if !c.is_finite() {
-        return Err(format!("camera {i} has non-finite or non-positive values"));
+/// The largest magnitude a camera value (focal length, principal point, translation) may have:
+/// the scene loaders' bound, beyond which single-precision rendering overflows.
+pub const MAX_CAMERA_MAGNITUDE: f64 = fewview_scene::load::MAX_CAMERA_MAGNITUDE;
+
+/// How far `RᵀR` may be from the identity (Frobenius norm) for `R` to count as a rotation, and
+/// how far the last row of a pose matrix may be from `[0, 0, 0, 1]`.
+const POSE_TOLERANCE: f64 = 1e-3;
+
+/// Why a world-to-camera matrix is not a rigid pose, if it is not: a value that is not finite, a
+/// translation beyond [`MAX_CAMERA_MAGNITUDE`], a rotation block that is not orthonormal or is a
+/// reflection (det −1), or a last row other than `[0, 0, 0, 1]`.
+pub fn pose_problem(m: &Matrix4<f64>) -> Option<String> {
+    if let Some(v) = m.iter().find(|v| !v.is_finite()) {
+        return Some(format!("holds a non-finite value ({v})"));
     }
-    let r = &c.world_to_camera.rotation;
-    let err = (r.transpose() * r - nalgebra::Matrix3::identity()).norm();
-    if err > 1e-3 {
-        return Err(format!(
-            "camera {i}: rotation is not orthonormal (|RᵀR − I| = {err:.2e})"
+    let t = m.fixed_view::<3, 1>(0, 3);
+    if let Some(v) = t.iter().find(|v| v.abs() > MAX_CAMERA_MAGNITUDE) {
+        return Some(format!(
+            "translation {v:.3e} is beyond the {MAX_CAMERA_MAGNITUDE:.0e} a camera value may have"
         ));
     }
-    Ok(())
+    let last = m.fixed_view::<1, 4>(3, 0);
+    let identity_row = nalgebra::RowVector4::new(0.0, 0.0, 0.0, 1.0);
+    if (last - identity_row).abs().max() > POSE_TOLERANCE {
+        return Some(format!(
+            "last row is [{}, {}, {}, {}], not [0, 0, 0, 1]",
+            last[0], last[1], last[2], last[3]
+        ));
+    }
+    let r = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let err = (r.transpose() * r - nalgebra::Matrix3::identity()).norm();
+    if err > POSE_TOLERANCE {
+        return Some(format!(
+            "rotation is not orthonormal (|RᵀR − I| = {err:.2e})"
+        ));
+    }
+    let det = r.determinant();
+    if det <= 0.0 {
+        return Some(format!(
+            "rotation is a reflection (det {det:.3}), not a proper rotation (det +1)"
+        ));
+    }
+    None
+}
+
+fn check(c: &Camera, m: &Matrix4<f64>, i: usize) -> std::result::Result<(), String> {
+    let k = &c.intrinsics;
+    if !k.is_finite() {
+        return Err(format!("camera {i} has non-finite or non-positive values"));
+    }
+    let values = [
+        ("focal length fx", k.fx),
+        ("focal length fy", k.fy),
+        ("principal point cx", k.cx),
+        ("principal point cy", k.cy),
+    ];
+    if let Some((what, v)) = values.iter().find(|(_, v)| v.abs() > MAX_CAMERA_MAGNITUDE) {
+        return Err(format!(
+            "camera {i}: {what} {v:.3e} is beyond the {MAX_CAMERA_MAGNITUDE:.0e} a camera value may have"
+        ));
+    }
+    if k.width == 0 || k.height == 0 {
+        return Err(format!(
+            "camera {i}: image size {}×{} is empty",
+            k.width, k.height
+        ));
+    }
+    match pose_problem(m) {
+        Some(p) => Err(format!("camera {i}: world_to_camera {p}")),
+        None => Ok(()),
+    }
 }
 
 /// Reads one camera or a list of cameras.
@@ -82,8 +144,8 @@ pub fn read_cameras(path: &Path) -> Result<Vec<Camera>> {
         .iter()
         .enumerate()
         .map(|(i, c)| {
-            let cam = camera_from_value(c).map_err(|m| format!("camera {i}: {m}"))?;
-            check(&cam, i)?;
+            let (cam, m) = camera_from_value(c).map_err(|m| format!("camera {i}: {m}"))?;
+            check(&cam, &m, i)?;
             Ok(cam)
         })
         .collect::<std::result::Result<Vec<_>, String>>()
@@ -103,16 +165,17 @@ pub fn read_poses(path: &Path) -> Result<Vec<Se3>> {
         && !list.is_empty()
         && list.iter().all(|m| matrix_from_rows(m).is_some())
     {
-        let poses: Vec<Se3> = list
+        return list
             .iter()
-            .map(|m| Se3::from_matrix4(&matrix_from_rows(m).unwrap_or_else(Matrix4::identity)))
+            .enumerate()
+            .map(|(i, m)| {
+                let m = matrix_from_rows(m).unwrap_or_else(Matrix4::identity);
+                match pose_problem(&m) {
+                    Some(p) => Err(GeomError::format(path, format!("pose {i}: {p}"))),
+                    None => Ok(Se3::from_matrix4(&m)),
+                }
+            })
             .collect();
-        for (i, p) in poses.iter().enumerate() {
-            if !p.is_finite() {
-                return Err(GeomError::format(path, format!("pose {i} is not finite")));
-            }
-        }
-        return Ok(poses);
     }
     Ok(read_cameras(path)?
         .into_iter()
@@ -167,5 +230,76 @@ mod tests {
         // A list of matrices is taken as poses; as cameras it lacks intrinsics.
         let e = read_cameras(&p3).unwrap_err().to_string();
         assert!(e.contains("m.json") && e.contains("intrinsics"), "{e}");
+    }
+
+    /// Plain matrix lists and camera-form files both refuse a pose that is not rigid (shear,
+    /// reflection, bad last row, non-finite or huge translation), naming the file and the index.
+    #[test]
+    fn poses_that_are_not_rigid_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("poses.json");
+        let ok = "[[1,0,0,0],[0,1,0,0],[0,0,1,5],[0,0,0,1]]";
+        let cases = [
+            (
+                "[[2,0,0,0],[0,1,0,0],[0,0,1,5],[0,0,0,1]]",
+                "not orthonormal",
+            ),
+            ("[[-1,0,0,0],[0,1,0,0],[0,0,1,5],[0,0,0,1]]", "reflection"),
+            ("[[1,0,0,0],[0,1,0,0],[0,0,1,5],[5,5,5,5]]", "last row"),
+            (
+                "[[1,0,0,1e300],[0,1,0,0],[0,0,1,5],[0,0,0,1]]",
+                "translation",
+            ),
+        ];
+        for (bad, problem) in cases {
+            std::fs::write(&p, format!("[{ok}, {bad}]")).unwrap();
+            let e = read_poses(&p).unwrap_err().to_string();
+            assert!(e.contains("poses.json: pose 1: "), "{e}");
+            assert!(e.contains(problem), "{e}");
+            let intr = r#"{"fx": 500, "fy": 500, "cx": 16, "cy": 12, "width": 32, "height": 24}"#;
+            let cam = |m: &str| format!(r#"{{"intrinsics": {intr}, "world_to_camera": {m}}}"#);
+            std::fs::write(&p, format!("[{}, {}]", cam(ok), cam(bad))).unwrap();
+            for e in [
+                read_poses(&p).unwrap_err().to_string(),
+                read_cameras(&p).unwrap_err().to_string(),
+            ] {
+                assert!(e.contains("poses.json: camera 1: world_to_camera"), "{e}");
+                assert!(e.contains(problem), "{e}");
+            }
+        }
+        std::fs::write(&p, format!("[{ok}]")).unwrap();
+        assert_eq!(read_poses(&p).unwrap().len(), 1);
+    }
+
+    /// A camera with a focal length or principal point beyond the bound, or an empty image, is
+    /// refused when reading, naming the camera file.
+    #[test]
+    fn camera_values_are_bounded() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("cam.json");
+        let m = "[[1,0,0,0],[0,1,0,0],[0,0,1,2],[0,0,0,1]]";
+        let cases = [
+            (
+                r#""fx": 1e300, "fy": 500, "cx": 16, "cy": 12, "width": 32, "height": 24"#,
+                "focal length fx",
+            ),
+            (
+                r#""fx": 500, "fy": 500, "cx": -1e13, "cy": 12, "width": 32, "height": 24"#,
+                "principal point cx",
+            ),
+            (
+                r#""fx": 500, "fy": 500, "cx": 16, "cy": 12, "width": 0, "height": 24"#,
+                "is empty",
+            ),
+        ];
+        for (intr, problem) in cases {
+            let text = format!(r#"{{"intrinsics": {{{intr}}}, "world_to_camera": {m}}}"#);
+            std::fs::write(&p, text).unwrap();
+            let e = read_cameras(&p).unwrap_err().to_string();
+            assert!(
+                e.contains("cam.json: camera 0: ") && e.contains(problem),
+                "{e}"
+            );
+        }
     }
 }

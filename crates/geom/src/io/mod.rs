@@ -95,8 +95,25 @@ pub struct NpyArray {
     pub data: Vec<f32>,
 }
 
-/// Reads a float32/float64 (or bool, uint8, uint16, int32) `.npy` array in C order.
+/// Reads a float32/float64 (or bool, uint8, uint16, int32) `.npy` array in C order. A value that
+/// is NaN, infinite or (float64) beyond float32 range is an error naming the file and the index.
 pub fn read_npy(path: &Path) -> Result<NpyArray> {
+    let a = read_npy_unchecked(path)?;
+    if let Some(i) = a.data.iter().position(|v| !v.is_finite()) {
+        return Err(GeomError::format(
+            path,
+            format!(
+                "value at index {:?} is {} (NaN, infinite, or beyond float32 range); the array must hold finite numbers",
+                unravel(i, &a.shape),
+                a.data[i]
+            ),
+        ));
+    }
+    Ok(a)
+}
+
+/// [`read_npy`] without the check that the values are finite.
+fn read_npy_unchecked(path: &Path) -> Result<NpyArray> {
     let bytes = std::fs::read(path).map_err(|e| GeomError::io(path, e))?;
     let npy = npyz::NpyFile::new(&bytes[..])
         .map_err(|e| GeomError::format(path, format!("not a .npy file: {e}")))?;
@@ -158,6 +175,18 @@ pub fn read_npy(path: &Path) -> Result<NpyArray> {
     Ok(NpyArray { shape, data })
 }
 
+/// The C-order multi-index of flat index `i` in an array of `shape`.
+fn unravel(mut i: usize, shape: &[usize]) -> Vec<usize> {
+    let mut index = vec![0; shape.len()];
+    for (slot, &n) in index.iter_mut().zip(shape).rev() {
+        if n > 0 {
+            *slot = i % n;
+            i /= n;
+        }
+    }
+    index
+}
+
 /// Writes a float32 `.npy` array in C order, atomically.
 pub fn write_npy(path: &Path, shape: &[usize], data: &[f32]) -> Result<()> {
     use npyz::WriterBuilder;
@@ -191,7 +220,7 @@ pub fn read_depth(path: &Path, png_scale: f32) -> Result<DepthMap> {
         .map(str::to_ascii_lowercase);
     match ext.as_deref() {
         Some("npy") => {
-            let a = read_npy(path)?;
+            let a = read_npy_unchecked(path)?;
             let (h, w) = match a.shape.as_slice() {
                 [h, w] | [h, w, 1] => (*h, *w),
                 s => {
@@ -201,6 +230,17 @@ pub fn read_depth(path: &Path, png_scale: f32) -> Result<DepthMap> {
                     ));
                 }
             };
+            if let Some(i) = a.data.iter().position(|d| !d.is_finite()) {
+                return Err(GeomError::format(
+                    path,
+                    format!(
+                        "pixel ({}, {}) is {} (NaN/inf depth)",
+                        i % w.max(1),
+                        i / w.max(1),
+                        a.data[i]
+                    ),
+                ));
+            }
             Ok(DepthMap {
                 width: w,
                 height: h,
@@ -347,5 +387,30 @@ mod tests {
         img.save(&p).unwrap();
         let d = read_depth(&p, 0.001).unwrap();
         assert_eq!(d.depth, vec![1.0, 2.5]);
+    }
+
+    /// A grid with ±inf (or a float64 beyond float32 range) is refused when reading, naming the
+    /// file and the index; a depth map names the file and the pixel.
+    #[test]
+    fn non_finite_npy_values_name_the_file_and_index() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("grid.npy");
+        for bad in [f32::INFINITY, f32::NEG_INFINITY, f32::NAN] {
+            let mut g = vec![0.5f32; 2 * 3 * 4];
+            g[(3 + 2) * 4 + 1] = bad;
+            write_npy(&p, &[2, 3, 4], &g).unwrap();
+            let e = read_npy(&p).err().unwrap().to_string();
+            assert!(e.contains("grid.npy: value at index [1, 2, 1] is "), "{e}");
+        }
+        let q = dir.path().join("f64.npy");
+        npyz::to_file_1d(&q, vec![1.0f64, 1e300]).unwrap();
+        let e = read_npy(&q).err().unwrap().to_string();
+        assert!(e.contains("f64.npy: value at index [1] is inf"), "{e}");
+        let d = dir.path().join("depth.npy");
+        let mut data = vec![1.0f32; 6];
+        data[4] = f32::NAN;
+        write_npy(&d, &[2, 3], &data).unwrap();
+        let e = read_depth(&d, 1.0).err().unwrap().to_string();
+        assert!(e.contains("depth.npy: pixel (1, 1) is NaN"), "{e}");
     }
 }

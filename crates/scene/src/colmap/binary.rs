@@ -229,13 +229,52 @@ pub fn read_points(path: &Path) -> Result<Vec<ColmapPoint>> {
         let error = r.f64("a reprojection error")?;
         let track = r.u64("a track length")?;
         r.skip(track, 8, "a track")?;
-        out.push(ColmapPoint {
+        let point = ColmapPoint {
             id,
             xyz,
             rgb,
             error,
-        });
+        };
+        if let Some(problem) = point.problem() {
+            return Err(SceneError::invalid(path, problem));
+        }
+        out.push(point);
     }
     r.finish()?;
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A `points3D.bin` with one point at `xyz` and an empty track.
+    fn points_file(xyz: [f64; 3]) -> Vec<u8> {
+        let mut b = Vec::new();
+        b.extend(1u64.to_le_bytes());
+        b.extend(7u64.to_le_bytes());
+        for v in xyz {
+            b.extend(v.to_le_bytes());
+        }
+        b.extend([10u8, 20, 30]);
+        b.extend(0.5f64.to_le_bytes());
+        b.extend(0u64.to_le_bytes());
+        b
+    }
+
+    /// A NaN or 1e300 coordinate is refused when reading, naming the file and the point id.
+    #[test]
+    fn points_with_non_finite_or_huge_coordinates_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("points3D.bin");
+        std::fs::write(&path, points_file([1.0, 2.0, 3.0])).unwrap();
+        assert_eq!(read_points(&path).unwrap()[0].xyz, [1.0, 2.0, 3.0]);
+        for (xyz, axis) in [([f64::NAN, 0.0, 0.0], "x"), ([0.0, 0.0, 1e300], "z")] {
+            std::fs::write(&path, points_file(xyz)).unwrap();
+            let err = read_points(&path).unwrap_err().to_string();
+            assert!(err.contains("points3D.bin: point 7: coordinate"), "{err}");
+            assert!(err.contains(&format!("{axis} = ")), "{err}");
+            assert!(err.contains("not a finite value"), "{err}");
+        }
+    }
 }

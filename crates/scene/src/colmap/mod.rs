@@ -153,6 +153,25 @@ pub struct ColmapPoint {
     pub error: f64,
 }
 
+impl ColmapPoint {
+    /// Why the point cannot be used, if it cannot: a position that is NaN, infinite or beyond
+    /// [`load::MAX_CAMERA_MAGNITUDE`] (training computes in single precision, where such a value
+    /// overflows). The message names the point id; the readers add the file. Colours are bytes,
+    /// so every stored colour is valid.
+    pub fn problem(&self) -> Option<String> {
+        const AXES: [&str; 3] = ["x", "y", "z"];
+        AXES.iter().zip(&self.xyz).find_map(|(axis, &v)| {
+            (!v.is_finite() || v.abs() > load::MAX_CAMERA_MAGNITUDE).then(|| {
+                format!(
+                    "point {}: coordinate {axis} = {v:.3e} is not a finite value within {:.0e}",
+                    self.id,
+                    load::MAX_CAMERA_MAGNITUDE
+                )
+            })
+        })
+    }
+}
+
 /// A sparse model.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ColmapModel {

@@ -182,12 +182,16 @@ pub fn read_points(path: &Path) -> Result<Vec<ColmapPoint>> {
         let f: Vec<&str> = line.split_whitespace().collect();
         let num = |k: usize, what: &str| field::<f64>(&f, k, what, path, n);
         let byte = |k: usize, what: &str| field::<u8>(&f, k, what, path, n);
-        out.push(ColmapPoint {
+        let point = ColmapPoint {
             id: field(&f, 0, "point id", path, n)?,
             xyz: [num(1, "x")?, num(2, "y")?, num(3, "z")?],
             rgb: [byte(4, "red")?, byte(5, "green")?, byte(6, "blue")?],
             error: num(7, "error")?,
-        });
+        };
+        if let Some(problem) = point.problem() {
+            return Err(SceneError::invalid(path, format!("line {n}: {problem}")));
+        }
+        out.push(point);
     }
     Ok(out)
 }
@@ -227,5 +231,28 @@ mod tests {
         std::fs::write(&path, format!("{}\n\n{}\n1 2 -1\n", image(1), image(2))).unwrap();
         let ids: Vec<u32> = read_images(&path).unwrap().iter().map(|i| i.id).collect();
         assert_eq!(ids, [1, 2]);
+    }
+
+    /// A NaN or 1e300 coordinate is refused when reading, naming the file, line and point id.
+    #[test]
+    fn points_with_non_finite_or_huge_coordinates_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("points3D.txt");
+        let ok = "# points\n3 1 2 3 10 20 30 0.5 1 0\n";
+        std::fs::write(&path, ok).unwrap();
+        assert_eq!(read_points(&path).unwrap()[0].xyz, [1.0, 2.0, 3.0]);
+        for (line, axis) in [("5 nan 0 0 1 2 3 0.1", "x"), ("5 0 1e300 0 1 2 3 0.1", "y")] {
+            std::fs::write(&path, format!("{ok}{line}\n")).unwrap();
+            let err = read_points(&path).unwrap_err().to_string();
+            assert!(
+                err.contains("points3D.txt: line 3: point 5: coordinate"),
+                "{err}"
+            );
+            assert!(err.contains(&format!("{axis} = ")), "{err}");
+        }
+        // A colour beyond a byte is refused too.
+        std::fs::write(&path, "5 0 0 0 256 0 0 0.1\n").unwrap();
+        let err = read_points(&path).unwrap_err().to_string();
+        assert!(err.contains("points3D.txt: line 1: red"), "{err}");
     }
 }

@@ -160,6 +160,11 @@ pub enum TrainError {
     Diverged { iteration: usize, loss: f32 },
     #[error("invalid training setup: {0}")]
     Invalid(String),
+    /// Densification and pruning removed every Gaussian: there is nothing left to train or save.
+    #[error(
+        "densification/pruning at iteration {iteration} removed every Gaussian ({before} before, 0 left); start from more points (e.g. a larger --init-points) or prune less"
+    )]
+    NoGaussiansLeft { iteration: usize, before: usize },
 }
 
 /// Everything that changes during training; saved in checkpoints.
@@ -383,6 +388,12 @@ impl Trainer {
             if it.is_multiple_of(d.opacity_reset_interval) {
                 reset_opacity(&mut self.state.model, &mut self.state.adam);
             }
+        }
+        if self.state.model.is_empty() {
+            return Err(TrainError::NoGaussiansLeft {
+                iteration: it,
+                before: n,
+            });
         }
         if densified.is_none() {
             self.adam_step(it, &g_means, &g_scales, &g_quats, &g_opacity, &g_sh);
