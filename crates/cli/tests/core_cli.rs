@@ -569,7 +569,7 @@ fn train_refuses_an_unusable_init_before_writing() {
             "--out",
             s(&run),
         ]);
-        assert_clean_error(&out, &["--init", needle]);
+        assert_clean_error(&out, &[needle]);
         assert!(!run.exists(), "--init {init}: nothing written");
     }
 }
