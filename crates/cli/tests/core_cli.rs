@@ -612,6 +612,11 @@ fn render_checks_its_outputs_before_rendering() {
         &render(&["--views", "none", "--path", s(&gif), "--fps", "1000000"]),
         &["--fps 1000000", "GIF"],
     );
+    let mp4 = dir.path().join("p.mp4");
+    assert_clean_error(
+        &render(&["--path", s(&mp4), "--fps", "1e7"]),
+        &["--fps 10000000", "MP4", "timescale"],
+    );
     assert_clean_error(
         &render(&["--views", "none"]),
         &["--views none", "nothing to render"],
@@ -630,7 +635,7 @@ fn render_checks_its_outputs_before_rendering() {
     ]);
     assert_clean_error(&out, &["--out", "is not a folder"]);
     assert!(
-        !renders.exists() && !gif.exists() && !nodir.exists(),
+        !renders.exists() && !gif.exists() && !mp4.exists() && !nodir.exists(),
         "nothing written"
     );
     // `--views none` with a path writes the path only.

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::{Args as ClapArgs, ValueEnum};
-use fewview_scene::video::{Container, MAX_GIF_FPS, VideoOptions, write_video};
+use fewview_scene::video::{Container, MAX_GIF_FPS, MAX_MP4_FPS, VideoOptions, write_video};
 use fewview_splat::eval::render_model;
 use fewview_splat::pipeline::render_path;
 use fewview_splat::ply::read_ply;
@@ -85,6 +85,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bail!(
                 "--fps {}: a GIF plays at most {MAX_GIF_FPS} fps (browsers cap its frame delay \
                  at 2 cs); write an .mp4 or lower --fps",
+                args.fps
+            );
+        }
+        if container == Container::Mp4 && args.fps > MAX_MP4_FPS {
+            bail!(
+                "--fps {}: an MP4 records at most {MAX_MP4_FPS} fps (its track timescale is 32-bit)",
                 args.fps
             );
         }

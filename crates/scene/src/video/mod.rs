@@ -35,6 +35,7 @@ use crate::image::Image;
 
 pub use frames::DEFAULT_FOLDER_FPS;
 pub use gif::MAX_GIF_FPS;
+pub use mp4_h264::MAX_MP4_FPS;
 
 /// The video container a path names.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

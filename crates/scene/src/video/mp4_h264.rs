@@ -35,6 +35,11 @@ const NAL_PPS: u8 = 8;
 /// Ticks per frame in the track timescale; the timescale is `round(1000 · fps)`.
 const TICKS_PER_FRAME: u32 = 1000;
 
+/// The highest frame rate an MP4 written here can record: the track timescale,
+/// [`TICKS_PER_FRAME`] ticks a frame, is a 32-bit field, so a faster rate would be saved wrong
+/// (the timescale saturates).
+pub const MAX_MP4_FPS: f32 = (u32::MAX / TICKS_PER_FRAME) as f32;
+
 /// The even frame size that 4:2:0 can carry for a `width × height` input.
 pub(crate) fn coded_size(width: usize, height: usize, policy: OddSizePolicy) -> (usize, usize) {
     match policy {
@@ -317,6 +322,14 @@ pub(crate) fn write_mp4(
     fps: f32,
     opts: &VideoOptions,
 ) -> Result<()> {
+    if fps > MAX_MP4_FPS {
+        return Err(SceneError::invalid(
+            path,
+            format!(
+                "MP4 cannot record {fps} fps: its 32-bit track timescale holds at most {MAX_MP4_FPS} fps"
+            ),
+        ));
+    }
     let stream = encode(path, frames, fps, opts)?;
     let bytes = mux(&stream, fps)
         .map_err(|e| SceneError::format(path, format!("cannot write MP4 container: {e}")))?;

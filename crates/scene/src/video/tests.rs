@@ -139,6 +139,26 @@ fn mp4_round_trip_keeps_quality_count_and_rate() {
         std::fs::read(&path).unwrap(),
         std::fs::read(&again).unwrap()
     );
+    // The fastest rate the 32-bit timescale holds is recorded as given; a faster one is
+    // refused rather than saved wrong (the timescale used to saturate), and nothing is written.
+    let fastest = dir.path().join("fastest.mp4");
+    write_video(
+        &fastest,
+        &frames[..2],
+        MAX_MP4_FPS,
+        &VideoOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(read_video(&fastest).unwrap().1, MAX_MP4_FPS);
+    let too_fast = dir.path().join("too_fast.mp4");
+    let err = write_video(&too_fast, &frames[..2], 1e7, &VideoOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("too_fast.mp4") && err.contains("timescale"),
+        "{err}"
+    );
+    assert!(!too_fast.exists());
 }
 
 #[test]
