@@ -161,6 +161,12 @@ pub struct Args {
     #[arg(long, default_value_t = WarmupOptions::default().cauchy_px, value_name = "PX",
           value_parser = super::number_args::positive)]
     pub warmup_cauchy: f64,
+    /// After the warm-up's annealing, polish the poses once more with each dense match's
+    /// Sampson distance divided by its standard deviation across its epipolar line, from the
+    /// Lucas–Kanade covariance of the grid match (a deviation: the paper has no warm-up; see
+    /// crates/surface/README.md). Affects only runs with dense matches (`--densify`).
+    #[arg(long)]
+    pub warmup_covariance: bool,
     /// What those pairs must form for the warm-up to run: `rigid` (their baseline directions fix
     /// every baseline's length up to one scale, e.g. chained triangles; default; `triangles` is
     /// the old name) or `connected` (any connected graph, e.g. the wide DTU triplet's chain
@@ -355,6 +361,7 @@ impl Args {
             min_matches_per_pair: self.warmup_min_matches,
             connectivity,
             cauchy_px: self.warmup_cauchy,
+            covariance_polish: self.warmup_covariance,
             ..Default::default()
         });
         let needs_matches = warm_up || !(self.no_matching && self.no_ncc && self.no_gc);
@@ -754,6 +761,9 @@ mod tests {
         );
         let c = config(&["--warmup-cauchy", "0.3"]);
         assert_eq!(c.pose_warmup.unwrap().cauchy_px, 0.3);
+        assert!(!c.pose_warmup.unwrap().covariance_polish);
+        let c = config(&["--warmup-covariance"]);
+        assert!(c.pose_warmup.unwrap().covariance_polish);
         let refused = |flags: &[&str]| {
             let argv = ["surface", "--synthetic"]
                 .into_iter()

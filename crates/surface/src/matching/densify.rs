@@ -116,7 +116,10 @@ pub fn densify_matches(
         let margin = window.half_window as f64 + 1.0;
         ctx.grow(pair_seeds, margin)
             .into_iter()
-            .map(|(a, b, ncc)| pair_match((va, vb), a, b, ncc.clamp(0.0, 1.0) as f32))
+            .map(|(a, b, ncc, covariance)| Match {
+                b_covariance: Some(covariance.map(|c| c as f32)),
+                ..pair_match((va, vb), a, b, ncc.clamp(0.0, 1.0) as f32)
+            })
             .collect()
     };
     let of_pair = |ms: &[Match], va: usize, vb: usize| -> Vec<Match> {
@@ -179,6 +182,7 @@ fn pair_match(views: (usize, usize), a: Vector2<f64>, b: Vector2<f64>, confidenc
         a: [a.x as f32, a.y as f32],
         b: [b.x as f32, b.y as f32],
         confidence,
+        b_covariance: None,
     }
 }
 
@@ -256,7 +260,8 @@ struct PairContext<'a> {
     options: &'a DensifyOptions,
 }
 
-type Grown = (Vector2<f64>, Vector2<f64>, f64);
+/// A grown match: its two ends, the NCC of its windows and the covariance of `b`.
+type Grown = (Vector2<f64>, Vector2<f64>, f64, [f64; 3]);
 
 impl PairContext<'_> {
     /// Region growing from `seeds`; the accepted grid matches `(a, b, ncc)`.
@@ -287,7 +292,7 @@ impl PairContext<'_> {
             if found.is_empty() {
                 break;
             }
-            known.extend(found.iter().map(|(a, b, _)| (*a, *b)));
+            known.extend(found.iter().map(|(a, b, _, _)| (*a, *b)));
             accepted.extend(found);
         }
         accepted
@@ -346,7 +351,12 @@ impl PairContext<'_> {
             self.refine.max_iterations,
             self.refine.warp,
         )?;
-        ((back.b - p).norm() <= o.max_forward_backward_px).then_some((p, fwd.b, fwd.ncc))
+        ((back.b - p).norm() <= o.max_forward_backward_px).then_some((
+            p,
+            fwd.b,
+            fwd.ncc,
+            fwd.b_covariance,
+        ))
     }
 }
 

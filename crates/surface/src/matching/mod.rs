@@ -26,6 +26,13 @@ pub struct Match {
     pub b: [f32; 2],
     /// In `[0, 1]`, higher is more reliable.
     pub confidence: f32,
+    /// Covariance of `b` in px² (xx, xy, yy), when `b` was fitted by Lucas–Kanade at a grid
+    /// point of `a` ([`densify`]): a grid point is not chosen for its texture, and on an edge
+    /// the window fixes `b` across the edge only. The warm-up can weigh the epipolar residuals
+    /// by it (`WarmupOptions::covariance_polish`). `None` for feature matches, whose keypoints
+    /// are blobs located in both directions.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub b_covariance: Option<[f32; 3]>,
 }
 
 /// An image and its optional object mask, as matchers see them.
@@ -221,6 +228,7 @@ mod tests {
                 a: [ua as f32, va as f32],
                 b: [ub as f32, vb as f32],
                 confidence: 1.0,
+                b_covariance: None,
             });
         }
         // A point moved 4 px across the epipolar line is 2–4 px away on average.

@@ -317,6 +317,10 @@ pub(super) struct Fit {
     /// warp).
     pub(super) bend_px: f64,
     pub(super) ncc: f64,
+    /// Covariance of `b` (px²: xx, xy, yy): the windowed mean squared residual times the
+    /// centre block of the inverse Gauss–Newton normal matrix at the fit, i.e. marginalised
+    /// over the rest of the warp and the photometric gain and bias.
+    pub(super) b_covariance: [f64; 3],
 }
 
 /// The warp of [`refine_one`]: offsets `d` around `a` to points of image `b`.
@@ -380,17 +384,25 @@ fn jacobian_row<const N: usize>(gx: f64, gy: f64, d: &Vector2<f64>, t: f64) -> S
 /// Parameters of [`jacobian_row`] in all: the affine warp's 6, gain and bias, the quadratic 6.
 const FULL_STEP: usize = 14;
 
-/// One Gauss–Newton step over the first `N` parameters of [`jacobian_row`], the rest of the
-/// [`FULL_STEP`] entries zero; `None` when the normal system is singular.
-fn gauss_newton_step<const N: usize>(
+/// The window-weighted Gauss–Newton system of the first `N` parameters of [`jacobian_row`]
+/// at `warp`: the normal matrix (with a 10⁻⁹ ridge), the right-hand side, and the weighted
+/// mean squared residual.
+struct NormalEquations<const N: usize> {
+    normal: SMatrix<f64, N, N>,
+    rhs: SVector<f64, N>,
+    mean_square_residual: f64,
+}
+
+fn normal_equations<const N: usize>(
     b: &Plane,
     window: &Window,
     template: &[f64],
     warp: &Warp,
     (gain, bias): (f64, f64),
-) -> Option<[f64; FULL_STEP]> {
+) -> NormalEquations<N> {
     let mut normal = SMatrix::<f64, N, N>::zeros();
     let mut rhs = SVector::<f64, N>::zeros();
+    let (mut squares, mut weights) = (0.0, 0.0);
     for ((d, &w), &t) in window.offsets.iter().zip(&window.weights).zip(template) {
         let x = warp.apply(d);
         let value = b.sample(&b.value, x.x, x.y);
@@ -399,11 +411,52 @@ fn gauss_newton_step<const N: usize>(
         let jac = jacobian_row::<N>(gx, gy, d, t);
         normal += w * jac * jac.transpose();
         rhs += w * residual * jac;
+        squares += w * residual * residual;
+        weights += w;
     }
     for i in 0..N {
         normal[(i, i)] += 1e-9;
     }
-    let solved = -normal.cholesky()?.solve(&rhs);
+    NormalEquations {
+        normal,
+        rhs,
+        mean_square_residual: squares / weights.max(f64::MIN_POSITIVE),
+    }
+}
+
+/// The covariance of the warp's centre at a converged fit (see [`Fit::b_covariance`]); the
+/// residual variance is floored at 10⁻¹² so that a perfect synthetic fit keeps a usable
+/// (tiny, not zero) covariance. Infinite when the system is singular.
+fn centre_covariance<const N: usize>(
+    b: &Plane,
+    window: &Window,
+    template: &[f64],
+    warp: &Warp,
+    photometric: (f64, f64),
+) -> [f64; 3] {
+    let system = normal_equations::<N>(b, window, template, warp, photometric);
+    let variance = system.mean_square_residual.max(1e-12);
+    match system.normal.cholesky().map(|c| c.inverse()) {
+        Some(inv) => [
+            variance * inv[(0, 0)],
+            variance * inv[(0, 1)],
+            variance * inv[(1, 1)],
+        ],
+        None => [f64::INFINITY, 0.0, f64::INFINITY],
+    }
+}
+
+/// One Gauss–Newton step over the first `N` parameters of [`jacobian_row`], the rest of the
+/// [`FULL_STEP`] entries zero; `None` when the normal system is singular.
+fn gauss_newton_step<const N: usize>(
+    b: &Plane,
+    window: &Window,
+    template: &[f64],
+    warp: &Warp,
+    photometric: (f64, f64),
+) -> Option<[f64; FULL_STEP]> {
+    let system = normal_equations::<N>(b, window, template, warp, photometric);
+    let solved = -system.normal.cholesky()?.solve(&system.rhs);
     let mut step = [0.0; FULL_STEP];
     step[..N].copy_from_slice(solved.as_slice());
     Some(step)
@@ -467,11 +520,19 @@ pub(super) fn refine_one(
     if !corners_inside {
         return None;
     }
+    let photometric = (gain, bias);
+    let b_covariance = match model {
+        WarpModel::Affine => centre_covariance::<8>(b, window, &template, &warp, photometric),
+        WarpModel::Quadratic => {
+            centre_covariance::<FULL_STEP>(b, window, &template, &warp, photometric)
+        }
+    };
     Some(Fit {
         b: warp.centre,
         warp: warp.linear,
         bend_px,
         ncc: normalised_cross_correlation(&template, &samples),
+        b_covariance,
     })
 }
 
@@ -555,6 +616,7 @@ pub(super) mod tests {
                 a: [a.x as f32, a.y as f32],
                 b: [(b.x + noise.x) as f32, (b.y + noise.y) as f32],
                 confidence: 0.5,
+                b_covariance: None,
             });
             truth.push(b);
         }
@@ -597,6 +659,55 @@ pub(super) mod tests {
         }
     }
 
+    /// On an edge-like texture (strong in x, faint in y) the window fixes the match across
+    /// the stripes, so the fitted covariance of `b` is long along y; on the isotropic test
+    /// texture it is round. Image `b` is image `a` moved by (1.3, −0.4) px with a little
+    /// deterministic noise, so the fit has a residual to scale the covariance by.
+    #[test]
+    fn the_covariance_of_a_match_is_long_along_an_edge() {
+        let covariance = |texture: &dyn Fn(f64, f64) -> f64| {
+            let (w, h) = (96, 72);
+            let mut a = Image::new(w, h, 1);
+            let mut b = Image::new(w, h, 1);
+            for y in 0..h {
+                for x in 0..w {
+                    let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
+                    let noise = 0.004 * ((x * 7919 + y * 104_729) % 13) as f64 / 13.0;
+                    a.set(x, y, 0, texture(px, py) as f32);
+                    b.set(x, y, 0, (texture(px - 1.3, py + 0.4) + noise) as f32);
+                }
+            }
+            let (pa, pb) = (Plane::new(&a, 0.7), Plane::new(&b, 0.7));
+            let at = Vector2::new(48.0, 36.0);
+            let fit = refine_one(
+                &pa,
+                &pb,
+                at,
+                at + Vector2::new(1.0, 0.0),
+                Matrix2::identity(),
+                &Window::new(10),
+                30,
+                WarpModel::Affine,
+            )
+            .expect("a fit");
+            assert!(
+                (fit.b - (at + Vector2::new(1.3, -0.4))).norm() < 0.2,
+                "{:?}",
+                fit.b
+            );
+            fit.b_covariance
+        };
+        let edge = covariance(&|x, y| 0.5 + 0.3 * (0.6 * x).sin() + 0.02 * (0.37 * y + 1.0).sin());
+        let round = covariance(&texture);
+        assert!(
+            edge.iter().all(|c| c.is_finite()) && edge[0] > 0.0,
+            "{edge:?}"
+        );
+        assert!(edge[2] > 20.0 * edge[0], "edge: {edge:?}");
+        let ratio = round[2] / round[0];
+        assert!((0.2..5.0).contains(&ratio), "round: {round:?}");
+    }
+
     /// Exact analytic case with a bent warp: image `a` shows the texture through
     /// `W(x) = M·x + o + q·((x − 80)², (y − 60)²)`, so the point `x` of `a` is `W(x)` of `b`.
     /// Over a window the bend has a mean of `q·E_w[d²]` that an affine fit takes into its
@@ -636,6 +747,7 @@ pub(super) mod tests {
                     a: [p.x as f32, p.y as f32],
                     b: [(t.x + 0.6) as f32, (t.y - 0.5) as f32],
                     confidence: 1.0,
+                    b_covariance: None,
                 }
             })
             .collect();

@@ -152,6 +152,7 @@ impl Matcher for SiftMatcher {
                 a: fa.points[i],
                 b: fb.points[j],
                 confidence: 1.0 - ratio * ratio,
+                b_covariance: None,
             });
         }
         if let Some(px) = o.ransac_px {
