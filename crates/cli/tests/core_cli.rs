@@ -358,6 +358,47 @@ fn train_refuses_too_many_initial_points() {
     assert!(!run.exists(), "nothing written");
 }
 
+/// Training and held-out views that overlap (explicit lists against the default hold-out, or
+/// against each other) used to train silently and report "held-out" PSNR on training views.
+#[test]
+fn train_refuses_overlapping_train_and_test_views() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = write_llff(&dir.path().join("scene"), |_, _| {});
+    let run = dir.path().join("run");
+    // 10 views: the default hold-out (every 8th) is [0, 8].
+    assert_clean_error(
+        &fewview(&[
+            "train",
+            "--data",
+            s(&data),
+            "--train-views",
+            "0,8,9",
+            "--iterations",
+            "2",
+            "--out",
+            s(&run),
+        ]),
+        &["train views [0, 8, 9]", "test views [0, 8]", "--test-views"],
+    );
+    assert_clean_error(
+        &fewview(&[
+            "train",
+            "--data",
+            s(&data),
+            "--train-views",
+            "1,2",
+            "--test-views",
+            "1,3",
+            "--iterations",
+            "2",
+            "--out",
+            s(&run),
+        ]),
+        &["train views [1, 2]", "test views [1, 3]", "share [1]"],
+    );
+    assert!(!run.exists(), "nothing written");
+}
+
 /// A huge --frames-per-segment used to hang building the path before the output's container
 /// was even looked at; now both are checked before anything is read or rendered.
 #[test]

@@ -347,6 +347,8 @@ pub fn train_run(
     // dataset cannot serve (a missing PLY, `points` without sparse points) fails with nothing
     // written.
     std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
+    // A run interrupted while writing (SIGINT during a checkpoint) leaves a partial file.
+    fewview_scene::atomic::remove_partial_files(dir)?;
     let json =
         serde_json::to_vec_pretty(&resolved).map_err(|e| PipelineError::Eval(e.to_string()))?;
     fewview_scene::atomic::write_bytes(&run.config(), &json)?;

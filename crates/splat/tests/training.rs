@@ -313,3 +313,27 @@ fn default_run_length_grows_with_the_number_of_training_views() {
     ds.train = (0..100).map(|i| i % ds.views.len()).collect();
     assert_eq!(default_iterations(&ds), 5000);
 }
+
+/// A run killed while writing a checkpoint leaves a `.fewview-partial-…` file in its folder;
+/// starting (or resuming) a run there removes it, and leaves other files alone.
+#[test]
+fn a_run_sweeps_partial_files_left_in_its_folder() {
+    use fewview_scene::atomic::PARTIAL_PREFIX;
+    let ds = small_demo();
+    let mut cfg = short_config(10);
+    cfg.init_points = 200;
+    let dir = tempfile::tempdir().unwrap();
+    let partial = dir.path().join(format!("{PARTIAL_PREFIX}Ab12Cd"));
+    std::fs::write(&partial, b"half a checkpoint").unwrap();
+    let keep = dir.path().join("notes.txt");
+    std::fs::write(&keep, b"mine").unwrap();
+    train_run(&ds, &cfg, dir.path(), false, |_| {}).unwrap();
+    assert!(!partial.exists(), "partial file left behind");
+    assert!(keep.exists());
+    let leftovers: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}

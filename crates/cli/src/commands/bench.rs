@@ -8,6 +8,9 @@ use fewview_scene::load::{LoadOptions, load_dataset};
 use fewview_scene::synthetic::{DemoOptions, demo_dataset};
 use serde::Serialize;
 
+use fewview_splat::pipeline::MAX_INIT_POINTS;
+
+use super::number_args::{count_in, positive_count};
 use super::output_paths::check_folder;
 
 /// Measure speed and memory, beside references measured in the same run.
@@ -30,11 +33,11 @@ pub struct Args {
     /// LLFF fern folder for the training-step figure (default: `$FEWVIEW_DATA/llff/fern`).
     #[arg(long, value_name = "DIR")]
     pub fern: Option<PathBuf>,
-    /// Gaussians in the rasterizer benchmark.
-    #[arg(long, default_value_t = 100_000)]
+    /// Gaussians in the rasterizer benchmark (1 to 10,000,000, the `--init-points` limit).
+    #[arg(long, default_value_t = 100_000, value_parser = gaussian_count)]
     pub gaussians: usize,
-    /// Training steps timed per dataset.
-    #[arg(long, default_value_t = 20)]
+    /// Training steps timed per dataset (at least 1).
+    #[arg(long, default_value_t = 20, value_parser = positive_count)]
     pub train_steps: usize,
     /// DTU scan65 folder for the surface training-step figure (default:
     /// `$FEWVIEW_DATA/dtu/scan65`; views 22, 25, 28 at 400×300).
@@ -43,9 +46,15 @@ pub struct Args {
     /// Surface training steps timed (the NeuS-MLP reference runs one).
     #[arg(long, default_value_t = 10)]
     pub surface_steps: usize,
-    /// Repetitions of each rasterizer measurement (median reported).
-    #[arg(long, default_value_t = 5)]
+    /// Repetitions of each rasterizer measurement (median reported; at least 1).
+    #[arg(long, default_value_t = 5, value_parser = positive_count)]
     pub runs: usize,
+}
+
+/// `--gaussians`: at least one, and no more than training may start from
+/// ([`MAX_INIT_POINTS`], about 1 KB each): 10¹² aborted on allocation.
+fn gaussian_count(s: &str) -> Result<usize, String> {
+    count_in(s, 1, MAX_INIT_POINTS)
 }
 
 #[derive(Serialize)]

@@ -9,6 +9,7 @@ use fewview_splat::pipeline::render_path;
 use fewview_splat::ply::read_ply;
 use fewview_splat::raster::RenderSettings;
 
+use super::number_args::count_in;
 use super::output_paths::check_folder;
 use super::train::{check_init, print_summary, train_with_progress};
 use super::train_args::TrainArgs;
@@ -25,8 +26,8 @@ pub struct Args {
     /// Run directory.
     #[arg(long, default_value = "runs/demo", value_name = "DIR")]
     pub out: PathBuf,
-    /// Image width of the demo views (height is 3/4 of it).
-    #[arg(long, default_value_t = 200)]
+    /// Image width of the demo views (height is 3/4 of it), 16 to 8192.
+    #[arg(long, default_value_t = 200, value_parser = demo_width)]
     pub width: usize,
     #[command(flatten)]
     pub train: TrainArgs,
@@ -35,10 +36,20 @@ pub struct Args {
     pub resume: bool,
 }
 
+/// The narrowest demo view: the SSIM window and the scene's textures need a few pixels.
+const MIN_DEMO_WIDTH: usize = 16;
+
+/// The widest demo view. Every one of the 24 ground-truth views is ray traced and kept in memory
+/// as `f32` RGB, with a training copy: 8192 × 6144 is already about 14 GB and hours of ray
+/// tracing, while `--width 100000000` aborted on allocation and 4294967295 overflowed the
+/// buffer's size. (The demo is a smoke test; its default is 200.)
+const MAX_DEMO_WIDTH: usize = 8192;
+
+fn demo_width(s: &str) -> Result<usize, String> {
+    count_in(s, MIN_DEMO_WIDTH, MAX_DEMO_WIDTH)
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if args.width < 16 {
-        anyhow::bail!("--width must be at least 16");
-    }
     let opts = DemoOptions {
         width: args.width,
         height: args.width * 3 / 4,

@@ -49,3 +49,19 @@ fn to_f32(s: &str, v: f64) -> std::result::Result<f32, String> {
         ))
     }
 }
+
+/// A whole number in `lo..=hi` (clap's own ranged parsers cover `u64`/`i64` only).
+pub fn count_in(s: &str, lo: usize, hi: usize) -> std::result::Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(v) if (lo..=hi).contains(&v) => Ok(v),
+        _ => Err(format!("{s}: expected a whole number from {lo} to {hi}")),
+    }
+}
+
+/// A whole number ≥ 1.
+pub fn positive_count(s: &str) -> std::result::Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(v) if v >= 1 => Ok(v),
+        _ => Err(format!("{s}: expected a whole number ≥ 1")),
+    }
+}

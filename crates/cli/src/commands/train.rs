@@ -2,8 +2,9 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
+use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
+use fewview_scene::split;
 use fewview_splat::pipeline::{
     RunConfig, RunSummary, default_iterations, initial_model, train_run,
 };
@@ -34,6 +35,11 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let ds = args.dataset.load()?;
+    // The standard splits are disjoint; explicit `--train-views` / `--test-views` could overlap
+    // them or each other, and the held-out PSNR would then be measured on training views.
+    if let Err(e) = split::check_disjoint(&ds.train, &ds.test, args.dataset.folder()?) {
+        bail!("{e}; pass disjoint --train-views and --test-views");
+    }
     let cfg = args
         .train
         .run_config(ds.background, default_iterations(&ds))?;

@@ -16,6 +16,17 @@ use rayon::prelude::*;
 use super::diagnostics::{ess_bulk, ess_tail, rhat_rank};
 use crate::error::{MetricsError, Result};
 
+/// The fewest post-tuning draws per chain the convergence diagnostics can use: R̂ and the ESS
+/// split every chain in halves, and Geyer's initial positive sequence
+/// ([`super::diagnostics`]) needs at least 5 draws per half.
+pub const MIN_DRAWS: u64 = super::diagnostics::MIN_DRAWS as u64;
+
+/// The most post-tuning draws per chain. Every draw of every method is kept in memory (8 bytes
+/// each, and the diagnostics copy them a few times over) and costs a NUTS trajectory: 10⁶ draws
+/// is 250 times the paper's 4000 and a few hundred MB for a dozen methods, while 10¹¹ draws
+/// reached 1.3 GB before sampling got anywhere.
+pub const MAX_DRAWS: u64 = 1_000_000;
+
 /// Sampler settings (defaults: the paper's).
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct BtSettings {
@@ -228,13 +239,16 @@ pub fn fit_bradley_terry(
             "Bradley–Terry: prior sigma must be positive",
         ));
     }
-    if settings.chains < 1
-        || settings.draws < 4
-        || !(0.0 < settings.target_accept && settings.target_accept < 1.0)
-    {
+    if settings.chains < 1 || !(0.0 < settings.target_accept && settings.target_accept < 1.0) {
         return Err(MetricsError::invalid(
-            "Bradley–Terry: need ≥ 1 chain, ≥ 4 draws, target acceptance in (0, 1)",
+            "Bradley–Terry: need ≥ 1 chain and a target acceptance in (0, 1)",
         ));
+    }
+    if !(MIN_DRAWS..=MAX_DRAWS).contains(&settings.draws) {
+        return Err(MetricsError::invalid(format!(
+            "Bradley–Terry: {} draws per chain; expected {MIN_DRAWS} to {MAX_DRAWS}",
+            settings.draws
+        )));
     }
     if !(0.0 < settings.credible_mass && settings.credible_mass < 1.0) {
         return Err(MetricsError::invalid(
@@ -298,7 +312,7 @@ pub fn fit_bradley_terry(
         })
         .collect();
     let chains: Vec<(Vec<Vec<f64>>, u64)> = chains.into_iter().collect::<Result<_>>()?;
-    if chains.iter().any(|(d, _)| d[0].len() < 4) {
+    if chains.iter().any(|(d, _)| (d[0].len() as u64) < MIN_DRAWS) {
         return Err(MetricsError::invalid(
             "NUTS returned fewer post-tuning draws than asked for",
         ));
@@ -454,5 +468,29 @@ mod tests {
             assert!(s.rhat < 1.01);
         }
         assert!((post.prob_better[0][1] - 0.5).abs() < 0.05);
+    }
+
+    /// 4 to 9 draws passed the old `≥ 4` check and then indexed out of bounds in the ESS
+    /// (fuzzing: `study analyze --draws 4`); too many draws are refused before any allocation.
+    #[test]
+    fn draw_counts_the_diagnostics_cannot_use_are_refused() {
+        let methods = vec!["a".to_string(), "b".to_string()];
+        for draws in [0, 4, 9, MAX_DRAWS + 1, u64::MAX] {
+            let settings = BtSettings {
+                tune: 10,
+                draws,
+                ..Default::default()
+            };
+            let err = fit_bradley_terry(&methods, &[], &settings).unwrap_err();
+            assert!(err.to_string().contains("draws"), "{draws}: {err}");
+        }
+        let settings = BtSettings {
+            chains: 2,
+            tune: 10,
+            draws: MIN_DRAWS,
+            ..Default::default()
+        };
+        let post = fit_bradley_terry(&methods, &[], &settings).unwrap();
+        assert!(post.skills.iter().all(|s| s.ess_bulk.is_finite()));
     }
 }

@@ -6,8 +6,13 @@
 
 use crate::error::{MetricsError, Result};
 
+/// The fewest draws per chain: the chains are split in halves, and Geyer's initial positive
+/// sequence in [`ess`] looks at lags 1 to 3 of each half, so a half needs at least 5 draws.
+pub const MIN_DRAWS: usize = 10;
+
 /// Rank-normalised split R̂ (the larger of the bulk and the folded-tail value).
-/// `chains[c][i]` is draw `i` of chain `c`; every chain needs the same number (≥ 4) of draws.
+/// `chains[c][i]` is draw `i` of chain `c`; every chain needs the same number (≥ [`MIN_DRAWS`])
+/// of draws.
 pub fn rhat_rank(chains: &[Vec<f64>]) -> Result<f64> {
     check(chains)?;
     let split = split_chains(chains);
@@ -48,10 +53,10 @@ pub fn ess_tail(chains: &[Vec<f64>]) -> Result<f64> {
 
 fn check(chains: &[Vec<f64>]) -> Result<()> {
     let n = chains.first().map_or(0, Vec::len);
-    if chains.is_empty() || n < 4 || chains.iter().any(|c| c.len() != n) {
-        return Err(MetricsError::invalid(
-            "diagnostics need chains of equal length with at least 4 draws",
-        ));
+    if chains.is_empty() || n < MIN_DRAWS || chains.iter().any(|c| c.len() != n) {
+        return Err(MetricsError::invalid(format!(
+            "diagnostics need chains of equal length with at least {MIN_DRAWS} draws"
+        )));
     }
     if chains.iter().flatten().any(|v| !v.is_finite()) {
         return Err(MetricsError::invalid(
@@ -195,7 +200,12 @@ fn ess(chains: &[Vec<f64>]) -> f64 {
         }
         t += 2;
     }
-    let max_t = t - 2;
+    let total = (m * n) as f64;
+    // ArviZ's `max_t = t - 2` is −1 when the sequence stops at once (ρ̂₁ ≤ −1, a chain that
+    // alternates): no lag is summed, τ = −1 + ρ̂₀, clamped below as usual.
+    let Some(max_t) = t.checked_sub(2) else {
+        return total / (-1.0 + rho_hat[0]).max(1.0 / total.log10());
+    };
     if even > 0.0 {
         rho_hat[max_t + 1] = even;
     }
@@ -208,7 +218,6 @@ fn ess(chains: &[Vec<f64>]) -> f64 {
         }
         t += 2;
     }
-    let total = (m * n) as f64;
     let tau = -1.0
         + 2.0 * rho_hat[..=max_t].iter().sum::<f64>()
         + rho_hat.get(max_t + 1).copied().unwrap_or(0.0);
@@ -327,5 +336,41 @@ mod tests {
                 normal_quantile(p)
             );
         }
+    }
+
+    /// Fewer than [`MIN_DRAWS`] draws is an error, not an index out of bounds.
+    #[test]
+    fn short_chains_are_refused() {
+        for n in 0..MIN_DRAWS {
+            let chains = vec![(0..n).map(|i| (i * 7 % 5) as f64).collect::<Vec<_>>(); 2];
+            assert!(rhat_rank(&chains).is_err(), "{n}");
+            assert!(ess_bulk(&chains).is_err(), "{n}");
+            assert!(ess_tail(&chains).is_err(), "{n}");
+        }
+        let chains: Vec<Vec<f64>> = (0..2)
+            .map(|c| {
+                (0..MIN_DRAWS)
+                    .map(|i| ((i * 7 + c * 3) % 5) as f64)
+                    .collect()
+            })
+            .collect();
+        assert!(rhat_rank(&chains).unwrap().is_finite());
+        assert!(ess_bulk(&chains).unwrap() > 0.0);
+        assert!(ess_tail(&chains).unwrap() > 0.0);
+    }
+
+    /// Chains that alternate have ρ̂₁ < −1, so Geyer's sequence stops before its first step
+    /// (ArviZ's `max_t = -1`); that used to underflow `t - 2`.
+    #[test]
+    fn alternating_chains_do_not_underflow() {
+        let chains: Vec<Vec<f64>> = (0..2)
+            .map(|_| {
+                (0..12)
+                    .map(|i| if i % 2 == 0 { 1.0 } else { -1.0 })
+                    .collect()
+            })
+            .collect();
+        let ess = ess_bulk(&chains).unwrap();
+        assert!(ess.is_finite() && ess > 0.0, "{ess}");
     }
 }

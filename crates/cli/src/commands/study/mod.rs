@@ -10,6 +10,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Subcommand;
+use fewview_metrics::study::bradley_terry::{MAX_DRAWS, MIN_DRAWS};
 use fewview_metrics::study::{self, BtSettings};
 
 #[derive(Debug, clap::Args)]
@@ -47,7 +48,10 @@ enum StudyCommand {
         chains: usize,
         #[arg(long, default_value_t = 4000)]
         tune: u64,
-        #[arg(long, default_value_t = 4000)]
+        /// Post-tuning draws per chain: at least 10 (R̂ and the ESS split each chain in halves
+        /// of at least 5 draws), at most 1,000,000 (every draw is kept in memory).
+        #[arg(long, default_value_t = 4000,
+              value_parser = clap::value_parser!(u64).range(MIN_DRAWS..=MAX_DRAWS))]
         draws: u64,
         #[arg(long, default_value_t = 0.95)]
         target_accept: f64,
