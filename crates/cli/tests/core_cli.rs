@@ -5,6 +5,9 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+mod common;
+use common::assert_clean_error;
+
 fn fewview(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_fewview"))
         .args(args)
@@ -92,26 +95,6 @@ fn write_llff(dir: &Path, tweak: impl Fn(usize, &mut [f64; 17])) -> PathBuf {
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
-}
-
-/// Asserts a failed run with one line on stderr that contains every needle, and no panic.
-fn assert_clean_error(out: &Output, needles: &[&str]) {
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        !out.status.success(),
-        "expected failure, got success; stderr: {err}"
-    );
-    assert!(!err.contains("panicked"), "panic: {err}");
-    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
-    let error_lines: Vec<&&str> = lines.iter().filter(|l| l.starts_with("error")).collect();
-    assert_eq!(error_lines.len(), 1, "want one error line, got: {err}");
-    for n in needles {
-        assert!(
-            error_lines[0].contains(n),
-            "`{n}` not in: {}",
-            error_lines[0]
-        );
-    }
 }
 
 #[test]

@@ -5,6 +5,9 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
+mod common;
+use common::assert_clean_error;
+
 fn fewview(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_fewview"))
         .args(args)
@@ -14,22 +17,6 @@ fn fewview(args: &[&str]) -> Output {
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
-}
-
-/// Asserts a failed run with one `error` line on stderr containing every needle, and no panic.
-fn assert_clean_error(out: &Output, needles: &[&str]) {
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "expected failure; stderr: {err}");
-    assert!(!err.contains("panicked"), "panic: {err}");
-    let error_lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
-    assert_eq!(error_lines.len(), 1, "want one error line, got: {err}");
-    for n in needles {
-        assert!(
-            error_lines[0].contains(n),
-            "`{n}` not in: {}",
-            error_lines[0]
-        );
-    }
 }
 
 /// `study analyze --draws 4` to `9` passed the old `≥ 4` check and panicked (index out of
