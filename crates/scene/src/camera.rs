@@ -59,6 +59,17 @@ impl Intrinsics {
         (tx, ty)
     }
 
+    /// The focal lengths and principal point with their names, for checks whose errors say
+    /// which value is wrong.
+    pub fn named_values(&self) -> [(&'static str, f64); 4] {
+        [
+            ("focal length fx", self.fx),
+            ("focal length fy", self.fy),
+            ("principal point cx", self.cx),
+            ("principal point cy", self.cy),
+        ]
+    }
+
     pub fn is_finite(&self) -> bool {
         [self.fx, self.fy, self.cx, self.cy]
             .iter()

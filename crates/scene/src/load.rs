@@ -206,17 +206,14 @@ pub const MAX_CAMERA_MAGNITUDE: f64 = 1e12;
 /// corrupt), so that a run fails before it writes anything instead of diverging to NaN.
 fn check_camera_magnitudes(path: &Path, dataset: &Dataset) -> Result<()> {
     for view in &dataset.views {
-        let k = &view.camera.intrinsics;
         let bounds = view.depth_bounds.map_or([0.0; 2], |(n, f)| [n, f]);
-        let values = [
-            ("camera centre", view.camera.center().norm()),
-            ("focal length fx", k.fx),
-            ("focal length fy", k.fy),
-            ("principal point cx", k.cx),
-            ("principal point cy", k.cy),
-            ("near depth bound", bounds[0]),
-            ("far depth bound", bounds[1]),
-        ];
+        let values = [("camera centre", view.camera.center().norm())]
+            .into_iter()
+            .chain(view.camera.intrinsics.named_values())
+            .chain([
+                ("near depth bound", bounds[0]),
+                ("far depth bound", bounds[1]),
+            ]);
         for (what, v) in values {
             if !v.is_finite() || v.abs() > MAX_CAMERA_MAGNITUDE {
                 return Err(SceneError::invalid(

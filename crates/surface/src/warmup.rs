@@ -178,18 +178,22 @@ fn covariance_scaled(
 ) -> Vec<f64> {
     let n = poses.len();
     let mut fs = vec![None; n * n];
-    distances(poses, intrinsics, matches)
-        .into_iter()
-        .zip(matches)
-        .map(|(d, m)| {
-            let Some(c) = m.b_covariance else {
-                return d;
-            };
+    matches
+        .iter()
+        .map(|m| {
             let f = *fs[m.view_a * n + m.view_b].get_or_insert_with(|| {
                 let ca = fewview_scene::Camera::new(intrinsics[m.view_a], poses[m.view_a]);
                 let cb = fewview_scene::Camera::new(intrinsics[m.view_b], poses[m.view_b]);
                 fundamental_from_cameras(&ca, &cb)
             });
+            let d = sampson_signed(
+                &f,
+                [m.a[0] as f64, m.a[1] as f64],
+                [m.b[0] as f64, m.b[1] as f64],
+            );
+            let Some(c) = m.b_covariance else {
+                return d;
+            };
             let line = f * nalgebra::Vector3::new(m.a[0] as f64, m.a[1] as f64, 1.0);
             let length = line.x.hypot(line.y);
             if length <= 0.0 {

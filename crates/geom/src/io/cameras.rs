@@ -108,13 +108,11 @@ fn check(c: &Camera, m: &Matrix4<f64>, i: usize) -> std::result::Result<(), Stri
     if !k.is_finite() {
         return Err(format!("camera {i} has non-finite or non-positive values"));
     }
-    let values = [
-        ("focal length fx", k.fx),
-        ("focal length fy", k.fy),
-        ("principal point cx", k.cx),
-        ("principal point cy", k.cy),
-    ];
-    if let Some((what, v)) = values.iter().find(|(_, v)| v.abs() > MAX_CAMERA_MAGNITUDE) {
+    if let Some((what, v)) = k
+        .named_values()
+        .into_iter()
+        .find(|(_, v)| v.abs() > MAX_CAMERA_MAGNITUDE)
+    {
         return Err(format!(
             "camera {i}: {what} {v:.3e} is beyond the {MAX_CAMERA_MAGNITUDE:.0e} a camera value may have"
         ));
