@@ -26,6 +26,7 @@ pub mod load;
 pub mod numpy;
 pub mod ply_scalar;
 pub mod pose_export;
+pub mod sealed;
 pub mod split;
 pub mod synthetic;
 pub mod transforms;

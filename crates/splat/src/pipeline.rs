@@ -105,14 +105,66 @@ impl RunDir {
     }
 }
 
-/// The `config.json` of a run.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct ResolvedConfig {
+/// What a run trains on: the dataset, its split and the image size. A checkpoint records it, so
+/// that `--resume` refuses another dataset, other views or another downscale instead of
+/// continuing one run's Gaussians on another's images.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunData {
     pub dataset: String,
     pub train_views: Vec<String>,
     pub test_views: Vec<String>,
     pub width: usize,
     pub height: usize,
+}
+
+impl RunData {
+    /// The dataset, split and size of `ds` (its first training view's size).
+    pub fn of(ds: &Dataset) -> Result<Self, PipelineError> {
+        let first = ds
+            .train_views()
+            .next()
+            .ok_or_else(|| PipelineError::Init("the split has no training views".into()))?;
+        Ok(Self {
+            dataset: ds.name.clone(),
+            train_views: ds.train_views().map(|v| v.name.clone()).collect(),
+            test_views: ds.test_views().map(|v| v.name.clone()).collect(),
+            width: first.image.width,
+            height: first.image.height,
+        })
+    }
+
+    /// A one-line description of how `self` (the checkpoint's) differs from `now`, or `None`.
+    fn difference(&self, now: &RunData) -> Option<String> {
+        if self.dataset != now.dataset {
+            Some(format!("dataset {} (now {})", self.dataset, now.dataset))
+        } else if (self.width, self.height) != (now.width, now.height) {
+            Some(format!(
+                "images {}x{} (now {}x{}: another --downscale?)",
+                self.width, self.height, now.width, now.height
+            ))
+        } else if self.train_views != now.train_views {
+            Some(format!(
+                "training views {} (now {})",
+                self.train_views.join(","),
+                now.train_views.join(",")
+            ))
+        } else if self.test_views != now.test_views {
+            Some(format!(
+                "test views {} (now {})",
+                self.test_views.join(","),
+                now.test_views.join(",")
+            ))
+        } else {
+            None
+        }
+    }
+}
+
+/// The `config.json` of a run.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ResolvedConfig {
+    #[serde(flatten)]
+    pub data: RunData,
     pub extent: f64,
     pub run: RunConfig,
 }
@@ -128,43 +180,62 @@ pub struct RunSummary {
     pub test: EvalReport,
 }
 
-const CHECKPOINT_MAGIC: &[u8; 8] = b"FVCKPT01";
+/// Header of the current checkpoint format: the payload is postcard of
+/// `(TrainConfig, RunData, TrainState)`, sealed with a CRC-32 ([`fewview_scene::sealed`]).
+const CHECKPOINT_MAGIC: &[u8; 8] = b"FVCKPT02";
+/// Earlier formats: `FVCKPT01` had neither the run's data nor a checksum.
+const OLDER_CHECKPOINT_MAGICS: [&[u8]; 1] = [b"FVCKPT01"];
 
-/// Saves a checkpoint (configuration and training state), atomically.
+/// What a checkpoint holds: the training configuration, the data it trains on and the state.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Checkpoint {
+    pub config: TrainConfig,
+    pub data: RunData,
+    pub state: TrainState,
+}
+
+/// Saves a checkpoint, atomically.
 pub fn save_checkpoint(
     path: &Path,
     config: &TrainConfig,
+    data: &RunData,
     state: &TrainState,
 ) -> Result<(), PipelineError> {
-    let body = postcard::to_allocvec(&(config, state)).map_err(|e| PipelineError::Checkpoint {
-        path: path.to_path_buf(),
-        message: format!("cannot encode: {e}"),
-    })?;
-    fewview_scene::atomic::write_with(path, |w| {
-        use std::io::Write;
-        w.write_all(CHECKPOINT_MAGIC)?;
-        w.write_all(&body)
-    })?;
+    let body =
+        postcard::to_allocvec(&(config, data, state)).map_err(|e| PipelineError::Checkpoint {
+            path: path.to_path_buf(),
+            message: format!("cannot encode: {e}"),
+        })?;
+    let sealed = fewview_scene::sealed::seal(CHECKPOINT_MAGIC, &body);
+    fewview_scene::atomic::write_bytes(path, &sealed)?;
     Ok(())
 }
 
-/// Loads a checkpoint written by [`save_checkpoint`].
-pub fn load_checkpoint(path: &Path) -> Result<(TrainConfig, TrainState), PipelineError> {
+/// Loads a checkpoint written by [`save_checkpoint`]; a truncated or altered file is an error.
+pub fn load_checkpoint(path: &Path) -> Result<Checkpoint, PipelineError> {
     let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    let body = fewview_scene::sealed::unseal(
+        path,
+        &bytes,
+        CHECKPOINT_MAGIC,
+        &OLDER_CHECKPOINT_MAGICS,
+        "a fewview checkpoint",
+    )?;
     let bad = |m: String| PipelineError::Checkpoint {
         path: path.to_path_buf(),
         message: m,
     };
-    if bytes.len() < 8 || &bytes[..8] != CHECKPOINT_MAGIC {
-        return Err(bad("not a fewview checkpoint".into()));
-    }
-    let (config, state): (TrainConfig, TrainState) =
-        postcard::from_bytes(&bytes[8..]).map_err(|e| bad(format!("corrupt checkpoint: {e}")))?;
+    let (config, data, state): (TrainConfig, RunData, TrainState) =
+        postcard::from_bytes(body).map_err(|e| bad(format!("corrupt checkpoint: {e}")))?;
     state
         .model
         .validate()
         .map_err(|m| bad(format!("corrupt checkpoint: {m}")))?;
-    Ok((config, state))
+    Ok(Checkpoint {
+        config,
+        data,
+        state,
+    })
 }
 
 /// The point closest (least squares) to every camera's optical axis: where the cameras look.
@@ -293,16 +364,8 @@ pub fn train_run(
     }
     let device = Device::flex().autodiff();
     let (_, extent) = ds.camera_extent();
-    let first = ds
-        .train_views()
-        .next()
-        .ok_or_else(|| PipelineError::Init("the split has no training views".into()))?;
     let resolved = ResolvedConfig {
-        dataset: ds.name.clone(),
-        train_views: ds.train_views().map(|v| v.name.clone()).collect(),
-        test_views: ds.test_views().map(|v| v.name.clone()).collect(),
-        width: first.image.width,
-        height: first.image.height,
+        data: RunData::of(ds)?,
         extent,
         run: cfg.clone(),
     };
@@ -331,15 +394,21 @@ pub fn train_run(
         });
     }
     let (model, resumed) = if resume {
-        let (saved_cfg, state) = load_checkpoint(&run.checkpoint())?;
-        if saved_cfg != cfg.train {
+        let saved = load_checkpoint(&run.checkpoint())?;
+        if let Some(difference) = saved.data.difference(&resolved.data) {
+            return Err(PipelineError::Checkpoint {
+                path: run.checkpoint(),
+                message: format!("the checkpoint belongs to another run: {difference}"),
+            });
+        }
+        if saved.config != cfg.train {
             return Err(PipelineError::Checkpoint {
                 path: run.checkpoint(),
                 message: "the checkpoint was written with a different training configuration"
                     .into(),
             });
         }
-        (None, Some(state))
+        (None, Some(saved.state))
     } else {
         (Some(initial_model(ds, cfg)?), None)
     };
@@ -372,7 +441,7 @@ pub fn train_run(
     let start = Instant::now();
     let ckpt_path = run.checkpoint();
     trainer.run(on_progress, |state, config| {
-        save_checkpoint(&ckpt_path, config, state).map_err(|e| e.to_string())
+        save_checkpoint(&ckpt_path, config, &resolved.data, state).map_err(|e| e.to_string())
     })?;
     let train_seconds = start.elapsed().as_secs_f64();
     let model = &trainer.state.model;

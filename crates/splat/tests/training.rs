@@ -6,7 +6,7 @@ use fewview_scene::synthetic::{DemoOptions, demo_dataset};
 use fewview_scene::{Dataset, Image};
 use fewview_splat::eval::{evaluate, render_model};
 use fewview_splat::pipeline::{
-    RunConfig, initial_model, load_checkpoint, save_checkpoint, train_run,
+    RunConfig, RunData, initial_model, load_checkpoint, save_checkpoint, train_run,
 };
 use fewview_splat::ply::{read_ply, write_ply};
 use fewview_splat::raster::{RenderCamera, RenderSettings};
@@ -73,18 +73,90 @@ fn resumed_run_equals_uninterrupted_run() {
     }
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("checkpoint.bin");
-    save_checkpoint(&path, &first.config, &first.state).unwrap();
+    let data = RunData::of(&ds).unwrap();
+    save_checkpoint(&path, &first.config, &data, &first.state).unwrap();
     drop(first);
-    let (config, state) = load_checkpoint(&path).unwrap();
-    assert_eq!(config, cfg.train);
+    let saved = load_checkpoint(&path).unwrap();
+    assert_eq!(saved.config, cfg.train);
+    assert_eq!(saved.data, data);
     let mut resumed = trainer(&ds, &cfg);
-    resumed.state = state;
+    resumed.state = saved.state;
     while !resumed.is_done() {
         resumed.step().unwrap();
     }
     assert_eq!(resumed.state.iteration, 40);
     // Bit-identical: same Gaussians, optimiser moments and statistics.
     assert_eq!(resumed.state, straight.state);
+}
+
+/// A checkpoint left by a run on views 1, 4, 7 of the 64 × 48 demo, after 5 iterations.
+fn checkpoint_of_a_small_run(dir: &std::path::Path, ds: &Dataset, cfg: &RunConfig) {
+    let mut t = trainer(ds, cfg);
+    for _ in 0..5 {
+        t.step().unwrap();
+    }
+    std::fs::create_dir_all(dir).unwrap();
+    let data = RunData::of(ds).unwrap();
+    save_checkpoint(&dir.join("checkpoint.bin"), &t.config, &data, &t.state).unwrap();
+}
+
+#[test]
+fn resuming_on_other_views_or_another_size_is_refused_before_anything_is_written() {
+    let ds = small_demo();
+    let cfg = short_config(20);
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    checkpoint_of_a_small_run(&run, &ds, &cfg);
+    let other_views = demo_dataset(&DemoOptions {
+        width: 64,
+        height: 48,
+        views: 8,
+        train: vec![0, 3, 6],
+        supersample: 2,
+    });
+    let other_size = demo_dataset(&DemoOptions {
+        width: 32,
+        height: 24,
+        views: 8,
+        train: vec![1, 4, 7],
+        supersample: 2,
+    });
+    for (ds, expected) in [
+        (&other_views, "training views"),
+        (&other_size, "images 64x48 (now 32x24"),
+    ] {
+        let e = train_run(ds, &cfg, &run, true, |_| {})
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("belongs to another run") && e.contains(expected),
+            "{e}"
+        );
+        assert!(
+            !run.join("config.json").exists(),
+            "config.json written before the check"
+        );
+    }
+    // The same data resumes.
+    let summary = train_run(&ds, &cfg, &run, true, |_| {}).unwrap();
+    assert_eq!(summary.resumed_from, Some(5));
+}
+
+#[test]
+fn a_bit_flipped_checkpoint_is_reported_as_corrupt() {
+    let ds = small_demo();
+    let cfg = short_config(20);
+    let dir = tempfile::tempdir().unwrap();
+    checkpoint_of_a_small_run(dir.path(), &ds, &cfg);
+    let path = dir.path().join("checkpoint.bin");
+    let mut bytes = std::fs::read(&path).unwrap();
+    // A bit in the middle: inside the Gaussians' parameters, where postcard decodes any value.
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0x10;
+    std::fs::write(&path, &bytes).unwrap();
+    let e = load_checkpoint(&path).unwrap_err().to_string();
+    assert!(e.contains("checksum mismatch"), "{e}");
+    assert!(e.starts_with(&path.display().to_string()), "{e}");
 }
 
 #[test]

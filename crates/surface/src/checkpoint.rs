@@ -1,6 +1,8 @@
 //! Checkpoints: the trainer's whole state (parameters, Adam moments, poses, iteration) with the
-//! configuration it belongs to, in one binary file written atomically. Since every random draw
-//! is derived from `(seed, iteration)`, resuming repeats the uninterrupted run exactly.
+//! configuration and the run it belongs to, in one binary file written atomically and sealed
+//! with a CRC-32 ([`fewview_scene::sealed`]). Since every random draw is derived from
+//! `(seed, iteration)`, resuming repeats the uninterrupted run exactly — provided it is the same
+//! run, which [`Saved::check_run`] makes sure of before anything is written.
 
 use std::path::Path;
 
@@ -9,50 +11,195 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Result, SurfaceError};
 use crate::train::{TrainConfig, TrainState};
 
-const MAGIC: &str = "fewview-surface-checkpoint-v1";
+/// Header of the current format.
+const MAGIC: &[u8] = b"fewview-surface-checkpoint-v2\0";
+/// Version 1 (no run identity, no checksum) began with postcard's encoding of this string: its
+/// length, 29, then the bytes.
+const MAGIC_V1: &[u8] = b"\x1dfewview-surface-checkpoint-v1";
+
+/// What a run trains on and how, beyond the training configuration: resuming a checkpoint under
+/// another dataset, other views, another `--downscale` or another pose noise would continue one
+/// run's field and poses on another's images and matches.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunIdentity {
+    pub dataset: String,
+    /// Names of the training views, in order.
+    pub train_views: Vec<String>,
+    /// `[width, height]` of each training view as trained on.
+    pub image_sizes: Vec<[usize; 2]>,
+    /// `[width, height]` of the views the matcher saw, when not the training images
+    /// (`--match-downscale`).
+    pub matching_sizes: Option<Vec<[usize; 2]>>,
+    /// The run configuration as JSON, with the settings a resume may change removed (see
+    /// [`crate::pipeline::run_identity`]).
+    pub settings_json: String,
+}
+
+impl RunIdentity {
+    /// A one-line description of how `self` (the checkpoint's) differs from `now`, or `None`.
+    pub fn difference(&self, now: &RunIdentity) -> Option<String> {
+        if self.dataset != now.dataset {
+            return Some(format!("dataset {} (now {})", self.dataset, now.dataset));
+        }
+        if self.train_views != now.train_views {
+            return Some(format!(
+                "training views {} (now {})",
+                self.train_views.join(","),
+                now.train_views.join(",")
+            ));
+        }
+        if self.image_sizes != now.image_sizes || self.matching_sizes != now.matching_sizes {
+            let size = |s: &[[usize; 2]]| s.first().map_or("-".into(), |[w, h]| format!("{w}x{h}"));
+            return Some(format!(
+                "image size {} (now {}: another --downscale or --match-downscale?)",
+                size(&self.image_sizes),
+                size(&now.image_sizes)
+            ));
+        }
+        let parse = |s: &str| serde_json::from_str::<serde_json::Value>(s).ok();
+        match (parse(&self.settings_json), parse(&now.settings_json)) {
+            (Some(a), Some(b)) if a == b => None,
+            (Some(a), Some(b)) => {
+                let mut paths = Vec::new();
+                differing_paths(&a, &b, String::new(), &mut paths);
+                let shown: Vec<&str> = paths.iter().take(4).map(String::as_str).collect();
+                Some(format!(
+                    "settings {}{}",
+                    shown.join(", "),
+                    if paths.len() > shown.len() {
+                        ", …"
+                    } else {
+                        ""
+                    }
+                ))
+            }
+            _ => Some("settings (unreadable)".into()),
+        }
+    }
+}
+
+/// Dotted paths at which two JSON values differ (a whole object where only one side has it).
+fn differing_paths(
+    a: &serde_json::Value,
+    b: &serde_json::Value,
+    at: String,
+    out: &mut Vec<String>,
+) {
+    use serde_json::Value::Object;
+    match (a, b) {
+        (Object(x), Object(y)) => {
+            let mut keys: Vec<&String> = x.keys().chain(y.keys()).collect();
+            keys.sort();
+            keys.dedup();
+            for k in keys {
+                let path = if at.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{at}.{k}")
+                };
+                match (x.get(k), y.get(k)) {
+                    (Some(u), Some(v)) => differing_paths(u, v, path, out),
+                    _ => out.push(path),
+                }
+            }
+        }
+        _ if a != b => out.push(if at.is_empty() { "(all)".into() } else { at }),
+        _ => {}
+    }
+}
 
 #[derive(Serialize, Deserialize)]
 struct File {
-    magic: String,
-    /// The configuration as JSON (so a mismatch can be reported readably).
+    run: RunIdentity,
+    /// The training configuration as JSON (so a mismatch can be reported readably).
     config_json: String,
     state: TrainState,
 }
 
-/// Writes `state` and `config` to `path` (temp file + rename).
-pub fn save(path: &Path, config: &TrainConfig, state: &TrainState) -> Result<()> {
+/// Writes `state`, its training `config` and the `run` it belongs to to `path` (temp file +
+/// rename).
+pub fn save(
+    path: &Path,
+    run: &RunIdentity,
+    config: &TrainConfig,
+    state: &TrainState,
+) -> Result<()> {
     let file = File {
-        magic: MAGIC.into(),
+        run: run.clone(),
         config_json: serde_json::to_string(config)
             .map_err(|e| SurfaceError::invalid("checkpoint", e.to_string()))?,
         state: state.clone(),
     };
-    let bytes = postcard::to_stdvec(&file)
+    let body = postcard::to_stdvec(&file)
         .map_err(|e| SurfaceError::invalid("checkpoint", e.to_string()))?;
-    fewview_scene::atomic::write_bytes(path, &bytes).map_err(SurfaceError::Scene)
+    let sealed = fewview_scene::sealed::seal(MAGIC, &body);
+    fewview_scene::atomic::write_bytes(path, &sealed).map_err(SurfaceError::Scene)
 }
 
-/// Reads a checkpoint; its configuration must equal `config` except for the iteration count
-/// (a run may be extended).
-pub fn load(path: &Path, config: &TrainConfig) -> Result<TrainState> {
+/// A checkpoint as read, before it is checked against the run that resumes it.
+pub struct Saved {
+    run: RunIdentity,
+    config: TrainConfig,
+    state: TrainState,
+}
+
+/// Reads a checkpoint; a truncated or altered file is an error naming it.
+pub fn read(path: &Path) -> Result<Saved> {
     let bytes = std::fs::read(path).map_err(|e| SurfaceError::io(path, e))?;
-    let file: File = postcard::from_bytes(&bytes)
-        .map_err(|e| SurfaceError::format(path, format!("not a surface checkpoint ({e})")))?;
-    if file.magic != MAGIC {
-        return Err(SurfaceError::format(
-            path,
-            "not a surface checkpoint (bad header)",
-        ));
-    }
-    let saved: TrainConfig = serde_json::from_str(&file.config_json)
+    let body =
+        fewview_scene::sealed::unseal(path, &bytes, MAGIC, &[MAGIC_V1], "a surface checkpoint")?;
+    let file: File = postcard::from_bytes(body)
+        .map_err(|e| SurfaceError::format(path, format!("corrupt surface checkpoint ({e})")))?;
+    let config: TrainConfig = serde_json::from_str(&file.config_json)
         .map_err(|e| SurfaceError::format(path, format!("unreadable configuration ({e})")))?;
-    let mut a = saved.clone();
-    a.iterations = config.iterations;
-    if &a != config {
-        return Err(SurfaceError::format(
-            path,
-            "was written with a different configuration (only the iteration count may change)",
-        ));
+    Ok(Saved {
+        run: file.run,
+        config,
+        state: file.state,
+    })
+}
+
+impl Saved {
+    /// Refuses a checkpoint of another run (other data, views, sizes or settings) or one
+    /// already past `iterations` (a run may be extended, not cut short).
+    pub fn check_run(&self, path: &Path, now: &RunIdentity, iterations: usize) -> Result<()> {
+        if let Some(d) = self.run.difference(now) {
+            return Err(SurfaceError::format(
+                path,
+                format!(
+                    "belongs to another run: {d}; only --iterations and the output settings may change on --resume"
+                ),
+            ));
+        }
+        if self.state.iteration > iterations {
+            return Err(SurfaceError::format(
+                path,
+                format!(
+                    "is at iteration {}, past --iterations {iterations}",
+                    self.state.iteration
+                ),
+            ));
+        }
+        Ok(())
     }
-    Ok(file.state)
+
+    /// The state, once its training configuration equals `config` except for the iteration
+    /// count.
+    pub fn into_state(self, path: &Path, config: &TrainConfig) -> Result<TrainState> {
+        let mut saved = self.config;
+        saved.iterations = config.iterations;
+        if &saved != config {
+            return Err(SurfaceError::format(
+                path,
+                "was written with a different configuration (only the iteration count may change)",
+            ));
+        }
+        Ok(self.state)
+    }
+}
+
+/// Reads a checkpoint and returns its state for `config` ([`read`], then [`Saved::into_state`];
+/// the run identity is not checked).
+pub fn load(path: &Path, config: &TrainConfig) -> Result<TrainState> {
+    read(path)?.into_state(path, config)
 }

@@ -518,6 +518,44 @@ pub struct RunInputs<'a> {
     pub source: Option<PoseSource<'a>>,
 }
 
+/// What a checkpoint of this run must match for `--resume` to continue it
+/// ([`checkpoint::RunIdentity`]): the data and the whole configuration except the settings a
+/// resume may change — the iteration count, the checkpoint interval and the outputs (mesh
+/// resolution, evaluated views and their scale).
+pub fn run_identity(
+    dataset: &Dataset,
+    matching: Option<&Dataset>,
+    config: &RunConfig,
+) -> Result<checkpoint::RunIdentity> {
+    let sizes = |ds: &Dataset| -> Vec<[usize; 2]> {
+        ds.train_views()
+            .map(|v| [v.image.width, v.image.height])
+            .collect()
+    };
+    let mut settings = serde_json::to_value(config)
+        .map_err(|e| SurfaceError::invalid("configuration", e.to_string()))?;
+    if let Some(all) = settings.as_object_mut() {
+        for resumable in [
+            "checkpoint_every",
+            "mesh_resolution",
+            "eval_views",
+            "eval_scale",
+        ] {
+            all.remove(resumable);
+        }
+        if let Some(train) = all.get_mut("train").and_then(|t| t.as_object_mut()) {
+            train.remove("iterations");
+        }
+    }
+    Ok(checkpoint::RunIdentity {
+        dataset: dataset.name.clone(),
+        train_views: dataset.train_views().map(|v| v.name.clone()).collect(),
+        image_sizes: sizes(dataset),
+        matching_sizes: matching.map(sizes),
+        settings_json: settings.to_string(),
+    })
+}
+
 /// Runs everything and writes the run directory. `resume` continues from `checkpoint.bin`
 /// when it exists.
 pub fn run(
@@ -538,6 +576,15 @@ pub fn run(
     // Refuse what is wrong before the run folder is touched: no half-written output.
     config.train.validate()?;
     check_view_count(dataset)?;
+    let identity = run_identity(dataset, matching, config)?;
+    let ckpt = checkpoint_path(out);
+    let saved = if resume && ckpt.exists() {
+        let saved = checkpoint::read(&ckpt)?;
+        saved.check_run(&ckpt, &identity, config.train.iterations)?;
+        Some(saved)
+    } else {
+        None
+    };
     std::fs::create_dir_all(out).map_err(|e| SurfaceError::io(out, e))?;
     write_json(&out.join("config.json"), config)?;
     on_event(Event::Stage("matching"));
@@ -589,10 +636,8 @@ pub fn run(
         &prep.start,
         prep.matches.clone(),
     )?;
-    let ckpt = checkpoint_path(out);
-    if resume && ckpt.exists() {
-        let state = checkpoint::load(&ckpt, &train_config)?;
-        trainer.restore(state)?;
+    if let Some(saved) = saved {
+        trainer.restore(saved.into_state(&ckpt, &train_config)?)?;
         trainer.sync_progress();
     }
     on_event(Event::Stage("training"));
@@ -608,7 +653,7 @@ pub fn run(
         if config.checkpoint_every > 0
             && (it % config.checkpoint_every == 0 || it == train_config.iterations)
         {
-            checkpoint::save(&ckpt, &train_config, &trainer.state)?;
+            checkpoint::save(&ckpt, &identity, &train_config, &trainer.state)?;
             let err = pose_error(&trainer.poses(), &prep.ground_truth)?;
             history.push(PoseErrorAt {
                 iteration: it,

@@ -6,6 +6,7 @@ use fewview_scene::Dataset;
 use fewview_surface::checkpoint;
 use fewview_surface::pipeline::{
     InitialPoses, RunConfig, RunInputs, RunReport, prepare, prepare_with_matching, run,
+    run_identity,
 };
 use fewview_surface::sdf_scene::{SdfSceneOptions, observed_faces, sdf_dataset, surface_mesh};
 use fewview_surface::train::Trainer;
@@ -123,7 +124,8 @@ fn resume_reproduces_the_uninterrupted_run() {
     for _ in 0..4 {
         first.step().unwrap();
     }
-    checkpoint::save(&ckpt, &config.train, &first.state).unwrap();
+    let identity = run_identity(&ds, None, &config).unwrap();
+    checkpoint::save(&ckpt, &identity, &config.train, &first.state).unwrap();
     drop(first);
     let mut resumed = new_trainer();
     resumed
@@ -194,7 +196,8 @@ fn checkpoint_of_another_configuration_is_refused() {
     .unwrap();
     let dir = tempfile::tempdir().unwrap();
     let ckpt = dir.path().join("checkpoint.bin");
-    checkpoint::save(&ckpt, &config.train, &t.state).unwrap();
+    let identity = run_identity(&ds, None, &config).unwrap();
+    checkpoint::save(&ckpt, &identity, &config.train, &t.state).unwrap();
     let mut other = config.train.clone();
     other.seed += 1;
     let err = checkpoint::load(&ckpt, &other).unwrap_err().to_string();
@@ -205,6 +208,102 @@ fn checkpoint_of_another_configuration_is_refused() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("not a surface checkpoint"), "{err}");
+}
+
+/// `--resume` continues only the run the checkpoint belongs to: another pose noise, other
+/// training views, another image size, an iteration count below the checkpoint's, or a
+/// bit-flipped file are refused with one line naming the checkpoint, before anything is
+/// written (before, each of these resumed silently, and the flipped file surfaced later as
+/// "training diverged"). A changed output setting resumes.
+#[test]
+fn resume_refuses_a_checkpoint_of_another_run_before_writing() {
+    let ds = tiny_scene();
+    let config = tiny_config(4);
+    let prep = prepare(&ds, None, &config).unwrap();
+    let mut t = Trainer::new(
+        config.train.clone(),
+        prep.views.clone(),
+        &prep.start,
+        prep.matches.clone(),
+    )
+    .unwrap();
+    t.step().unwrap();
+    t.step().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let ckpt = dir.path().join("saved.bin");
+    let identity = run_identity(&ds, None, &config).unwrap();
+    checkpoint::save(&ckpt, &identity, &config.train, &t.state).unwrap();
+
+    let other_views = sdf_dataset(&SdfSceneOptions {
+        width: 64,
+        height: 48,
+        views: 6,
+        train: vec![1, 3, 5],
+        supersample: 1,
+        ..Default::default()
+    });
+    let other_size = sdf_dataset(&SdfSceneOptions {
+        width: 32,
+        height: 24,
+        views: 6,
+        train: vec![0, 2, 4],
+        supersample: 1,
+        ..Default::default()
+    });
+    let mut noisier = config.clone();
+    noisier.initial_poses = InitialPoses::NoisyGroundTruth { sigma: 0.1 };
+    let shorter = tiny_config(1);
+    let cases: [(&Dataset, &RunConfig, &str); 4] = [
+        (&ds, &noisier, "settings initial_poses"),
+        (&other_views, &config, "training views"),
+        (&other_size, &config, "image size 64x48 (now 32x24"),
+        (&ds, &shorter, "is at iteration 2, past --iterations 1"),
+    ];
+    for (i, (data, cfg, expected)) in cases.into_iter().enumerate() {
+        let out = dir.path().join(format!("case{i}"));
+        std::fs::create_dir_all(&out).unwrap();
+        std::fs::copy(&ckpt, out.join("checkpoint.bin")).unwrap();
+        let err = run(inputs(data, None), cfg, &out, true, &mut silent)
+            .expect_err("refused")
+            .to_string();
+        assert!(
+            err.contains("checkpoint.bin") && err.contains(expected),
+            "{err}"
+        );
+        assert!(!err.contains('\n'), "{err}");
+        assert!(
+            !out.join("config.json").exists(),
+            "case {i} wrote config.json"
+        );
+    }
+
+    let flipped = dir.path().join("flipped");
+    std::fs::create_dir_all(&flipped).unwrap();
+    let mut bytes = std::fs::read(&ckpt).unwrap();
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0x04;
+    std::fs::write(flipped.join("checkpoint.bin"), &bytes).unwrap();
+    let err = run(inputs(&ds, None), &config, &flipped, true, &mut silent)
+        .expect_err("refused")
+        .to_string();
+    assert!(err.contains("checksum mismatch"), "{err}");
+    assert!(!flipped.join("config.json").exists());
+
+    // Output settings may change: the run resumes at iteration 2.
+    let mut other_outputs = config.clone();
+    other_outputs.mesh_resolution = 32;
+    other_outputs.checkpoint_every = 1;
+    let same = dir.path().join("same");
+    std::fs::create_dir_all(&same).unwrap();
+    std::fs::copy(&ckpt, same.join("checkpoint.bin")).unwrap();
+    let mut first_step = None;
+    run(inputs(&ds, None), &other_outputs, &same, true, &mut |e| {
+        if let fewview_surface::pipeline::Event::Step(s) = e {
+            first_step.get_or_insert(s.iteration);
+        }
+    })
+    .unwrap();
+    assert_eq!(first_step, Some(2));
 }
 
 /// A configuration or dataset the run cannot use is refused before the run folder is made:

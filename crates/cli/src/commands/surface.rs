@@ -72,7 +72,9 @@ pub struct Args {
     /// Run directory. Default: `runs/surface-<dataset folder name>`.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
-    /// Continue the run in `--out` from its checkpoint (same flags as the first time).
+    /// Continue the run in `--out` from its checkpoint. Same data and flags as the first time;
+    /// only --iterations (to extend), --checkpoint-every and the output settings (--mesh-resolution,
+    /// --eval-views, --eval-scale) may change. A checkpoint of another run is refused.
     #[arg(long)]
     pub resume: bool,
     /// Training iterations (the paper: 100k on a GPU). The default fits the 40-minute CPU budget
