@@ -184,6 +184,10 @@ pub(crate) fn parse_transforms(text: &str, path: &Path) -> Result<Vec<Frame>> {
         .into_iter()
         .enumerate()
         .map(|(i, f)| {
+            // An empty path joins to the folder itself, which became `<folder>.png`.
+            if f.file_path.trim().is_empty() {
+                return Err(SceneError::invalid(path, format!("frame {i}: empty file_path")));
+            }
             let m = Matrix4::from_fn(|r, c| f.transform_matrix[r][c]);
             if !m.iter().all(|v| v.is_finite()) {
                 return Err(SceneError::invalid(
@@ -583,6 +587,16 @@ pub(crate) mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("is a reflection"), "{e}");
+        // An empty image path.
+        let doc = json!({ "camera_angle_x": 0.5, "frames": [{ "file_path": "", "transform_matrix": [[1.0,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]] }] });
+        std::fs::write(dir.path().join("transforms_test.json"), doc.to_string()).unwrap();
+        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("transforms_test.json") && e.contains("frame 0: empty file_path"),
+            "{e}"
+        );
         // Finite but absurd: a camera 10³⁰⁰ away, and a focal length of 10³⁰⁰ (caught by the
         // loader-independent check that every loaded camera fits single precision).
         write_blender(dir.path(), 100, 2, json!({}));

@@ -518,6 +518,30 @@ pub struct RunInputs<'a> {
     pub source: Option<PoseSource<'a>>,
 }
 
+/// A reference surface Chamfer can score against: faces with area (Chamfer samples points on
+/// them) spanning some volume. An empty, line-only or degenerate mesh used to be found out only
+/// after training, as "not scored".
+pub fn check_reference(reference: &Mesh) -> Result<()> {
+    let what = "reference surface";
+    if reference.faces.is_empty() {
+        return Err(SurfaceError::invalid(
+            what,
+            format!(
+                "has no faces ({} vertices): Chamfer samples points on a surface",
+                reference.vertices.len()
+            ),
+        ));
+    }
+    let area = reference.area();
+    if !(area.is_finite() && area > 0.0) {
+        return Err(SurfaceError::invalid(
+            what,
+            format!("none of its {} faces has any area", reference.faces.len()),
+        ));
+    }
+    Ok(())
+}
+
 /// What a checkpoint of this run must match for `--resume` to continue it
 /// ([`checkpoint::RunIdentity`]): the data and the whole configuration except the settings a
 /// resume may change — the iteration count, the checkpoint interval and the outputs (mesh
@@ -576,6 +600,9 @@ pub fn run(
     // Refuse what is wrong before the run folder is touched: no half-written output.
     config.train.validate()?;
     check_view_count(dataset)?;
+    if let Some(reference) = reference {
+        check_reference(reference)?;
+    }
     let identity = run_identity(dataset, matching, config)?;
     let ckpt = checkpoint_path(out);
     let saved = if resume && ckpt.exists() {

@@ -370,6 +370,34 @@ fn bad_configuration_or_single_view_writes_nothing() {
         assert!(expected.iter().any(|e| err.contains(e)), "{name}: {err}");
         assert!(!out.exists(), "{name}: {} was created", out.display());
     }
+    // A reference surface Chamfer cannot score (no faces; faces without area) was found out
+    // only after training, as "not scored".
+    let line = fewview_geom::Mesh {
+        vertices: vec![[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]],
+        faces: vec![[0, 1, 2]],
+        ..Default::default()
+    };
+    let empty = fewview_geom::Mesh::default();
+    for (name, reference, expected) in [
+        ("empty", &empty, "has no faces (0 vertices)"),
+        ("line", &line, "none of its 1 faces has any area"),
+    ] {
+        let out = dir.path().join(name);
+        let err = run(
+            inputs(&ds, Some(reference)),
+            &tiny_config(4),
+            &out,
+            false,
+            &mut silent,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.starts_with("reference surface: ") && err.contains(expected),
+            "{err}"
+        );
+        assert!(!out.exists(), "{name}: {} was created", out.display());
+    }
 }
 
 /// The analytic scene from noisy poses, a reduced run that fits the CI budget: 6 views at

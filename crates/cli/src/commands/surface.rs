@@ -463,10 +463,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             None
         };
         let reference = match &args.reference {
-            Some(p) => Some(
-                fewview_geom::io::read_mesh(p)
-                    .with_context(|| format!("reading the reference surface {}", p.display()))?,
-            ),
+            Some(p) => {
+                let mesh = fewview_geom::io::read_mesh(p)
+                    .with_context(|| format!("reading the reference surface {}", p.display()))?;
+                // Checked again by the pipeline; here the error can name the file.
+                fewview_surface::pipeline::check_reference(&mesh)
+                    .with_context(|| p.display().to_string())?;
+                Some(mesh)
+            }
             None => None,
         };
         let name = folder

@@ -381,7 +381,8 @@ impl StudyAnalysis {
     }
 
     /// Writes `report.md`, `pairs.csv`, `skills.csv`, `analysis.json` and one ranking plot per
-    /// question (`ranking_<question>.png`) into `dir`, each atomically. Returns the paths written.
+    /// question (`ranking_<question>.png`, [`ranking_file_names`]) into `dir`, each atomically.
+    /// Returns the paths written.
     pub fn write_report(&self, dir: &Path) -> Result<Vec<std::path::PathBuf>> {
         std::fs::create_dir_all(dir).map_err(|e| MetricsError::io(dir, e))?;
         let mut written = Vec::new();
@@ -397,17 +398,84 @@ impl StudyAnalysis {
             fewview_scene::atomic::write_bytes(&path, text.as_bytes())?;
             written.push(path);
         }
-        for q in &self.questions {
-            let safe: String = q
-                .question
-                .chars()
-                .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
-                .collect();
-            let path = dir.join(format!("ranking_{safe}.png"));
+        let questions: Vec<&str> = self.questions.iter().map(|q| q.question.as_str()).collect();
+        for (q, name) in self.questions.iter().zip(ranking_file_names(&questions)) {
+            let path = dir.join(name);
             plot::ranking_plot(q, &path)?;
             written.push(path);
         }
         Ok(written)
+    }
+}
+
+/// `ranking_<question>.png` for each question, with every character but ASCII letters and
+/// digits replaced by `_`. Names that would clash (`Q 1`, `Q_1` and `Q/1` all become `Q_1`; `q1`
+/// and `Q1` on a case-insensitive file system) take the question's 1-based position as a
+/// suffix, so no plot overwrites another.
+fn ranking_file_names(questions: &[&str]) -> Vec<String> {
+    let safe: Vec<String> = questions
+        .iter()
+        .map(|q| {
+            q.chars()
+                .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+                .collect()
+        })
+        .collect();
+    let clashes = |s: &String| safe.iter().filter(|t| t.eq_ignore_ascii_case(s)).count() > 1;
+    let names: Vec<String> = safe
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            if clashes(s) {
+                format!("ranking_{s}_{}.png", i + 1)
+            } else {
+                format!("ranking_{s}.png")
+            }
+        })
+        .collect();
+    let lower: std::collections::HashSet<String> =
+        names.iter().map(|n| n.to_ascii_lowercase()).collect();
+    if lower.len() == names.len() {
+        names
+    } else {
+        // A suffix met another question's name (`Q 1`, `Q_1`, `Q_1_2`): number them all in
+        // front, which cannot clash (the number ends at the first `_`).
+        safe.iter()
+            .enumerate()
+            .map(|(i, s)| format!("ranking_{}_{s}.png", i + 1))
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ranking_file_names;
+
+    #[test]
+    fn ranking_file_names_never_clash() {
+        assert_eq!(
+            ranking_file_names(&["Sharper?", "Q1"]),
+            ["ranking_Sharper_.png", "ranking_Q1.png"]
+        );
+        assert_eq!(
+            ranking_file_names(&["Q 1", "Q_1", "Q/1", "q1", "Q1"]),
+            [
+                "ranking_Q_1_1.png",
+                "ranking_Q_1_2.png",
+                "ranking_Q_1_3.png",
+                "ranking_q1_4.png",
+                "ranking_Q1_5.png"
+            ]
+        );
+        let tricky = ranking_file_names(&["Q 1", "Q_1", "Q_1_2"]);
+        assert_eq!(
+            tricky,
+            [
+                "ranking_1_Q_1.png",
+                "ranking_2_Q_1.png",
+                "ranking_3_Q_1_2.png"
+            ]
+        );
     }
 }
 

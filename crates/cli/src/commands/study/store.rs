@@ -99,9 +99,15 @@ impl Store {
         }
         let conn = Connection::open(path)
             .with_context(|| format!("{}: cannot open database", path.display()))?;
-        conn.busy_timeout(std::time::Duration::from_secs(10))?;
-        conn.pragma_update(None, "journal_mode", "WAL")?;
-        conn.pragma_update(None, "synchronous", "FULL")?;
+        // SQLite opens any file lazily; a file that is not a database fails at the first
+        // statement, here, and the error must name it.
+        let not_a_database = || format!("{}: not a usable SQLite database", path.display());
+        conn.busy_timeout(std::time::Duration::from_secs(10))
+            .with_context(not_a_database)?;
+        conn.pragma_update(None, "journal_mode", "WAL")
+            .with_context(not_a_database)?;
+        conn.pragma_update(None, "synchronous", "FULL")
+            .with_context(not_a_database)?;
         conn.execute_batch(
             "CREATE TABLE IF NOT EXISTS participants (
                  id TEXT PRIMARY KEY, created_at TEXT NOT NULL DEFAULT CURRENT_TIMESTAMP);
@@ -313,5 +319,26 @@ impl Store {
             })
         })?
         .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Store;
+
+    /// A file that is not a database (a config passed by mistake) is refused with its name;
+    /// before, the error was SQLite's bare "file is not a database".
+    #[test]
+    fn a_file_that_is_not_a_database_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("answers.sqlite");
+        std::fs::write(&path, "title = \"not a database\"\n".repeat(200)).unwrap();
+        let err = Store::open(&path).err().expect("refused");
+        let shown = format!("{err:#}");
+        assert!(
+            shown.starts_with(&format!("{}: not a usable SQLite database", path.display())),
+            "{shown}"
+        );
+        assert!(shown.contains("not a database"), "{shown}");
     }
 }
