@@ -447,6 +447,14 @@ fn ranking_file_names(questions: &[&str]) -> Vec<String> {
     }
 }
 
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::ranking_file_names;
@@ -476,13 +484,5 @@ mod tests {
                 "ranking_3_Q_1_2.png"
             ]
         );
-    }
-}
-
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
     }
 }
