@@ -31,6 +31,12 @@ use serde::Serialize;
 /// ε of Alg. 2.
 pub const EPS: f64 = 1e-6;
 
+/// ε of SPARF's and BARF's code (`rotation_distance`, in f32), whose floor of 0.028° is the
+/// 0.03° paper 001 reports (Appendix B.3: "the rotation error 0.03 is caused by an eps value")
+/// although its Alg. 2 prints 10⁻⁶. Figures at this ε compare with the paper's Table 1; figures
+/// at [`EPS`] follow the printed algorithm and cannot go below 0.081°.
+pub const SPARF_CODE_EPS: f64 = 1e-7;
+
 /// Errors of the pose evaluation.
 #[derive(Debug, thiserror::Error)]
 pub enum PoseErrorError {
@@ -301,7 +307,8 @@ mod tests {
     fn floors_are_as_documented() {
         assert!((rotation_floor_deg(1e-6) - 0.081028).abs() < 1e-6);
         assert!((rotation_floor_deg_f32(1e-6) - 0.081565).abs() < 2e-6);
-        assert!((rotation_floor_deg_f32(1e-7) - 0.02798).abs() < 1e-5);
+        assert!((rotation_floor_deg_f32(SPARF_CODE_EPS) - 0.02798).abs() < 1e-5);
+        assert!((rotation_floor_deg(SPARF_CODE_EPS) - 0.025623).abs() < 1e-6);
     }
 
     #[test]

@@ -629,6 +629,17 @@ fn print_report(r: &RunReport, out: &std::path::Path) {
             100.0 * w.translation
         );
     }
+    let sparf = &r.rotation_at_sparf_eps;
+    println!(
+        "  at ε = {:.0e}     R {:.3}° → {}{:.3}° (SPARF's code; paper 001 Table 1's convention)",
+        sparf.eps,
+        sparf.initial_deg,
+        match sparf.warmup_deg.filter(|_| warmed_up) {
+            Some(w) => format!("{w:.3}° → "),
+            None => String::new(),
+        },
+        sparf.final_deg
+    );
     println!(
         "training         {} iterations, {:.0} s ({:.2} it/s)",
         r.iterations, r.train_seconds_wall, r.iterations_per_second_wall
