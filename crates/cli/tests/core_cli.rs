@@ -3,28 +3,9 @@
 //! input gives a one-line error and a non-zero exit, never a panic.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 mod common;
-use common::assert_clean_error;
-
-fn fewview(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fewview"))
-        .args(args)
-        .output()
-        .expect("run fewview")
-}
-
-/// Runs `fewview` and asserts it succeeded (stderr in the message otherwise).
-fn fewview_ok(args: &[&str]) -> Output {
-    let out = fewview(args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
+use common::{assert_clean_error, fewview, fewview_ok, s};
 
 /// A run directory's `metrics.json`.
 fn metrics(run: &Path) -> serde_json::Value {
@@ -91,10 +72,6 @@ fn write_llff(dir: &Path, tweak: impl Fn(usize, &mut [f64; 17])) -> PathBuf {
     }
     write_npy(&dir.join("poses_bounds.npy"), 10, 17, &rows);
     dir.to_path_buf()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 #[test]

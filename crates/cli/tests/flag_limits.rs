@@ -2,22 +2,9 @@
 //! each is now refused where it is parsed, with one error line naming the flag, and nothing is
 //! written.
 
-use std::path::Path;
-use std::process::{Command, Output};
 
 mod common;
-use common::assert_clean_error;
-
-fn fewview(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fewview"))
-        .args(args)
-        .output()
-        .expect("run fewview")
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+use common::{assert_clean_error, fewview, s};
 
 /// `study analyze --draws 4` to `9` passed the old `≥ 4` check and panicked (index out of
 /// bounds) in the effective-sample-size code; huge counts allocated gigabytes.

@@ -8,20 +8,17 @@ use fewview_geom::io::{read_mesh, write_mesh, write_npy};
 use fewview_geom::mesh::Mesh;
 use fewview_scene::Image;
 
+mod common;
+use common::s;
+
+/// Runs `fewview`: success, stdout, stderr.
 fn fewview(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_fewview"))
-        .args(args)
-        .output()
-        .expect("run fewview");
+    let out = common::fewview(args);
     (
         out.status.success(),
         String::from_utf8_lossy(&out.stdout).into_owned(),
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
 }
 
 const CAMERA: &str = r#"{"intrinsics": {"fx": 400, "fy": 400, "cx": 40, "cy": 30, "width": 80, "height": 60},

@@ -1,6 +1,33 @@
-//! Helpers shared by the CLI's integration tests.
+//! Helpers shared by the CLI's integration tests. Each test file compiles this module on its
+//! own and uses only some of the helpers.
+#![allow(dead_code)]
 
-use std::process::Output;
+use std::path::Path;
+use std::process::{Command, Output};
+
+/// Runs the `fewview` binary built for these tests.
+pub fn fewview(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fewview"))
+        .args(args)
+        .output()
+        .expect("run fewview")
+}
+
+/// Runs `fewview` and asserts it succeeded (stderr in the message otherwise).
+pub fn fewview_ok(args: &[&str]) -> Output {
+    let out = fewview(args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// A path as a command-line argument (the tests' temporary paths are UTF-8).
+pub fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
 
 /// Asserts a failed run with one line on stderr that contains every needle, and no panic.
 pub fn assert_clean_error(out: &Output, needles: &[&str]) {
