@@ -12,14 +12,19 @@ use fewview_splat::ply::{read_ply, write_ply};
 use fewview_splat::raster::{RenderCamera, RenderSettings};
 use fewview_splat::train::{TrainConfig, TrainError, TrainView, Trainer};
 
-fn small_demo() -> Dataset {
+/// The demo scene, eight views on its arc, at `width × height` with these training views.
+fn demo(width: usize, height: usize, train: Vec<usize>) -> Dataset {
     demo_dataset(&DemoOptions {
-        width: 64,
-        height: 48,
+        width,
+        height,
         views: 8,
-        train: vec![1, 4, 7],
+        train,
         supersample: 2,
     })
+}
+
+fn small_demo() -> Dataset {
+    demo(64, 48, vec![1, 4, 7])
 }
 
 /// A short run that exercises every part of the schedule: densification from iteration 5 every
@@ -107,20 +112,8 @@ fn resuming_on_other_views_or_another_size_is_refused_before_anything_is_written
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
     checkpoint_of_a_small_run(&run, &ds, &cfg);
-    let other_views = demo_dataset(&DemoOptions {
-        width: 64,
-        height: 48,
-        views: 8,
-        train: vec![0, 3, 6],
-        supersample: 2,
-    });
-    let other_size = demo_dataset(&DemoOptions {
-        width: 32,
-        height: 24,
-        views: 8,
-        train: vec![1, 4, 7],
-        supersample: 2,
-    });
+    let other_views = demo(64, 48, vec![0, 3, 6]);
+    let other_size = demo(32, 24, vec![1, 4, 7]);
     for (ds, expected) in [
         (&other_views, "training views"),
         (&other_size, "images 64x48 (now 32x24"),

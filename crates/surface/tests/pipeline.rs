@@ -11,15 +11,20 @@ use fewview_surface::pipeline::{
 use fewview_surface::sdf_scene::{SdfSceneOptions, observed_faces, sdf_dataset, surface_mesh};
 use fewview_surface::train::Trainer;
 
-fn tiny_scene() -> Dataset {
+/// The analytic scene with six views at `width × height`, these ones for training.
+fn six_view_scene(width: usize, height: usize, train: Vec<usize>) -> Dataset {
     sdf_dataset(&SdfSceneOptions {
-        width: 64,
-        height: 48,
+        width,
+        height,
         views: 6,
-        train: vec![0, 2, 4],
+        train,
         supersample: 1,
         ..Default::default()
     })
+}
+
+fn tiny_scene() -> Dataset {
+    six_view_scene(64, 48, vec![0, 2, 4])
 }
 
 fn tiny_config(iterations: usize) -> RunConfig {
@@ -234,22 +239,8 @@ fn resume_refuses_a_checkpoint_of_another_run_before_writing() {
     let identity = run_identity(&ds, None, &config).unwrap();
     checkpoint::save(&ckpt, &identity, &config.train, &t.state).unwrap();
 
-    let other_views = sdf_dataset(&SdfSceneOptions {
-        width: 64,
-        height: 48,
-        views: 6,
-        train: vec![1, 3, 5],
-        supersample: 1,
-        ..Default::default()
-    });
-    let other_size = sdf_dataset(&SdfSceneOptions {
-        width: 32,
-        height: 24,
-        views: 6,
-        train: vec![0, 2, 4],
-        supersample: 1,
-        ..Default::default()
-    });
+    let other_views = six_view_scene(64, 48, vec![1, 3, 5]);
+    let other_size = six_view_scene(32, 24, vec![0, 2, 4]);
     let mut noisier = config.clone();
     noisier.initial_poses = InitialPoses::NoisyGroundTruth { sigma: 0.1 };
     let shorter = tiny_config(1);
