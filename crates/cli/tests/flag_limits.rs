@@ -2,7 +2,6 @@
 //! each is now refused where it is parsed, with one error line naming the flag, and nothing is
 //! written.
 
-
 mod common;
 use common::{assert_clean_error, fewview, s};
 

@@ -166,9 +166,13 @@ pub struct Args {
     /// After the warm-up's annealing, polish the poses once more with each dense match's
     /// Sampson distance divided by its standard deviation across its epipolar line, from the
     /// Lucas–Kanade covariance of the grid match (a deviation: the paper has no warm-up; see
-    /// crates/surface/README.md). Affects only runs with dense matches (`--densify`).
-    #[arg(long)]
+    /// crates/surface/README.md). On with `--schedule cpu`; affects only runs with dense
+    /// matches (`--densify`, or grown by `--densify auto`).
+    #[arg(long, conflicts_with = "no_warmup_covariance")]
     pub warmup_covariance: bool,
+    /// No covariance polish after the warm-up, whatever `--schedule` says.
+    #[arg(long)]
+    pub no_warmup_covariance: bool,
     /// What those pairs must form for the warm-up to run: `rigid` (their baseline directions fix
     /// every baseline's length up to one scale, e.g. chained triangles; default; `triangles` is
     /// the old name) or `connected` (any connected graph, e.g. the wide DTU triplet's chain
@@ -358,12 +362,16 @@ impl Args {
             "connected" => Connectivity::Connected,
             other => bail!("--warmup-connectivity {other:?}: expected rigid or connected"),
         };
-        let warm_up = (c.pose_warmup.is_some() || self.pose_warmup) && !self.no_pose_warmup;
+        let scheduled = c.pose_warmup;
+        let warm_up = (scheduled.is_some() || self.pose_warmup) && !self.no_pose_warmup;
+        let covariance_polish = (scheduled.is_some_and(|w| w.covariance_polish)
+            || self.warmup_covariance)
+            && !self.no_warmup_covariance;
         c.pose_warmup = warm_up.then(|| WarmupOptions {
             min_matches_per_pair: self.warmup_min_matches,
             connectivity,
             cauchy_px: self.warmup_cauchy,
-            covariance_polish: self.warmup_covariance,
+            covariance_polish,
             ..Default::default()
         });
         let needs_matches = warm_up || !(self.no_matching && self.no_ncc && self.no_gc);
@@ -778,8 +786,19 @@ mod tests {
         );
         let c = config(&["--warmup-cauchy", "0.3"]);
         assert_eq!(c.pose_warmup.unwrap().cauchy_px, 0.3);
+        // The covariance polish: on with the CPU schedule, off with the paper's (whose
+        // warm-up, when asked for, is the plain one), and either way by flag.
+        assert!(c.pose_warmup.unwrap().covariance_polish);
+        let c = config(&["--no-warmup-covariance"]);
         assert!(!c.pose_warmup.unwrap().covariance_polish);
-        let c = config(&["--warmup-covariance"]);
+        let c = config(&["--schedule", "paper", "--pose-warmup"]);
+        assert!(!c.pose_warmup.unwrap().covariance_polish);
+        let c = config(&[
+            "--schedule",
+            "paper",
+            "--pose-warmup",
+            "--warmup-covariance",
+        ]);
         assert!(c.pose_warmup.unwrap().covariance_polish);
         let refused = |flags: &[&str]| {
             let argv = ["surface", "--synthetic"]
