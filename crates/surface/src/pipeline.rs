@@ -545,9 +545,9 @@ pub struct RunInputs<'a> {
     pub source: Option<PoseSource<'a>>,
 }
 
-/// A reference surface Chamfer can score against: faces with area (Chamfer samples points on
-/// them) spanning some volume. An empty, line-only or degenerate mesh used to be found out only
-/// after training, as "not scored".
+/// A reference surface Chamfer can score against: faces with some area, on which Chamfer
+/// samples its points. An empty, line-only or degenerate mesh used to be found out only after
+/// training, as "not scored".
 pub fn check_reference(reference: &Mesh) -> Result<()> {
     let what = "reference surface";
     if reference.faces.is_empty() {

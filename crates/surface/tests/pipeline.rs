@@ -213,6 +213,14 @@ fn checkpoint_of_another_configuration_is_refused() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("not a surface checkpoint"), "{err}");
+    // Version 1 (postcard: the magic string's length, 29, then the string; no checksum).
+    let mut v1 = b"\x1dfewview-surface-checkpoint-v1".to_vec();
+    v1.extend_from_slice(&[0; 64]);
+    std::fs::write(&ckpt, &v1).unwrap();
+    let err = checkpoint::load(&ckpt, &config.train)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("from an older version of fewview"), "{err}");
 }
 
 /// `--resume` continues only the run the checkpoint belongs to: another pose noise, other
