@@ -273,28 +273,30 @@ fn bad_inputs_give_one_line_errors() {
     );
 }
 
+/// Runs `fewview train --data DATA FLAGS --out RUN` and asserts a one-line error with every
+/// needle, with the run folder never made.
+fn assert_train_refused_before_writing(data: &Path, run: &Path, flags: &[&str], needles: &[&str]) {
+    let args: Vec<&str> = ["train", "--data", s(data)]
+        .into_iter()
+        .chain(flags.iter().copied())
+        .chain(["--out", s(run)])
+        .collect();
+    assert_clean_error(&fewview(&args), needles);
+    assert!(!run.exists(), "{flags:?}: nothing written");
+}
+
 /// Held-out views too small for SSIM (or whose mask a downscale empties) used to fail only at
 /// the evaluation, after config.json and point_cloud.ply were written.
 #[test]
 fn train_refuses_views_too_small_to_score_before_writing() {
     let dir = tempfile::tempdir().unwrap();
     let data = write_llff(&dir.path().join("scene"), |_, _| {});
-    let run = dir.path().join("run");
-    assert_clean_error(
-        &fewview(&[
-            "train",
-            "--data",
-            s(&data),
-            "--downscale",
-            "5",
-            "--iterations",
-            "2",
-            "--out",
-            s(&run),
-        ]),
+    assert_train_refused_before_writing(
+        &data,
+        &dir.path().join("run"),
+        &["--downscale", "5", "--iterations", "2"],
         &["SSIM window", "downscale"],
     );
-    assert!(!run.exists(), "nothing written");
 }
 
 /// 10¹² random initial points used to abort on allocation.
@@ -302,20 +304,12 @@ fn train_refuses_views_too_small_to_score_before_writing() {
 fn train_refuses_too_many_initial_points() {
     let dir = tempfile::tempdir().unwrap();
     let data = write_llff(&dir.path().join("scene"), |_, _| {});
-    let run = dir.path().join("run");
-    assert_clean_error(
-        &fewview(&[
-            "train",
-            "--data",
-            s(&data),
-            "--init-points",
-            "1000000000000",
-            "--out",
-            s(&run),
-        ]),
+    assert_train_refused_before_writing(
+        &data,
+        &dir.path().join("run"),
+        &["--init-points", "1000000000000"],
         &["--init-points 1000000000000", "allowed"],
     );
-    assert!(!run.exists(), "nothing written");
 }
 
 /// Training and held-out views that overlap (explicit lists against the default hold-out, or
@@ -326,37 +320,25 @@ fn train_refuses_overlapping_train_and_test_views() {
     let data = write_llff(&dir.path().join("scene"), |_, _| {});
     let run = dir.path().join("run");
     // 10 views: the default hold-out (every 8th) is [0, 8].
-    assert_clean_error(
-        &fewview(&[
-            "train",
-            "--data",
-            s(&data),
-            "--train-views",
-            "0,8,9",
-            "--iterations",
-            "2",
-            "--out",
-            s(&run),
-        ]),
+    assert_train_refused_before_writing(
+        &data,
+        &run,
+        &["--train-views", "0,8,9", "--iterations", "2"],
         &["train views [0, 8, 9]", "test views [0, 8]", "--test-views"],
     );
-    assert_clean_error(
-        &fewview(&[
-            "train",
-            "--data",
-            s(&data),
+    assert_train_refused_before_writing(
+        &data,
+        &run,
+        &[
             "--train-views",
             "1,2",
             "--test-views",
             "1,3",
             "--iterations",
             "2",
-            "--out",
-            s(&run),
-        ]),
+        ],
         &["train views [1, 2]", "test views [1, 3]", "share [1]"],
     );
-    assert!(!run.exists(), "nothing written");
 }
 
 /// A huge --frames-per-segment used to hang building the path before the output's container

@@ -58,6 +58,22 @@ pub fn unseal<'a>(
     Ok(&body[magic.len()..])
 }
 
+/// Writes `payload` sealed under `magic` ([`seal`]) to `path`, atomically
+/// ([`crate::atomic::write_bytes`]).
+pub fn write(path: &Path, magic: &[u8], payload: &[u8]) -> Result<()> {
+    crate::atomic::write_bytes(path, &seal(magic, payload))
+}
+
+/// Reads a file written by [`write`] and returns its payload, checked as [`unseal`] checks it.
+pub fn read(path: &Path, magic: &[u8], older: &[&[u8]], what: &str) -> Result<Vec<u8>> {
+    let mut bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    let payload_len = unseal(path, &bytes, magic, older, what)?.len();
+    // The payload in place: drop the checksum, then the header.
+    bytes.truncate(magic.len() + payload_len);
+    bytes.drain(..magic.len());
+    Ok(bytes)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -70,6 +86,16 @@ mod tests {
         let file = seal(MAGIC, &payload);
         let back = unseal(Path::new("x"), &file, MAGIC, &[], "a test file").unwrap();
         assert_eq!(back, payload.as_slice());
+    }
+
+    #[test]
+    fn a_written_file_reads_back_its_payload() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("state.bin");
+        write(&path, MAGIC, b"payload").unwrap();
+        assert_eq!(read(&path, MAGIC, &[], "a test file").unwrap(), b"payload");
+        let e = read(&dir.path().join("missing"), MAGIC, &[], "a test file").unwrap_err();
+        assert!(e.to_string().contains("missing"), "{e}");
     }
 
     #[test]

@@ -206,17 +206,14 @@ pub fn save_checkpoint(
             path: path.to_path_buf(),
             message: format!("cannot encode: {e}"),
         })?;
-    let sealed = fewview_scene::sealed::seal(CHECKPOINT_MAGIC, &body);
-    fewview_scene::atomic::write_bytes(path, &sealed)?;
+    fewview_scene::sealed::write(path, CHECKPOINT_MAGIC, &body)?;
     Ok(())
 }
 
 /// Loads a checkpoint written by [`save_checkpoint`]; a truncated or altered file is an error.
 pub fn load_checkpoint(path: &Path) -> Result<Checkpoint, PipelineError> {
-    let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
-    let body = fewview_scene::sealed::unseal(
+    let body = fewview_scene::sealed::read(
         path,
-        &bytes,
         CHECKPOINT_MAGIC,
         &OLDER_CHECKPOINT_MAGICS,
         "a fewview checkpoint",
@@ -226,7 +223,7 @@ pub fn load_checkpoint(path: &Path) -> Result<Checkpoint, PipelineError> {
         message: m,
     };
     let (config, data, state): (TrainConfig, RunData, TrainState) =
-        postcard::from_bytes(body).map_err(|e| bad(format!("corrupt checkpoint: {e}")))?;
+        postcard::from_bytes(&body).map_err(|e| bad(format!("corrupt checkpoint: {e}")))?;
     state
         .model
         .validate()

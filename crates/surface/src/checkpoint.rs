@@ -132,8 +132,7 @@ pub fn save(
     };
     let body = postcard::to_stdvec(&file)
         .map_err(|e| SurfaceError::invalid("checkpoint", e.to_string()))?;
-    let sealed = fewview_scene::sealed::seal(MAGIC, &body);
-    fewview_scene::atomic::write_bytes(path, &sealed).map_err(SurfaceError::Scene)
+    fewview_scene::sealed::write(path, MAGIC, &body).map_err(SurfaceError::Scene)
 }
 
 /// A checkpoint as read, before it is checked against the run that resumes it.
@@ -145,10 +144,8 @@ pub struct Saved {
 
 /// Reads a checkpoint; a truncated or altered file is an error naming it.
 pub fn read(path: &Path) -> Result<Saved> {
-    let bytes = std::fs::read(path).map_err(|e| SurfaceError::io(path, e))?;
-    let body =
-        fewview_scene::sealed::unseal(path, &bytes, MAGIC, &[MAGIC_V1], "a surface checkpoint")?;
-    let file: File = postcard::from_bytes(body)
+    let body = fewview_scene::sealed::read(path, MAGIC, &[MAGIC_V1], "a surface checkpoint")?;
+    let file: File = postcard::from_bytes(&body)
         .map_err(|e| SurfaceError::format(path, format!("corrupt surface checkpoint ({e})")))?;
     let config: TrainConfig = serde_json::from_str(&file.config_json)
         .map_err(|e| SurfaceError::format(path, format!("unreadable configuration ({e})")))?;

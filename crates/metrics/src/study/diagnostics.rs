@@ -201,10 +201,12 @@ fn ess(chains: &[Vec<f64>]) -> f64 {
         t += 2;
     }
     let total = (m * n) as f64;
+    // τ is clamped below at 1 / log₁₀(total draws), as ArviZ does.
+    let ess_of_tau = |tau: f64| total / tau.max(1.0 / total.log10());
     // ArviZ's `max_t = t - 2` is −1 when the sequence stops at once (ρ̂₁ ≤ −1, a chain that
-    // alternates): no lag is summed, τ = −1 + ρ̂₀, clamped below as usual.
+    // alternates): no lag is summed, τ = −1 + ρ̂₀.
     let Some(max_t) = t.checked_sub(2) else {
-        return total / (-1.0 + rho_hat[0]).max(1.0 / total.log10());
+        return ess_of_tau(-1.0 + rho_hat[0]);
     };
     if even > 0.0 {
         rho_hat[max_t + 1] = even;
@@ -221,8 +223,7 @@ fn ess(chains: &[Vec<f64>]) -> f64 {
     let tau = -1.0
         + 2.0 * rho_hat[..=max_t].iter().sum::<f64>()
         + rho_hat.get(max_t + 1).copied().unwrap_or(0.0);
-    let tau = tau.max(1.0 / total.log10());
-    total / tau
+    ess_of_tau(tau)
 }
 
 /// Standard normal quantile Φ⁻¹(p), Wichura's algorithm AS 241 (PPND16, relative accuracy about
