@@ -12,7 +12,9 @@ use crate::error::{Result, SurfaceError};
 use crate::train::{TrainConfig, TrainState};
 
 /// Header of the current format.
-const MAGIC: &[u8] = b"fewview-surface-checkpoint-v2\0";
+const MAGIC: &[u8] = b"fewview-surface-checkpoint-v3\0";
+/// Version 2 recorded no cameras in its run identity.
+const MAGIC_V2: &[u8] = b"fewview-surface-checkpoint-v2\0";
 /// Version 1 (no run identity, no checksum) began with postcard's encoding of this string: its
 /// length, 29, then the bytes.
 const MAGIC_V1: &[u8] = b"\x1dfewview-surface-checkpoint-v1";
@@ -30,6 +32,13 @@ pub struct RunIdentity {
     /// `[width, height]` of the views the matcher saw, when not the training images
     /// (`--match-downscale`).
     pub matching_sizes: Option<Vec<[usize; 2]>>,
+    /// Each training view's camera as loaded ([`camera_record`]): the poses the run starts
+    /// from (before any seeded noise) come from the camera file, which the settings name only
+    /// by option (`--cameras-file`, `--initial-poses loaded`).
+    pub cameras: Vec<CameraRecord>,
+    /// The same for the ground-truth cameras the poses are scored against, when they come from
+    /// another file than the starting ones.
+    pub truth_cameras: Option<Vec<CameraRecord>>,
     /// The run configuration as JSON, with the settings a resume may change removed (see
     /// [`crate::pipeline::run_identity`]).
     pub settings_json: String,
@@ -55,6 +64,22 @@ impl RunIdentity {
                 size(&self.image_sizes),
                 size(&now.image_sizes)
             ));
+        }
+        if let Some(view) = first_differing_camera(&self.cameras, &now.cameras, &now.train_views) {
+            return Some(format!(
+                "camera of training view {view} (another camera file?)"
+            ));
+        }
+        match (&self.truth_cameras, &now.truth_cameras) {
+            (None, None) => {}
+            (Some(a), Some(b)) => {
+                if let Some(view) = first_differing_camera(a, b, &now.train_views) {
+                    return Some(format!(
+                        "ground-truth camera of training view {view} (another camera file?)"
+                    ));
+                }
+            }
+            _ => return Some("ground-truth cameras (another --initial-poses?)".into()),
         }
         let parse = |s: &str| serde_json::from_str::<serde_json::Value>(s).ok();
         match (parse(&self.settings_json), parse(&now.settings_json)) {
@@ -108,6 +133,40 @@ fn differing_paths(
     }
 }
 
+/// A camera as numbers: `fx, fy, cx, cy`, the world-to-camera rotation (row-major) and
+/// translation.
+pub type CameraRecord = [f64; 16];
+
+/// The record of `camera` compared by [`RunIdentity::difference`].
+pub fn camera_record(camera: &fewview_scene::Camera) -> CameraRecord {
+    let k = &camera.intrinsics;
+    let pose = &camera.world_to_camera;
+    let mut record = [0.0; 16];
+    record[..4].copy_from_slice(&[k.fx, k.fy, k.cx, k.cy]);
+    for r in 0..3 {
+        for c in 0..3 {
+            record[4 + 3 * r + c] = pose.rotation[(r, c)];
+        }
+        record[13 + r] = pose.translation[r];
+    }
+    record
+}
+
+/// The name (from `names`) of the first view whose record differs between `a` and `b`; the
+/// first name when their counts differ.
+fn first_differing_camera<'a>(
+    a: &[CameraRecord],
+    b: &[CameraRecord],
+    names: &'a [String],
+) -> Option<&'a str> {
+    let first = names.first().map_or("?", String::as_str);
+    if a.len() != b.len() {
+        return Some(first);
+    }
+    let i = a.iter().zip(b).position(|(x, y)| x != y)?;
+    Some(names.get(i).map_or(first, String::as_str))
+}
+
 #[derive(Serialize, Deserialize)]
 struct File {
     run: RunIdentity,
@@ -144,7 +203,8 @@ pub struct Saved {
 
 /// Reads a checkpoint; a truncated or altered file is an error naming it.
 pub fn read(path: &Path) -> Result<Saved> {
-    let body = fewview_scene::sealed::read(path, MAGIC, &[MAGIC_V1], "a surface checkpoint")?;
+    let body =
+        fewview_scene::sealed::read(path, MAGIC, &[MAGIC_V2, MAGIC_V1], "a surface checkpoint")?;
     let file: File = postcard::from_bytes(&body)
         .map_err(|e| SurfaceError::format(path, format!("corrupt surface checkpoint ({e})")))?;
     let config: TrainConfig = serde_json::from_str(&file.config_json)

@@ -575,9 +575,15 @@ pub fn check_reference(reference: &Mesh) -> Result<()> {
 /// resolution, evaluated views and their scale).
 pub fn run_identity(
     dataset: &Dataset,
+    truth: Option<&Dataset>,
     matching: Option<&Dataset>,
     config: &RunConfig,
 ) -> Result<checkpoint::RunIdentity> {
+    let cameras = |ds: &Dataset| -> Vec<checkpoint::CameraRecord> {
+        ds.train_views()
+            .map(|v| checkpoint::camera_record(&v.camera))
+            .collect()
+    };
     let sizes = |ds: &Dataset| -> Vec<[usize; 2]> {
         ds.train_views()
             .map(|v| [v.image.width, v.image.height])
@@ -603,6 +609,8 @@ pub fn run_identity(
         train_views: dataset.train_views().map(|v| v.name.clone()).collect(),
         image_sizes: sizes(dataset),
         matching_sizes: matching.map(sizes),
+        cameras: cameras(dataset),
+        truth_cameras: truth.map(cameras),
         settings_json: settings.to_string(),
     })
 }
@@ -630,7 +638,7 @@ pub fn run(
     if let Some(reference) = reference {
         check_reference(reference)?;
     }
-    let identity = run_identity(dataset, matching, config)?;
+    let identity = run_identity(dataset, truth, matching, config)?;
     let ckpt = checkpoint_path(out);
     let saved = if resume && ckpt.exists() {
         let saved = checkpoint::read(&ckpt)?;

@@ -129,7 +129,7 @@ fn resume_reproduces_the_uninterrupted_run() {
     for _ in 0..4 {
         first.step().unwrap();
     }
-    let identity = run_identity(&ds, None, &config).unwrap();
+    let identity = run_identity(&ds, None, None, &config).unwrap();
     checkpoint::save(&ckpt, &identity, &config.train, &first.state).unwrap();
     drop(first);
     let mut resumed = new_trainer();
@@ -201,7 +201,7 @@ fn checkpoint_of_another_configuration_is_refused() {
     .unwrap();
     let dir = tempfile::tempdir().unwrap();
     let ckpt = dir.path().join("checkpoint.bin");
-    let identity = run_identity(&ds, None, &config).unwrap();
+    let identity = run_identity(&ds, None, None, &config).unwrap();
     checkpoint::save(&ckpt, &identity, &config.train, &t.state).unwrap();
     let mut other = config.train.clone();
     other.seed += 1;
@@ -217,6 +217,13 @@ fn checkpoint_of_another_configuration_is_refused() {
     let mut v1 = b"\x1dfewview-surface-checkpoint-v1".to_vec();
     v1.extend_from_slice(&[0; 64]);
     std::fs::write(&ckpt, &v1).unwrap();
+    let err = checkpoint::load(&ckpt, &config.train)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("from an older version of fewview"), "{err}");
+    // Version 2 (sealed, but its run identity records no cameras).
+    let v2 = fewview_scene::sealed::seal(b"fewview-surface-checkpoint-v2\0", &[0; 64]);
+    std::fs::write(&ckpt, &v2).unwrap();
     let err = checkpoint::load(&ckpt, &config.train)
         .unwrap_err()
         .to_string();
@@ -244,7 +251,7 @@ fn resume_refuses_a_checkpoint_of_another_run_before_writing() {
     t.step().unwrap();
     let dir = tempfile::tempdir().unwrap();
     let ckpt = dir.path().join("saved.bin");
-    let identity = run_identity(&ds, None, &config).unwrap();
+    let identity = run_identity(&ds, None, None, &config).unwrap();
     checkpoint::save(&ckpt, &identity, &config.train, &t.state).unwrap();
 
     let other_views = six_view_scene(64, 48, vec![1, 3, 5]);
@@ -252,17 +259,39 @@ fn resume_refuses_a_checkpoint_of_another_run_before_writing() {
     let mut noisier = config.clone();
     noisier.initial_poses = InitialPoses::NoisyGroundTruth { sigma: 0.1 };
     let shorter = tiny_config(1);
-    let cases: [(&Dataset, &RunConfig, &str); 4] = [
-        (&ds, &noisier, "settings initial_poses"),
-        (&other_views, &config, "training views"),
-        (&other_size, &config, "image size 64x48 (now 32x24"),
-        (&ds, &shorter, "is at iteration 2, past --iterations 1"),
+    // The same settings and views, but the camera file moved the last training view by 1 mm
+    // in a 1 m scene: the run would start from other poses.
+    let mut moved_camera = ds.clone();
+    let last = *moved_camera.train.last().unwrap();
+    moved_camera.views[last]
+        .camera
+        .world_to_camera
+        .translation
+        .x += 1e-3;
+    let moved_name = moved_camera.views[last].name.clone();
+    let moved_expected = format!("camera of training view {moved_name}");
+    let cases: [(&Dataset, Option<&Dataset>, &RunConfig, &str); 6] = [
+        (&ds, None, &noisier, "settings initial_poses"),
+        (&other_views, None, &config, "training views"),
+        (&other_size, None, &config, "image size 64x48 (now 32x24"),
+        (
+            &ds,
+            None,
+            &shorter,
+            "is at iteration 2, past --iterations 1",
+        ),
+        (&moved_camera, None, &config, &moved_expected),
+        (&ds, Some(&moved_camera), &config, "ground-truth cameras"),
     ];
-    for (i, (data, cfg, expected)) in cases.into_iter().enumerate() {
+    for (i, (data, truth, cfg, expected)) in cases.into_iter().enumerate() {
         let out = dir.path().join(format!("case{i}"));
         std::fs::create_dir_all(&out).unwrap();
         std::fs::copy(&ckpt, out.join("checkpoint.bin")).unwrap();
-        let err = run(inputs(data, None), cfg, &out, true, &mut silent)
+        let run_inputs = RunInputs {
+            truth,
+            ..inputs(data, None)
+        };
+        let err = run(run_inputs, cfg, &out, true, &mut silent)
             .expect_err("refused")
             .to_string();
         assert!(
