@@ -18,6 +18,7 @@ pub mod hashgrid;
 pub mod losses;
 pub mod matching;
 pub mod mlp;
+pub mod patch_adjustment;
 pub mod pipeline;
 pub mod pose;
 pub mod rays;

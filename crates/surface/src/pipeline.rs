@@ -42,6 +42,7 @@ use crate::matching::sift::{SiftMatcher, SiftOptions};
 use crate::matching::{
     Match, MatchInput, MatchPrecision, covisible_pairs, epipolar_precision, match_pairs,
 };
+use crate::patch_adjustment::{PatchAdjustmentOptions, PatchAdjustmentReport, adjust_patches};
 use crate::pose::perturb_poses;
 use crate::schedule::PoseTiming;
 use crate::train::{StepStats, TrainConfig, TrainView, Trainer};
@@ -108,6 +109,11 @@ pub struct RunConfig {
     /// `train`'s.
     #[serde(default)]
     pub pose_timing_without_warmup: Option<PoseTiming>,
+    /// Deviation, used by [`crate::schedule::Schedule::Cpu`]: after an epipolar warm-up that
+    /// ran on dense matches, refine the poses photometrically on small planes seeded by the
+    /// matches ([`crate::patch_adjustment`]).
+    #[serde(default)]
+    pub patch_adjustment: Option<PatchAdjustmentOptions>,
 }
 
 fn default_max_pair_angle() -> f64 {
@@ -130,6 +136,7 @@ impl Default for RunConfig {
             densify: None,
             densify_if_needed: None,
             pose_timing_without_warmup: None,
+            patch_adjustment: None,
         }
     }
 }
@@ -163,6 +170,9 @@ pub struct Prepared {
     /// epipolar warm-up.
     pub start: Vec<Se3>,
     pub warmup: Option<WarmupReport>,
+    /// The photometric patch adjustment's report and the warm-up's poses it started from,
+    /// when it ran ([`RunConfig::patch_adjustment`]).
+    pub patch_adjustment: Option<(PatchAdjustmentReport, Vec<Se3>)>,
     pub matches: Vec<Match>,
     pub match_precision: Option<MatchPrecision>,
     /// Why dense matches were grown under [`RunConfig::densify_if_needed`] (the warm-up's
@@ -262,6 +272,27 @@ pub fn prepare_with_matching(
             (poses, Some(report))
         }
     };
+    let dense = densified_because.is_some() || config.densify.is_some();
+    let warmed_up = warmup.as_ref().is_some_and(|w| w.skipped.is_none());
+    let (start, patch_adjustment) = match &config.patch_adjustment {
+        Some(opts) if dense && warmed_up => {
+            let images: Vec<&Image> = matching.train_views().map(|v| &v.image).collect();
+            let masks: Vec<Option<&Image>> = matching
+                .train_views()
+                .map(|v| v.mask.as_ref().filter(|_| config.train.use_masks))
+                .collect();
+            let (poses, report) = adjust_patches(
+                &images,
+                &masks,
+                &match_intrinsics,
+                &start,
+                &fine_matches,
+                opts,
+            );
+            (poses, Some((report, start)))
+        }
+        _ => (start, None),
+    };
     let matches = fine_matches
         .iter()
         .map(|m| Match {
@@ -277,6 +308,7 @@ pub fn prepare_with_matching(
         initial,
         start,
         warmup,
+        patch_adjustment,
         matches,
         match_precision,
         densified_because,
@@ -401,7 +433,12 @@ pub struct RunReport {
     pub initial_pose_error: PoseError,
     /// After the epipolar warm-up, when it ran.
     pub warmup: Option<WarmupReport>,
+    /// After the epipolar warm-up (before the patch adjustment, when that ran).
     pub warmup_pose_error: Option<PoseError>,
+    /// The photometric patch adjustment after the warm-up, when it ran, and the pose error of
+    /// the poses it gave the training.
+    pub patch_adjustment: Option<PatchAdjustmentReport>,
+    pub patch_adjustment_pose_error: Option<PoseError>,
     /// When the poses were released and their learning rate, as the training used them.
     pub pose_timing: PoseTiming,
     /// Whether that is [`RunConfig::pose_timing_without_warmup`] because the warm-up declined.
@@ -485,6 +522,11 @@ pub enum Event<'a> {
     /// The epipolar warm-up finished; the pose error of its poses.
     WarmedUp {
         report: &'a WarmupReport,
+        pose_error: &'a PoseError,
+    },
+    /// The photometric patch adjustment finished; the pose error of its poses.
+    PatchesAdjusted {
+        report: &'a PatchAdjustmentReport,
         pose_error: &'a PoseError,
     },
     Step(&'a StepStats),
@@ -676,10 +718,25 @@ pub fn run(
         &out.join("poses_initial.json"),
         &cams(&prep.initial),
     )?;
+    let epipolar_poses = prep
+        .patch_adjustment
+        .as_ref()
+        .map_or(&prep.start, |(_, before)| before);
     let warmup_pose_error = match &prep.warmup {
         Some(report) => {
-            let err = pose_error(&prep.start, &prep.ground_truth)?;
+            let err = pose_error(epipolar_poses, &prep.ground_truth)?;
             on_event(Event::WarmedUp {
+                report,
+                pose_error: &err,
+            });
+            Some(err)
+        }
+        None => None,
+    };
+    let patch_adjustment_pose_error = match &prep.patch_adjustment {
+        Some((report, _)) => {
+            let err = pose_error(&prep.start, &prep.ground_truth)?;
+            on_event(Event::PatchesAdjusted {
                 report,
                 pose_error: &err,
             });
@@ -864,6 +921,8 @@ pub fn run(
         initial_pose_error: initial_err,
         warmup: prep.warmup.clone(),
         warmup_pose_error,
+        patch_adjustment: prep.patch_adjustment.as_ref().map(|(r, _)| r.clone()),
+        patch_adjustment_pose_error,
         pose_timing,
         pose_timing_fell_back: fell_back,
         final_pose_error: final_err,

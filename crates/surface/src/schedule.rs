@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::adam::ExpSchedule;
 use crate::matching::densify::DensifyOptions;
+use crate::patch_adjustment::PatchAdjustmentOptions;
 use crate::pipeline::RunConfig;
 use crate::train::TrainConfig;
 use crate::warmup::WarmupOptions;
@@ -78,7 +79,9 @@ pub enum Schedule {
     /// the warm-up, dense ones are grown on a 4-pixel grid first
     /// ([`RunConfig::densify_if_needed`]), and the warm-up ends with the covariance polish
     /// ([`WarmupOptions::covariance_polish`]; DTU's wide triplet: 12° → 0.10–0.13°, without
-    /// the polish 0.16–0.19°; the analytic ring 13.3° → 0.265°, without 0.297°). When the
+    /// the polish 0.16–0.19°; the analytic ring 13.3° → 0.265°, without 0.297°), followed by
+    /// the photometric patch adjustment ([`RunConfig::patch_adjustment`]; the wide triplet
+    /// 0.084–0.085°, the ring 0.107°). When the
     /// warm-up still declines (e.g. a ring of views whose neighbours alone are matched),
     /// holding the unrefined noisy poses for most of the run would waste it, so the run falls
     /// back to [`PoseTiming::PAPER`] ([`RunConfig::pose_timing_without_warmup`]).
@@ -96,6 +99,7 @@ impl Schedule {
                 PoseTiming::PAPER.apply_to(&mut config.train);
                 config.densify_if_needed = None;
                 config.pose_timing_without_warmup = None;
+                config.patch_adjustment = None;
             }
             Schedule::Cpu => {
                 config.pose_warmup = Some(WarmupOptions {
@@ -109,6 +113,7 @@ impl Schedule {
                     ..Default::default()
                 });
                 config.pose_timing_without_warmup = Some(PoseTiming::PAPER);
+                config.patch_adjustment = Some(PatchAdjustmentOptions::default());
             }
         }
     }
@@ -142,6 +147,7 @@ mod tests {
         assert_eq!(c.pose_timing_without_warmup, Some(PoseTiming::PAPER));
         assert_eq!(c.densify, None);
         assert_eq!(c.densify_if_needed.as_ref().map(|d| d.spacing_px), Some(4));
+        assert_eq!(c.patch_adjustment, Some(PatchAdjustmentOptions::default()));
         // Back to the paper's clears all of it.
         Schedule::Paper.apply(&mut c);
         assert_eq!(c, RunConfig::default());

@@ -10,6 +10,7 @@ use fewview_surface::field::{EncoderKind, FdScheme};
 use fewview_surface::matching::densify::DensifyOptions;
 use fewview_surface::matching::refine::{AffineRefineOptions, WarpModel};
 use fewview_surface::matching::sift::SiftOptions;
+use fewview_surface::patch_adjustment::PatchAdjustmentOptions;
 use fewview_surface::pipeline::{
     Event, InitialPoses, RunConfig, RunInputs, RunReport, run as run_pipeline,
 };
@@ -173,6 +174,16 @@ pub struct Args {
     /// No covariance polish after the warm-up, whatever `--schedule` says.
     #[arg(long)]
     pub no_warmup_covariance: bool,
+    /// After a warm-up on dense matches, refine the poses photometrically: each match seeds a
+    /// small plane in 3D (depth and normal), compared across every view that sees it through
+    /// the homography it induces, in a bundle adjustment with the poses (a deviation: the paper
+    /// has no warm-up; see crates/surface/README.md). On with `--schedule cpu`; affects only
+    /// runs with dense matches (`--densify`, or grown by `--densify auto`).
+    #[arg(long, conflicts_with = "no_patch_adjustment")]
+    pub patch_adjustment: bool,
+    /// No patch adjustment after the warm-up, whatever `--schedule` says.
+    #[arg(long)]
+    pub no_patch_adjustment: bool,
     /// What those pairs must form for the warm-up to run: `rigid` (their baseline directions fix
     /// every baseline's length up to one scale, e.g. chained triangles; default; `triangles` is
     /// the old name) or `connected` (any connected graph, e.g. the wide DTU triplet's chain
@@ -367,6 +378,9 @@ impl Args {
         let covariance_polish = (scheduled.is_some_and(|w| w.covariance_polish)
             || self.warmup_covariance)
             && !self.no_warmup_covariance;
+        let patch_adjustment =
+            (c.patch_adjustment.is_some() || self.patch_adjustment) && !self.no_patch_adjustment;
+        c.patch_adjustment = patch_adjustment.then(PatchAdjustmentOptions::default);
         c.pose_warmup = warm_up.then(|| WarmupOptions {
             min_matches_per_pair: self.warmup_min_matches,
             connectivity,
@@ -601,6 +615,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 100.0 * pose_error.translation
             ),
         }),
+        Event::PatchesAdjusted { report, pose_error } => bar.suspend(|| match &report.skipped {
+            Some(why) => eprintln!("patch adjustment skipped: {why}"),
+            None => eprintln!(
+                "patch adjustment ({} patches in {} views beyond their own, {} of them joined; \
+                     {} iterations): rotation error {:.3}°, translation error (×100) {:.3}",
+                report.patches,
+                report.observations,
+                report.joined,
+                report.iterations,
+                pose_error.rotation_deg,
+                100.0 * pose_error.translation
+            ),
+        }),
         Event::PoseTimingFallback(timing) => bar.suspend(|| {
             let from = if timing.start > 0.0 {
                 format!("{:.0} % into the run", 100.0 * timing.start)
@@ -635,6 +662,17 @@ fn print_report(r: &RunReport, out: &std::path::Path) {
             "  after warm-up  R {:.3}°   t(×100) {:.2}",
             w.rotation_deg,
             100.0 * w.translation
+        );
+    }
+    let adjusted = r
+        .patch_adjustment
+        .as_ref()
+        .is_some_and(|p| p.skipped.is_none());
+    if let Some(p) = r.patch_adjustment_pose_error.as_ref().filter(|_| adjusted) {
+        println!(
+            "  after patches  R {:.3}°   t(×100) {:.2}",
+            p.rotation_deg,
+            100.0 * p.translation
         );
     }
     let sparf = &r.rotation_at_sparf_eps;

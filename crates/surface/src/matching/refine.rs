@@ -102,10 +102,10 @@ impl AffineRefineOptions {
 }
 
 /// A grey plane with its gradients, sampled bilinearly with pixel centres at half-integers.
-pub(super) struct Plane {
-    pub(super) width: usize,
-    pub(super) height: usize,
-    value: Vec<f32>,
+pub(crate) struct Plane {
+    pub(crate) width: usize,
+    pub(crate) height: usize,
+    pub(crate) value: Vec<f32>,
     grad_x: Vec<f32>,
     grad_y: Vec<f32>,
 }
@@ -113,7 +113,7 @@ pub(super) struct Plane {
 impl Plane {
     /// Luminance (Rec. 601 weights, as the SIFT matcher's grey image) blurred by `sigma`, with
     /// central-difference gradients (one-sided at the borders).
-    pub(super) fn new(image: &Image, sigma: f32) -> Self {
+    pub(crate) fn new(image: &Image, sigma: f32) -> Self {
         let (w, h) = (image.width, image.height);
         let grey: Vec<f32> = (0..w * h)
             .map(|i| luminance(image.pixel(i % w, i / w)))
@@ -155,7 +155,7 @@ impl Plane {
     }
 
     /// Whether `(x, y)` lies where all four bilinear taps are inside the image.
-    fn inside(&self, x: f64, y: f64) -> bool {
+    pub(crate) fn inside(&self, x: f64, y: f64) -> bool {
         x >= 0.5 && y >= 0.5 && x <= self.width as f64 - 0.5 && y <= self.height as f64 - 0.5
     }
 
@@ -175,7 +175,7 @@ impl Plane {
         ]
     }
 
-    fn sample(&self, plane: &[f32], x: f64, y: f64) -> f64 {
+    pub(crate) fn sample(&self, plane: &[f32], x: f64, y: f64) -> f64 {
         self.taps(x, y)
             .iter()
             .map(|&(i, t)| plane[i] as f64 * t)
@@ -184,13 +184,13 @@ impl Plane {
 }
 
 /// Offsets of the window and their Gaussian weights.
-pub(super) struct Window {
-    offsets: Vec<Vector2<f64>>,
-    weights: Vec<f64>,
+pub(crate) struct Window {
+    pub(crate) offsets: Vec<Vector2<f64>>,
+    pub(crate) weights: Vec<f64>,
 }
 
 impl Window {
-    pub(super) fn new(half: usize) -> Self {
+    pub(crate) fn new(half: usize) -> Self {
         let h = half as isize;
         let sigma = (half as f64 / 2.0).max(0.5);
         let mut offsets = Vec::new();
