@@ -412,7 +412,8 @@ fn surface_runs_on_the_built_in_analytic_scene_without_a_dataset() {
     // The default (CPU) schedule warms the poses up. The ring's sparse matches cannot tie its
     // views together, so dense ones are grown first (pairs 90° apart composed through the
     // view between); the warm-up then runs (measured 13.3° → 0.265° with the covariance
-    // polish, which weighs every grown match) and the poses are held for 75 % of the run.
+    // polish, which weighs every grown match), then the patch adjustment, and the poses are
+    // held for 75 % of the run.
     assert!(
         metrics["densified_because"].is_string(),
         "{}",
@@ -432,6 +433,17 @@ fn surface_runs_on_the_built_in_analytic_scene_without_a_dataset() {
         .as_f64()
         .unwrap();
     assert!(warmed < 1.0, "{warmed}");
+    // After dense matches the photometric patch adjustment follows (measured 0.265° → 0.107°).
+    assert!(
+        metrics["patch_adjustment"]["skipped"].is_null(),
+        "{}",
+        metrics["patch_adjustment"]
+    );
+    assert!(metrics["patch_adjustment"]["joined"].as_u64().unwrap() > 1000);
+    let patched = metrics["patch_adjustment_pose_error"]["rotation_deg"]
+        .as_f64()
+        .unwrap();
+    assert!(patched < 0.6 * warmed, "{patched} vs {warmed}");
     // The same poses scored at SPARF's ε = 1e-7: every view's floor drops from 0.081° to
     // 0.026°, so the mean over the eight views drops by at least an eighth of that (Alg. 1's
     // anchor is aligned exactly).
@@ -439,6 +451,10 @@ fn surface_runs_on_the_built_in_analytic_scene_without_a_dataset() {
     assert_eq!(sparf["eps"].as_f64(), Some(1e-7));
     for (at_printed, at_sparf) in [
         (&metrics["warmup_pose_error"], &sparf["warmup_deg"]),
+        (
+            &metrics["patch_adjustment_pose_error"],
+            &sparf["patch_adjustment_deg"],
+        ),
         (&metrics["final_pose_error"], &sparf["final_deg"]),
     ] {
         let (printed, sparf) = (

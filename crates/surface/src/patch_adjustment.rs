@@ -217,8 +217,7 @@ impl Views {
 
     /// Normalised cross-correlation of the patch's template with `values` (window-weighted).
     fn ncc(&self, patch: &Patch, values: &[f64]) -> f64 {
-        let (mean, centred) = self.centred(values);
-        let _ = mean;
+        let (_, centred) = self.centred(values);
         let (mut cross, mut energy) = (0.0, 0.0);
         for ((w, t), c) in self
             .window
@@ -970,6 +969,15 @@ mod tests {
         matches
     }
 
+    /// The cameras, their true poses, their renders and their intrinsics.
+    fn scene() -> (Vec<Camera>, Vec<Se3>, Vec<Image>, Vec<Intrinsics>) {
+        let cameras = cameras();
+        let truth = cameras.iter().map(|c| c.world_to_camera).collect();
+        let images = cameras.iter().map(render).collect();
+        let intrinsics = cameras.iter().map(|c| c.intrinsics).collect();
+        (cameras, truth, images, intrinsics)
+    }
+
     /// Rotation (degrees) between the relative rotations of views `i` and `j` under two sets of
     /// poses.
     fn relative_rotation_error(a: &[Se3], b: &[Se3], i: usize, j: usize) -> f64 {
@@ -992,11 +1000,8 @@ mod tests {
     /// interpolation: with a blur of 0.05 px instead of 0.7 it is 0.004–0.007°.
     #[test]
     fn patches_on_two_planes_recover_the_relative_poses() {
-        let cameras = cameras();
-        let truth: Vec<Se3> = cameras.iter().map(|c| c.world_to_camera).collect();
-        let images: Vec<Image> = cameras.iter().map(render).collect();
+        let (cameras, truth, images, intrinsics) = scene();
         let image_refs: Vec<&Image> = images.iter().collect();
-        let intrinsics: Vec<Intrinsics> = cameras.iter().map(|c| c.intrinsics).collect();
         let matches = exact_matches(&cameras);
         let start = vec![
             truth[0],
@@ -1051,11 +1056,8 @@ mod tests {
     /// Without enough patches (two matches) the poses come back as they were, with the reason.
     #[test]
     fn too_few_patches_leave_the_poses_alone() {
-        let cameras = cameras();
-        let truth: Vec<Se3> = cameras.iter().map(|c| c.world_to_camera).collect();
-        let images: Vec<Image> = cameras.iter().map(render).collect();
+        let (cameras, truth, images, intrinsics) = scene();
         let image_refs: Vec<&Image> = images.iter().collect();
-        let intrinsics: Vec<Intrinsics> = cameras.iter().map(|c| c.intrinsics).collect();
         let matches: Vec<Match> = exact_matches(&cameras).into_iter().take(2).collect();
         let (poses, report) = adjust_patches(
             &image_refs,

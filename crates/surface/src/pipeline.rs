@@ -478,6 +478,8 @@ pub struct SparfEpsRotation {
     pub eps: f64,
     pub initial_deg: f64,
     pub warmup_deg: Option<f64>,
+    /// After the patch adjustment, when it ran.
+    pub patch_adjustment_deg: Option<f64>,
     pub final_deg: f64,
     pub final_per_view_deg: Vec<f64>,
 }
@@ -799,6 +801,10 @@ pub fn run(
         eps: SPARF_CODE_EPS,
         initial_deg: at_sparf_eps(&prep.initial)?.rotation_deg,
         warmup_deg: match &warmup_pose_error {
+            Some(_) => Some(at_sparf_eps(epipolar_poses)?.rotation_deg),
+            None => None,
+        },
+        patch_adjustment_deg: match &patch_adjustment_pose_error {
             Some(_) => Some(at_sparf_eps(&prep.start)?.rotation_deg),
             None => None,
         },

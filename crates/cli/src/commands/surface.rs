@@ -680,10 +680,14 @@ fn print_report(r: &RunReport, out: &std::path::Path) {
         "  at ε = {:.0e}     R {:.3}° → {}{:.3}° (SPARF's code; paper 001 Table 1's convention)",
         sparf.eps,
         sparf.initial_deg,
-        match sparf.warmup_deg.filter(|_| warmed_up) {
-            Some(w) => format!("{w:.3}° → "),
-            None => String::new(),
-        },
+        [
+            sparf.warmup_deg.filter(|_| warmed_up),
+            sparf.patch_adjustment_deg.filter(|_| adjusted)
+        ]
+        .iter()
+        .flatten()
+        .map(|w| format!("{w:.3}° → "))
+        .collect::<String>(),
         sparf.final_deg
     );
     println!(
