@@ -81,7 +81,7 @@ pub enum Schedule {
     /// ([`WarmupOptions::covariance_polish`]; DTU's wide triplet: 12° → 0.10–0.13°, without
     /// the polish 0.16–0.19°; the analytic ring 13.3° → 0.265°, without 0.297°), followed by
     /// the photometric patch adjustment ([`RunConfig::patch_adjustment`]; the wide triplet
-    /// 0.084–0.085°, the ring 0.107°). When the
+    /// 0.082–0.085°, the ring 0.107°). When the
     /// warm-up still declines (e.g. a ring of views whose neighbours alone are matched),
     /// holding the unrefined noisy poses for most of the run would waste it, so the run falls
     /// back to [`PoseTiming::PAPER`] ([`RunConfig::pose_timing_without_warmup`]).
