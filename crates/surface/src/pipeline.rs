@@ -114,6 +114,11 @@ pub struct RunConfig {
     /// matches ([`crate::patch_adjustment`]).
     #[serde(default)]
     pub patch_adjustment: Option<PatchAdjustmentOptions>,
+    /// Deviation, used by [`crate::schedule::Schedule::Cpu`]: when the patch adjustment ran,
+    /// keep its poses for the whole training (`pose_start` 1). Released at 75 %, the field's
+    /// gradients moved them away on every wide DTU seed measured (crate README).
+    #[serde(default)]
+    pub hold_poses_after_patch_adjustment: bool,
 }
 
 fn default_max_pair_angle() -> f64 {
@@ -137,6 +142,7 @@ impl Default for RunConfig {
             densify_if_needed: None,
             pose_timing_without_warmup: None,
             patch_adjustment: None,
+            hold_poses_after_patch_adjustment: false,
         }
     }
 }
@@ -145,8 +151,15 @@ impl RunConfig {
     /// The training configuration a run uses: `train`, with the pose timing replaced by
     /// [`Self::pose_timing_without_warmup`] when the warm-up was asked for and declined
     /// (`warmup` is its report). The flag says whether that happened.
-    pub fn effective_train(&self, warmup: Option<&WarmupReport>) -> (TrainConfig, bool) {
+    pub fn effective_train(
+        &self,
+        warmup: Option<&WarmupReport>,
+        patches_adjusted: bool,
+    ) -> (TrainConfig, bool) {
         let mut train = self.train.clone();
+        if patches_adjusted && self.hold_poses_after_patch_adjustment {
+            train.pose_start = 1.0;
+        }
         let declined = warmup.is_some_and(|w| w.skipped.is_some());
         match self.pose_timing_without_warmup {
             Some(timing) if declined => {
@@ -746,7 +759,11 @@ pub fn run(
         }
         None => None,
     };
-    let (train_config, fell_back) = config.effective_train(prep.warmup.as_ref());
+    let patches_adjusted = prep
+        .patch_adjustment
+        .as_ref()
+        .is_some_and(|(report, _)| report.skipped.is_none());
+    let (train_config, fell_back) = config.effective_train(prep.warmup.as_ref(), patches_adjusted);
     let pose_timing = PoseTiming::of(&train_config);
     if fell_back {
         on_event(Event::PoseTimingFallback(&pose_timing));

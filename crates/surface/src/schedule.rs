@@ -81,7 +81,8 @@ pub enum Schedule {
     /// ([`WarmupOptions::covariance_polish`]; DTU's wide triplet: 12° → 0.10–0.13°, without
     /// the polish 0.16–0.19°; the analytic ring 13.3° → 0.265°, without 0.297°), followed by
     /// the photometric patch adjustment ([`RunConfig::patch_adjustment`]; the wide triplet
-    /// 0.082–0.085°, the ring 0.107°). When the
+    /// 0.082–0.085°, the ring 0.107°), whose poses are then kept for the whole run
+    /// ([`RunConfig::hold_poses_after_patch_adjustment`]). When the
     /// warm-up still declines (e.g. a ring of views whose neighbours alone are matched),
     /// holding the unrefined noisy poses for most of the run would waste it, so the run falls
     /// back to [`PoseTiming::PAPER`] ([`RunConfig::pose_timing_without_warmup`]).
@@ -100,6 +101,7 @@ impl Schedule {
                 config.densify_if_needed = None;
                 config.pose_timing_without_warmup = None;
                 config.patch_adjustment = None;
+                config.hold_poses_after_patch_adjustment = false;
             }
             Schedule::Cpu => {
                 config.pose_warmup = Some(WarmupOptions {
@@ -114,6 +116,7 @@ impl Schedule {
                 });
                 config.pose_timing_without_warmup = Some(PoseTiming::PAPER);
                 config.patch_adjustment = Some(PatchAdjustmentOptions::default());
+                config.hold_poses_after_patch_adjustment = true;
             }
         }
     }
@@ -148,6 +151,12 @@ mod tests {
         assert_eq!(c.densify, None);
         assert_eq!(c.densify_if_needed.as_ref().map(|d| d.spacing_px), Some(4));
         assert_eq!(c.patch_adjustment, Some(PatchAdjustmentOptions::default()));
+        assert!(c.hold_poses_after_patch_adjustment);
+        // After a patch adjustment the poses are held for the whole run.
+        let ran = warmup_report(None);
+        let (held, fell_back) = c.effective_train(Some(&ran), true);
+        assert_eq!((held.pose_start, fell_back), (1.0, false));
+        assert_eq!(c.effective_train(Some(&ran), false).0.pose_start, 0.75);
         // Back to the paper's clears all of it.
         Schedule::Paper.apply(&mut c);
         assert_eq!(c, RunConfig::default());
@@ -171,9 +180,9 @@ mod tests {
         Schedule::Cpu.apply(&mut c);
         let ran = warmup_report(None);
         let declined = warmup_report(Some("too few matches"));
-        let (train, fell_back) = c.effective_train(Some(&ran));
+        let (train, fell_back) = c.effective_train(Some(&ran), false);
         assert_eq!((train, fell_back), (c.train.clone(), false));
-        let (train, fell_back) = c.effective_train(Some(&declined));
+        let (train, fell_back) = c.effective_train(Some(&declined), false);
         assert!(fell_back);
         assert_eq!(PoseTiming::of(&train), PoseTiming::PAPER);
         // Everything else is the configured training.
@@ -182,8 +191,11 @@ mod tests {
         assert_eq!(train, expected);
         // Without a fallback, or without a warm-up, the configuration is used as it is.
         c.pose_timing_without_warmup = None;
-        assert_eq!(c.effective_train(Some(&declined)), (c.train.clone(), false));
+        assert_eq!(
+            c.effective_train(Some(&declined), false),
+            (c.train.clone(), false)
+        );
         Schedule::Cpu.apply(&mut c);
-        assert_eq!(c.effective_train(None), (c.train.clone(), false));
+        assert_eq!(c.effective_train(None, false), (c.train.clone(), false));
     }
 }

@@ -425,7 +425,8 @@ fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
     // view 25, gets ~320 matches, triangles form, and every seed's warm-up runs; the CPU
     // schedule's covariance polish then weighs each dense match by its Lucas–Kanade
     // uncertainty. Measured 0.103° / 0.126° / 0.110°, t×100 0.39 / 0.40 / 0.48 (without the
-    // polish 0.163° / 0.159° / 0.186°, t×100 0.64 / 0.63 / 0.86).
+    // polish 0.163° / 0.159° / 0.186°, t×100 0.64 / 0.63 / 0.86). The patch adjustment then
+    // lands under 0.1° (its measured figures in crates/surface/README.md).
     for seed in 0..3 {
         let mut cpu = RunConfig::default();
         Schedule::Cpu.apply(&mut cpu);
@@ -445,12 +446,17 @@ fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
         let why = prep.densified_because.as_deref().unwrap_or_default();
         assert!(why.contains("too few matches"), "seed {seed}: {why:?}");
         assert!(prep.warmup.as_ref().unwrap().skipped.is_none());
-        let after = error(&prep.start, &prep.ground_truth);
+        let (patches, warmed) = prep.patch_adjustment.as_ref().expect("patches adjusted");
+        let after = error(warmed, &prep.ground_truth);
+        let adjusted = error(&prep.start, &prep.ground_truth);
         eprintln!(
-            "wide dense, seed {seed}: {} matches, R {:.3}°, t×100 {:.2}",
+            "wide dense, seed {seed}: {} matches, R {:.3}°, t×100 {:.2}; {} patches: R {:.3}°, t×100 {:.2}",
             prep.matches.len(),
             after.rotation_deg,
-            100.0 * after.translation
+            100.0 * after.translation,
+            patches.patches,
+            adjusted.rotation_deg,
+            100.0 * adjusted.translation
         );
         assert!(
             prep.warmup.as_ref().unwrap().covariance_weighted > 1000,
@@ -458,5 +464,13 @@ fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
         );
         assert!(after.rotation_deg < 0.14, "seed {seed}: {after:?}");
         assert!(after.translation < 0.0055, "seed {seed}: {after:?}");
+        // The photometric patch adjustment that follows (CPU schedule) meets paper 001's
+        // target on every seed.
+        assert!(
+            patches.skipped.is_none() && patches.joined > 800,
+            "{patches:?}"
+        );
+        assert!(adjusted.rotation_deg < 0.1, "seed {seed}: {adjusted:?}");
+        assert!(adjusted.translation < 0.006, "seed {seed}: {adjusted:?}");
     }
 }

@@ -178,7 +178,9 @@ pub struct Args {
     /// small plane in 3D (depth and normal), compared across every view that sees it through
     /// the homography it induces, in a bundle adjustment with the poses (a deviation: the paper
     /// has no warm-up; see crates/surface/README.md). On with `--schedule cpu`; affects only
-    /// runs with dense matches (`--densify`, or grown by `--densify auto`).
+    /// runs with dense matches (`--densify`, or grown by `--densify auto`). With `--schedule
+    /// cpu` the adjusted poses are then held for the whole run unless `--pose-start` or
+    /// `--pose-lr` is given.
     #[arg(long, conflicts_with = "no_patch_adjustment")]
     pub patch_adjustment: bool,
     /// No patch adjustment after the warm-up, whatever `--schedule` says.
@@ -192,7 +194,8 @@ pub struct Args {
     #[arg(long, default_value = "rigid", value_name = "rigid|connected")]
     pub warmup_connectivity: String,
     /// Hold the poses fixed for this fraction of the iterations while the field forms, then
-    /// refine them (default from `--schedule`: 0.75 for `cpu`, a deviation; 0 for `paper`).
+    /// refine them (default from `--schedule`: 0.75 for `cpu`, a deviation, and 1, held for the
+    /// whole run, after a patch adjustment; 0 for `paper`). Given, it applies whatever ran.
     #[arg(long, value_name = "FRACTION")]
     pub pose_start: Option<f64>,
     /// Seed of the noise, sampling and initialisation.
@@ -308,6 +311,7 @@ impl Args {
             }
             c.train.pose_start = start;
             c.pose_timing_without_warmup = None;
+            c.hold_poses_after_patch_adjustment = false;
         }
         let t = &mut c.train;
         t.iterations = self.iterations;
@@ -360,6 +364,7 @@ impl Args {
                 end: end as f32,
             };
             c.pose_timing_without_warmup = None;
+            c.hold_poses_after_patch_adjustment = false;
         }
         c.initial_poses = match self.initial_poses.as_str() {
             "noisy" => InitialPoses::NoisyGroundTruth {
