@@ -978,6 +978,19 @@ mod tests {
         (cameras, truth, images, intrinsics)
     }
 
+    /// [`adjust_patches`] with the default options and no masks.
+    fn adjust_unmasked(
+        images: &[Image],
+        intrinsics: &[Intrinsics],
+        poses: &[Se3],
+        matches: &[Match],
+    ) -> (Vec<Se3>, PatchAdjustmentReport) {
+        let image_refs: Vec<&Image> = images.iter().collect();
+        let masks = vec![None; images.len()];
+        let options = PatchAdjustmentOptions::default();
+        adjust_patches(&image_refs, &masks, intrinsics, poses, matches, &options)
+    }
+
     /// Rotation (degrees) between the relative rotations of views `i` and `j` under two sets of
     /// poses.
     fn relative_rotation_error(a: &[Se3], b: &[Se3], i: usize, j: usize) -> f64 {
@@ -1001,7 +1014,6 @@ mod tests {
     #[test]
     fn patches_on_two_planes_recover_the_relative_poses() {
         let (cameras, truth, images, intrinsics) = scene();
-        let image_refs: Vec<&Image> = images.iter().collect();
         let matches = exact_matches(&cameras);
         let start = vec![
             truth[0],
@@ -1023,14 +1035,7 @@ mod tests {
             .map(|&(i, j)| relative_rotation_error(&start, &truth, i, j))
             .collect();
         assert!(before.iter().all(|&e| e > 0.2), "{before:?}");
-        let (adjusted, report) = adjust_patches(
-            &image_refs,
-            &[None, None, None],
-            &intrinsics,
-            &start,
-            &matches,
-            &PatchAdjustmentOptions::default(),
-        );
+        let (adjusted, report) = adjust_unmasked(&images, &intrinsics, &start, &matches);
         assert!(report.skipped.is_none(), "{report:?}");
         assert!(report.patches > 100 && report.joined > 50, "{report:?}");
         assert!(report.final_cost < 0.1 * report.initial_cost, "{report:?}");
@@ -1057,16 +1062,8 @@ mod tests {
     #[test]
     fn too_few_patches_leave_the_poses_alone() {
         let (cameras, truth, images, intrinsics) = scene();
-        let image_refs: Vec<&Image> = images.iter().collect();
         let matches: Vec<Match> = exact_matches(&cameras).into_iter().take(2).collect();
-        let (poses, report) = adjust_patches(
-            &image_refs,
-            &[None, None, None],
-            &intrinsics,
-            &truth,
-            &matches,
-            &PatchAdjustmentOptions::default(),
-        );
+        let (poses, report) = adjust_unmasked(&images, &intrinsics, &truth, &matches);
         assert_eq!(poses, truth);
         assert!(
             report
