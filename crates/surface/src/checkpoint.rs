@@ -142,7 +142,9 @@ pub fn camera_record(camera: &fewview_scene::Camera) -> CameraRecord {
     let k = &camera.intrinsics;
     let pose = &camera.world_to_camera;
     let mut record = [0.0; 16];
-    record[..4].copy_from_slice(&[k.fx, k.fy, k.cx, k.cy]);
+    for (slot, (_, value)) in record.iter_mut().zip(k.named_values()) {
+        *slot = value;
+    }
     for r in 0..3 {
         for c in 0..3 {
             record[4 + 3 * r + c] = pose.rotation[(r, c)];

@@ -117,6 +117,8 @@ struct Views {
     window: Window,
     /// Sum of the window's weights.
     weight_sum: f64,
+    /// Square roots of the window's weights (the residuals' factors).
+    sqrt_weights: Vec<f64>,
 }
 
 /// A plane seen around `centre` in its reference view.
@@ -168,6 +170,7 @@ impl Views {
     fn new(images: &[&Image], intrinsics: &[Intrinsics], options: &PatchAdjustmentOptions) -> Self {
         let window = Window::new(options.half_window);
         let weight_sum = window.weights.iter().sum();
+        let sqrt_weights = window.weights.iter().map(|w| w.sqrt()).collect();
         let k: Vec<Matrix3<f64>> = intrinsics.iter().map(Intrinsics::matrix).collect();
         Self {
             planes: images
@@ -181,6 +184,7 @@ impl Views {
             k,
             window,
             weight_sum,
+            sqrt_weights,
         }
     }
 
@@ -217,19 +221,9 @@ impl Views {
 
     /// Normalised cross-correlation of the patch's template with `values` (window-weighted).
     fn ncc(&self, patch: &Patch, values: &[f64]) -> f64 {
-        let (_, centred) = self.centred(values);
-        let (mut cross, mut energy) = (0.0, 0.0);
-        for ((w, t), c) in self
-            .window
-            .weights
-            .iter()
-            .zip(&patch.template)
-            .zip(&centred)
-        {
-            cross += w * t * c;
-            energy += w * c * c;
-        }
-        let denominator = (patch.template_energy * energy).sqrt();
+        let centred = self.centred(values);
+        let cross = self.weighted_dot(&patch.template, &centred);
+        let denominator = (patch.template_energy * self.weighted_dot(&centred, &centred)).sqrt();
         if denominator > 0.0 {
             cross / denominator
         } else {
@@ -237,8 +231,19 @@ impl Views {
         }
     }
 
-    /// The weighted mean of `values` and the values minus it.
-    fn centred(&self, values: &[f64]) -> (f64, Vec<f64>) {
+    /// `Σ w a b` over the window.
+    fn weighted_dot(&self, a: &[f64], b: &[f64]) -> f64 {
+        self.window
+            .weights
+            .iter()
+            .zip(a)
+            .zip(b)
+            .map(|((w, a), b)| w * a * b)
+            .sum()
+    }
+
+    /// `values` minus their weighted mean.
+    fn centred(&self, values: &[f64]) -> Vec<f64> {
         let mean = self
             .window
             .weights
@@ -247,30 +252,16 @@ impl Views {
             .map(|(w, v)| w * v)
             .sum::<f64>()
             / self.weight_sum;
-        (mean, values.iter().map(|v| v - mean).collect())
+        values.iter().map(|v| v - mean).collect()
     }
 
     /// Appends `√w · (values − mean − g · template)` with the best gain `g` (the bias is the
     /// mean): the residuals of one patch in one view.
     fn push_residuals(&self, patch: &Patch, values: &[f64], out: &mut Vec<f64>) {
-        let (_, centred) = self.centred(values);
-        let cross: f64 = self
-            .window
-            .weights
-            .iter()
-            .zip(&patch.template)
-            .zip(&centred)
-            .map(|((w, t), c)| w * t * c)
-            .sum();
-        let gain = cross / patch.template_energy;
-        for ((w, t), c) in self
-            .window
-            .weights
-            .iter()
-            .zip(&patch.template)
-            .zip(&centred)
-        {
-            out.push(w.sqrt() * (c - gain * t));
+        let centred = self.centred(values);
+        let gain = self.weighted_dot(&patch.template, &centred) / patch.template_energy;
+        for ((s, t), c) in self.sqrt_weights.iter().zip(&patch.template).zip(&centred) {
+            out.push(s * (c - gain * t));
         }
     }
 
@@ -393,14 +384,8 @@ fn seed_patches(
                 .iter()
                 .map(|d| plane.sample(&plane.value, centre.x + d.x, centre.y + d.y))
                 .collect();
-            let (_, template) = views.centred(&samples);
-            let template_energy: f64 = views
-                .window
-                .weights
-                .iter()
-                .zip(&template)
-                .map(|(w, t)| w * t * t)
-                .sum();
+            let template = views.centred(&samples);
+            let template_energy = views.weighted_dot(&template, &template);
             if template_energy < 1e-8 * views.weight_sum {
                 return None;
             }
@@ -716,12 +701,14 @@ fn iterate(
             })
             .collect();
         let new_poses = updated(poses, &camera_step);
-        let cost_after: f64 = patches
+        // Summed in order after the parallel part, so that a run repeats bit for bit.
+        let costs: Vec<f64> = patches
             .par_iter()
             .zip(&new_states)
             .zip(&weights)
             .map(|((p, s), w)| cost_of(&views.residuals(p, s, &new_poses), w))
-            .sum();
+            .collect();
+        let cost_after: f64 = costs.iter().sum();
         if cost_after.is_finite() && cost_after < cost_before {
             *lambda = (*lambda / 3.0).max(1e-7);
             return Step {
