@@ -1,7 +1,9 @@
 //! Speed of a training step, beside a reference measured in the same run: the same step with
 //! the paper's NeuS MLP (8 × 256, positional encoding) as the geometry encoder instead of the
 //! hash grid's custom CPU op. Everything else (batch, sampling, losses, pose refinement,
-//! correspondences) is the default run's.
+//! correspondences) is the default run's. A second hash-grid figure times the step with the
+//! poses held, as the CPU schedule holds them for most of a run: held poses are not tracked by
+//! autodiff, so the step skips the gradient with respect to the sample positions.
 
 use fewview_scene::Dataset;
 use serde::Serialize;
@@ -35,8 +37,12 @@ pub struct SurfaceStepBench {
     /// Rays rendered per iteration (random pixels + two per correspondence).
     pub rays_per_iteration: usize,
     pub samples_per_ray: usize,
-    /// The default run (hash grid).
+    /// The default run (hash grid), poses refined in every step.
     pub hash_grid: StepRate,
+    /// The same step with the poses held (`pose_start` 1), as in the CPU schedule's held part.
+    pub hash_grid_poses_held: StepRate,
+    /// `hash_grid_poses_held.iterations_per_cpu_second / hash_grid.iterations_per_cpu_second`.
+    pub held_speedup: f64,
     /// The reference: the same step with the NeuS MLP encoder.
     pub reference_neus_mlp: StepRate,
     /// `hash_grid.iterations_per_cpu_second / reference_neus_mlp.iterations_per_cpu_second`.
@@ -99,6 +105,9 @@ pub fn train_step_bench_with(
     let config = config.clone();
     let prep = prepare(dataset, None, &config)?;
     let hash_grid = rate(&config, &prep, iterations.max(1))?;
+    let mut held = config.clone();
+    held.train.pose_start = 1.0;
+    let hash_grid_poses_held = rate(&held, &prep, iterations.max(1))?;
     let mut reference = config.clone();
     reference.train.field.encoder = EncoderKind::NeusMlp;
     let reference_neus_mlp = rate(&reference, &prep, reference_iterations.max(1))?;
@@ -113,7 +122,10 @@ pub fn train_step_bench_with(
         samples_per_ray: config.train.sample.samples_per_ray(),
         speedup_vs_reference: hash_grid.iterations_per_cpu_second
             / reference_neus_mlp.iterations_per_cpu_second,
+        held_speedup: hash_grid_poses_held.iterations_per_cpu_second
+            / hash_grid.iterations_per_cpu_second,
         hash_grid,
+        hash_grid_poses_held,
         reference_neus_mlp,
     })
 }
@@ -148,5 +160,9 @@ mod tests {
         let ratio =
             b.hash_grid.iterations_per_cpu_second / b.reference_neus_mlp.iterations_per_cpu_second;
         assert!((b.speedup_vs_reference - ratio).abs() < 1e-12);
+        assert_eq!(b.hash_grid_poses_held.iterations, 2);
+        let held = b.hash_grid_poses_held.iterations_per_cpu_second
+            / b.hash_grid.iterations_per_cpu_second;
+        assert!((b.held_speedup - held).abs() < 1e-12);
     }
 }

@@ -406,6 +406,12 @@ impl Trainer {
         Ok(())
     }
 
+    /// Whether iteration `it` steps the poses: refinement is on and `pose_start` has passed.
+    pub fn steps_poses(&self, it: usize) -> bool {
+        self.config.refine_poses
+            && (it as f64) >= self.config.pose_start * self.config.iterations as f64
+    }
+
     /// One optimisation step.
     pub fn step(&mut self) -> Result<StepStats> {
         let it = self.state.iteration;
@@ -493,11 +499,12 @@ impl Trainer {
             .collect();
         let d9 =
             Tensor::<2>::from_data(TensorData::new(self.state.poses.clone(), [nv, 9]), &device);
-        let d9 = if cfg.refine_poses {
-            d9.require_grad()
-        } else {
-            d9
-        };
+        // Poses are tracked only in the iterations that step them: while they are held (the
+        // CPU schedule holds them for 75 % of the run, or all of it after a patch adjustment)
+        // the rays are constants, and the hash grid's backward skips the gradient with respect
+        // to the sample positions (a quarter of a step's time), which nothing else reads.
+        let step_poses = self.steps_poses(it);
+        let d9 = if step_poses { d9.require_grad() } else { d9 };
         let rows = d9_to_rows(d9.clone());
         let intr: Vec<Intrinsics> = self.views.iter().map(|v| v.intrinsics).collect();
         let sel = select_rows(&rows, &views_idx);
@@ -709,10 +716,7 @@ impl Trainer {
             };
             self.state.adam[k].step(&mut self.state.params[k], &g, lr * f, &cfg.adam);
         }
-        if cfg.refine_poses
-            && (it as f64) >= cfg.pose_start * cfg.iterations as f64
-            && let Some(g) = d9.grad(&grads)
-        {
+        if step_poses && let Some(g) = d9.grad(&grads) {
             let g = g.into_data().try_to_vec::<f32>().unwrap_or_default();
             if g.len() == self.state.poses.len() && g.iter().all(|v| v.is_finite()) {
                 let plr = cfg.pose_lr.at(it, cfg.iterations);
