@@ -138,18 +138,22 @@ pub fn contraction_reference(
 /// A random subset of `round(fraction·n)` points, without replacement, in their original order
 /// (paper 000: 10 % for our initialisation, 1 % for alternative (a)).
 pub fn subsample(points: &Points, fraction: f64, seed: u64) -> Result<Points> {
+    Ok(points.select(&sample_indices(points.len(), fraction, seed)?))
+}
+
+/// `round(fraction·n)` distinct indices below `n`, drawn with `seed`, in increasing order.
+pub fn sample_indices(n: usize, fraction: f64, seed: u64) -> Result<Vec<usize>> {
     if !(0.0..=1.0).contains(&fraction) {
         return Err(GeomError::invalid(
             "fraction",
             format!("{fraction} is not in [0, 1]"),
         ));
     }
-    let n = points.len();
     let k = (fraction * n as f64).round() as usize;
     let mut rng = StdRng::seed_from_u64(seed);
     let mut idx = rand::seq::index::sample(&mut rng, n, k).into_vec();
     idx.sort_unstable();
-    Ok(points.select(&idx))
+    Ok(idx)
 }
 
 #[cfg(test)]

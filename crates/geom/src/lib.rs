@@ -18,6 +18,7 @@ pub mod bench;
 pub mod blend;
 pub mod chamfer;
 pub mod cleanup;
+pub mod colormap;
 pub mod contract;
 pub mod depth;
 pub mod error;
@@ -28,6 +29,7 @@ pub mod mesh;
 pub mod registration;
 pub mod sampling;
 pub mod similarity;
+pub mod stereo;
 pub mod topology;
 
 pub use error::{GeomError, Result};

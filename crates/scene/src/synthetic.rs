@@ -218,6 +218,25 @@ pub fn demo_dataset(opts: &DemoOptions) -> Dataset {
     }
 }
 
+/// The exact z-depth (along the optical axis) of the demo scene through every pixel centre of
+/// `camera`, row-major, 0 where the ray meets nothing (sky): the ground truth of depth and
+/// stereo tests.
+pub fn demo_depth(camera: &Camera) -> Vec<f32> {
+    let scene = Scene::new();
+    let (w, h) = (camera.width() as usize, camera.height() as usize);
+    let forward = camera.forward();
+    let mut depth = vec![0f32; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let (o, d) = camera.ray(x as f64 + 0.5, y as f64 + 0.5);
+            if let Some((t, _)) = scene.intersect(&o, &d) {
+                depth[y * w + x] = (t * d.dot(&forward)) as f32;
+            }
+        }
+    }
+    depth
+}
+
 /// Ray-traced image (box-filtered `ss × ss` samples per pixel) and the range of hit depths.
 fn render_view(scene: &Scene, camera: &Camera, ss: usize) -> (Image, f64, f64) {
     let (w, h) = (camera.width() as usize, camera.height() as usize);
@@ -271,6 +290,34 @@ mod tests {
             .intersect(&Vector3::new(3.0, 0.0, 2.0), &Vector3::new(0.0, 0.0, -1.0))
             .unwrap();
         assert!(matches!(surf, Surface::Ground) && (t - 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn demo_depth_back_projects_onto_the_scene() {
+        let ds = demo_dataset(&DemoOptions {
+            width: 40,
+            height: 30,
+            views: 3,
+            train: vec![0],
+            supersample: 1,
+        });
+        let cam = &ds.views[1].camera;
+        let depth = demo_depth(cam);
+        let scene = Scene::new();
+        let mut hits = 0;
+        for (i, &z) in depth.iter().enumerate() {
+            if z <= 0.0 {
+                continue;
+            }
+            hits += 1;
+            let (u, v) = ((i % 40) as f64 + 0.5, (i / 40) as f64 + 0.5);
+            let p = cam.unproject(u, v, z as f64);
+            // The point lies on the first surface along its ray.
+            let (o, d) = cam.ray(u, v);
+            let (t, _) = scene.intersect(&o, &d).unwrap();
+            assert!((o + d * t - p).norm() < 1e-4 * t, "pixel {i}");
+        }
+        assert!(hits > 40 * 30 * 3 / 4, "{hits} pixels hit the scene");
     }
 
     #[test]

@@ -14,4 +14,5 @@ pub mod ply;
 pub mod raster;
 pub mod real;
 pub mod sh;
+pub mod stereo_start;
 pub mod train;

@@ -23,6 +23,7 @@ use crate::init::{FrustumView, from_points, random_in_box, random_in_frustums};
 use crate::model::GaussianModel;
 use crate::ply::{read_ply, write_ply};
 use crate::raster::{RenderCamera, RenderSettings};
+use crate::stereo_start::{StereoInit, StereoStart, stereo_start};
 use crate::train::{AlphaImage, Progress, TrainConfig, TrainError, TrainState, TrainView, Trainer};
 
 /// How to place the initial Gaussians.
@@ -42,6 +43,9 @@ pub enum InitStrategy {
     RandomBox { half_size: Option<f64> },
     /// Gaussians read from an Inria-layout PLY.
     Ply(PathBuf),
+    /// The stereo start of paper 000 §2: a sample of the hierarchical point cloud of the
+    /// training views' stereo pairs ([`crate::stereo_start`]).
+    Stereo(Box<StereoInit>),
 }
 
 /// Everything that defines a run besides the data.
@@ -102,6 +106,10 @@ impl RunDir {
     }
     pub fn renders(&self, split: &str) -> PathBuf {
         self.0.join("renders").join(split)
+    }
+    /// Where the stereo start writes its cloud, region render and summary.
+    pub fn init(&self) -> PathBuf {
+        self.0.join("init")
     }
 }
 
@@ -261,6 +269,14 @@ const ITERATIONS_PER_VIEW: usize = 50;
 
 /// The initial Gaussians for a dataset.
 pub fn initial_model(ds: &Dataset, cfg: &RunConfig) -> Result<GaussianModel, PipelineError> {
+    Ok(initial_model_and_start(ds, cfg)?.0)
+}
+
+/// The initial Gaussians and, for [`InitStrategy::Stereo`], the stereo start they came from.
+pub fn initial_model_and_start(
+    ds: &Dataset,
+    cfg: &RunConfig,
+) -> Result<(GaussianModel, Option<StereoStart>), PipelineError> {
     let degree = cfg.train.sh_degree;
     let seed = cfg.train.seed;
     if cfg.init_points > MAX_INIT_POINTS {
@@ -279,7 +295,15 @@ pub fn initial_model(ds: &Dataset, cfg: &RunConfig) -> Result<GaussianModel, Pip
         InitStrategy::Auto => InitStrategy::RandomBox { half_size: None },
         s => s.clone(),
     };
+    let mut start = None;
     let model = match strategy {
+        InitStrategy::Stereo(init) => {
+            let s = stereo_start(ds, &init, seed, &mut |_, _| {})
+                .map_err(|e| PipelineError::Init(e.to_string()))?;
+            let model = from_points(&s.sample, degree);
+            start = Some(s);
+            model
+        }
         InitStrategy::DatasetPoints => {
             let pts = ds
                 .points
@@ -341,7 +365,7 @@ pub fn initial_model(ds: &Dataset, cfg: &RunConfig) -> Result<GaussianModel, Pip
     if model.is_empty() {
         return Err(PipelineError::Init("no initial Gaussians".into()));
     }
-    Ok(model)
+    Ok((model, start))
 }
 
 /// Trains on `ds` in `dir` (resuming from its checkpoint when `resume`), writes the PLY, held-out
@@ -390,6 +414,7 @@ pub fn train_run(
             },
         });
     }
+    let mut start = None;
     let (model, resumed) = if resume {
         let saved = load_checkpoint(&run.checkpoint())?;
         if let Some(difference) = saved.data.difference(&resolved.data) {
@@ -407,7 +432,9 @@ pub fn train_run(
         }
         (None, Some(saved.state))
     } else {
-        (Some(initial_model(ds, cfg)?), None)
+        let (model, s) = initial_model_and_start(ds, cfg)?;
+        start = s;
+        (Some(model), None)
     };
     // The run folder is made only now, once the initial Gaussians exist: an `--init` the
     // dataset cannot serve (a missing PLY, `points` without sparse points) fails with nothing
@@ -418,6 +445,10 @@ pub fn train_run(
     let json =
         serde_json::to_vec_pretty(&resolved).map_err(|e| PipelineError::Eval(e.to_string()))?;
     fewview_scene::atomic::write_bytes(&run.config(), &json)?;
+    if let Some(s) = &start {
+        s.write(ds, &run.init())
+            .map_err(|e| PipelineError::Init(e.to_string()))?;
+    }
 
     let mut trainer = match (model, resumed) {
         (Some(m), _) => Trainer::new(cfg.train.clone(), m, views, extent as f32, device)?,

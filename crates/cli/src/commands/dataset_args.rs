@@ -12,7 +12,7 @@ use fewview_scene::{Dataset, DatasetFormat, load_dataset};
 #[derive(Debug, Clone, PartialEq)]
 pub struct ViewList(pub Vec<usize>);
 
-fn parse_views(s: &str) -> Result<ViewList, String> {
+pub fn parse_views(s: &str) -> Result<ViewList, String> {
     parse_view_list(s).map(ViewList)
 }
 

@@ -17,6 +17,7 @@ mod pose_error;
 mod progress;
 mod register;
 mod render;
+mod stereo;
 pub mod study;
 mod surface;
 mod train;
@@ -32,6 +33,7 @@ pub enum Command {
     Render(render::Args),
     Eval(eval::Args),
     Bench(bench::Args),
+    Stereo(stereo::Args),
     Blend(blend::Args),
     DepthMesh(depth_mesh::Args),
     DepthPoints(depth_points::Args),
@@ -54,6 +56,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Render(a) => render::run(a),
         Command::Eval(a) => eval::run(a),
         Command::Bench(a) => bench::run(a),
+        Command::Stereo(a) => stereo::run(a),
         Command::Blend(a) => blend::run(a),
         Command::DepthMesh(a) => depth_mesh::run(a),
         Command::DepthPoints(a) => depth_points::run(a),

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::bail;
 use clap::{Args, ValueEnum};
 use fewview_splat::pipeline::{InitStrategy, MAX_INIT_POINTS, RunConfig};
+use fewview_splat::stereo_start::{DepthFrom, StereoInit};
 use fewview_splat::train::TrainConfig;
 
 /// What the Gaussians are composited over during training on images with alpha.
@@ -27,10 +28,16 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 3)]
     pub sh_degree: usize,
     /// Initial Gaussians: `auto` (dataset points, else random in the training frustums when the
-    /// views have depth bounds, else random in a box), `points`, `frustum`, `box`,
-    /// `box:HALF_SIZE`, or `ply:FILE`.
+    /// views have depth bounds, else random in a box), `stereo` (paper 000 §2: the hierarchical
+    /// point cloud of the training views' stereo pairs, by Semi-Global Matching), `depth:DIR`
+    /// (the same from your own depth maps, `DIR/<view>.npy` float z-depth or 16-bit `.png` in
+    /// millimetres), `points`, `frustum`, `box`, `box:HALF_SIZE`, or `ply:FILE`.
     #[arg(long, default_value = "auto", value_name = "HOW")]
     pub init: String,
+    /// Fraction of the stereo point cloud that becomes Gaussians (paper 000: 0.1; its sparse
+    /// alternative (a): 0.01).
+    #[arg(long, default_value_t = 0.1, value_parser = super::number_args::fraction)]
+    pub stereo_fraction: f64,
     /// Number of random initial points.
     #[arg(long, default_value_t = 20_000)]
     pub init_points: usize,
@@ -65,7 +72,10 @@ impl TrainArgs {
         if let Err(m) = train.validate() {
             bail!("invalid training options: {m}");
         }
-        let init = parse_init(&self.init)?;
+        let mut init = parse_init(&self.init)?;
+        if let InitStrategy::Stereo(s) = &mut init {
+            s.fraction = self.stereo_fraction;
+        }
         if self.init_points == 0 {
             bail!("--init-points must be at least 1");
         }
@@ -112,6 +122,13 @@ fn parse_init(s: &str) -> anyhow::Result<InitStrategy> {
             InitStrategy::RandomBox { half_size: Some(v) }
         }
         _ if s.starts_with("ply:") => InitStrategy::Ply(PathBuf::from(&s[4..])),
-        _ => bail!("--init {s}: expected auto, points, frustum, box, box:HALF_SIZE or ply:FILE"),
+        "stereo" => InitStrategy::Stereo(Box::default()),
+        _ if s.starts_with("depth:") => InitStrategy::Stereo(Box::new(StereoInit {
+            depth: DepthFrom::Maps(PathBuf::from(&s[6..])),
+            ..StereoInit::default()
+        })),
+        _ => bail!(
+            "--init {s}: expected auto, stereo, depth:DIR, points, frustum, box, box:HALF_SIZE or ply:FILE"
+        ),
     })
 }

@@ -1,0 +1,302 @@
+//! Where the depth of a stereo pair comes from: [`DepthSource`] is the seam between the
+//! hierarchical point cloud and whatever estimates depth. [`SgmSource`] rectifies the pair and
+//! runs Semi-Global Matching in both directions (our stand-in for paper 000's UniMatch);
+//! [`DepthMapSource`] serves a user's own depth maps (one per view, e.g. from a learned model).
+
+use std::path::Path;
+
+use fewview_scene::Image;
+
+use super::pairs::StereoView;
+use super::rectify::{Rectification, RectifiedImage, Side};
+use super::refine::{RefineOptions, grey, refine};
+use super::sgm::{self, Disparity, GrayOrRgb, SgmParams};
+use crate::error::{GeomError, Result};
+use crate::io::read_depth;
+
+/// A z-depth map of one view in its original camera (row-major, that view's image size, 0 where
+/// unknown) and which of its depths were verified (the matcher could check them against the
+/// image texture; only verified depths can be pairwise consistent).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ViewDepth {
+    pub depth: Vec<f32>,
+    pub verified: Vec<bool>,
+}
+
+impl ViewDepth {
+    /// A depth map whose every depth counts as verified (a user's or a learned model's).
+    pub fn trusted(depth: Vec<f32>) -> Self {
+        let verified = depth.iter().map(|&d| d > 0.0).collect();
+        Self { depth, verified }
+    }
+}
+
+/// The depth maps of the two views of a pair.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PairDepths {
+    pub first: ViewDepth,
+    pub second: ViewDepth,
+}
+
+/// A source of depth for stereo pairs of training views (indices into the caller's views).
+pub trait DepthSource: Sync {
+    /// What the depth comes from, for reports ("sgm", "depth maps").
+    fn name(&self) -> &str;
+    /// The depth maps of views `first` and `second` as seen together.
+    fn pair_depths(&self, first: usize, second: usize) -> Result<PairDepths>;
+}
+
+/// How the disparity search range of a pair is chosen.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DisparityRange {
+    /// From the two views' depth bounds (10 % margin), rounded out to a multiple of 16.
+    FromDepthBounds,
+    /// Exactly these disparities, `min .. min + count`.
+    Fixed { min: i32, count: usize },
+}
+
+/// The most disparities searched when the range comes from depth bounds.
+pub const MAX_DISPARITIES: usize = 256;
+
+/// Everything two-view stereo computes for one pair.
+#[derive(Clone, Debug)]
+pub struct PairStereo {
+    pub rectification: Rectification,
+    /// True when the rectified left view is the pair's second view (the second camera sat to the
+    /// left of the first; matching always runs with the right camera at `+x`).
+    pub swapped: bool,
+    pub left: RectifiedImage,
+    pub right: RectifiedImage,
+    /// The parameters used, with the pair's disparity range.
+    pub params: SgmParams,
+    pub left_disparity: Disparity,
+    pub right_disparity: Disparity,
+    /// Depth maps of the pair's first and second view in their original cameras.
+    pub depths: PairDepths,
+}
+
+/// The disparity range of rectified pair `rect` for scene depths `near..far`.
+pub fn disparity_range(rect: &Rectification, near: f64, far: f64) -> (i32, usize) {
+    let lo = rect.depth_to_disparity(far * 1.1).floor().max(0.0) as i32;
+    let hi = rect.depth_to_disparity(near * 0.9).ceil() as i64;
+    let count = (hi - lo as i64 + 1).clamp(16, MAX_DISPARITIES as i64) as usize;
+    (lo, count.div_ceil(16) * 16)
+}
+
+/// Rectifies `first` and `second`, matches them both ways and maps the disparities back to depth
+/// in the original cameras. `range` picks the disparity search range (with
+/// [`DisparityRange::FromDepthBounds`] both views need depth bounds; see
+/// [`super::pairs::with_depth_bounds`]).
+pub fn match_pair(
+    first: &StereoView,
+    second: &StereoView,
+    params: &SgmParams,
+    range: DisparityRange,
+    refine_options: Option<&RefineOptions>,
+) -> Result<PairStereo> {
+    let pair_name = || format!("views {} and {}", first.name, second.name);
+    let baseline = second.camera.center() - first.camera.center();
+    let first_x = first.camera.world_to_camera.rotation.row(0).transpose();
+    let swapped = baseline.dot(&first_x) < 0.0;
+    let (l, r) = if swapped {
+        (second, first)
+    } else {
+        (first, second)
+    };
+    let rect = Rectification::new(l.camera, r.camera)
+        .map_err(|e| GeomError::invalid(pair_name(), e.to_string()))?;
+    let mut params = params.clone();
+    if let DisparityRange::Fixed { min, count } = range {
+        (params.min_disparity, params.num_disparities) = (min, count);
+    } else {
+        let (near, far) = pair_bounds(l, r).ok_or_else(|| {
+            GeomError::invalid(
+                pair_name(),
+                "no depth bounds to choose the disparity range from",
+            )
+        })?;
+        (params.min_disparity, params.num_disparities) = disparity_range(&rect, near, far);
+    }
+    let (left, right) = rayon::join(
+        || rect.rectify_image(Side::Left, l.image),
+        || rect.rectify_image(Side::Right, r.image),
+    );
+    let (lu8, ru8) = (eight_bit_rgb(&left.image), eight_bit_rgb(&right.image));
+    let (w, h) = (left.image.width, left.image.height);
+    let lg = GrayOrRgb::new(w, h, 3, &lu8)?;
+    let rg = GrayOrRgb::new(w, h, 3, &ru8)?;
+    let (mut ld, mut rd) = sgm::match_both(&lg, &rg, &params)?;
+    drop_outside(&mut ld, &left.inside, &right.inside, -1.0);
+    drop_outside(&mut rd, &right.inside, &left.inside, 1.0);
+    let (mut lf, mut rf) = (ld.to_f32(), rd.to_f32());
+    // Without refinement every SGM disparity counts as verified.
+    let (mut l_ok, mut r_ok) = (lf.clone(), rf.clone());
+    if let Some(o) = refine_options {
+        let (lg, rg) = (grey(&left.image), grey(&right.image));
+        let l_done = refine(&lg, &rg, w, h, &mut lf, -1.0, o);
+        let r_done = refine(&rg, &lg, w, h, &mut rf, 1.0, o);
+        l_ok = only_where(&lf, &l_done);
+        r_ok = only_where(&rf, &r_done);
+    }
+    let left_depth = view_depth(&rect, Side::Left, &lf, &l_ok)?;
+    let right_depth = view_depth(&rect, Side::Right, &rf, &r_ok)?;
+    let depths = if swapped {
+        PairDepths {
+            first: right_depth,
+            second: left_depth,
+        }
+    } else {
+        PairDepths {
+            first: left_depth,
+            second: right_depth,
+        }
+    };
+    Ok(PairStereo {
+        rectification: rect,
+        swapped,
+        left,
+        right,
+        params,
+        left_disparity: ld,
+        right_disparity: rd,
+        depths,
+    })
+}
+
+/// `values` where `keep`, NaN elsewhere.
+fn only_where(values: &[f32], keep: &[bool]) -> Vec<f32> {
+    values
+        .iter()
+        .zip(keep)
+        .map(|(&v, &k)| if k { v } else { f32::NAN })
+        .collect()
+}
+
+/// The original-camera depth of `side` from all its disparities and the verified ones.
+fn view_depth(
+    rect: &Rectification,
+    side: Side,
+    disparity: &[f32],
+    verified: &[f32],
+) -> Result<ViewDepth> {
+    let depth = rect.depth_from_disparity(side, disparity)?;
+    let checked = rect.depth_from_disparity(side, verified)?;
+    Ok(ViewDepth {
+        depth,
+        verified: checked.iter().map(|&d| d > 0.0).collect(),
+    })
+}
+
+/// The depth range both views see, when both know their bounds.
+fn pair_bounds(a: &StereoView, b: &StereoView) -> Option<(f64, f64)> {
+    let (na, fa) = a.depth_bounds?;
+    let (nb, fb) = b.depth_bounds?;
+    Some((na.min(nb), fa.max(fb)))
+}
+
+/// Drops disparities whose pixel, or whose match in the other image (at `x + sign·d`), lies
+/// where the rectified image has no source pixels.
+fn drop_outside(disp: &mut Disparity, inside: &[bool], other_inside: &[bool], sign: f32) {
+    let w = disp.width;
+    for (i, v) in disp.fixed.iter_mut().enumerate() {
+        if *v == disp.invalid {
+            continue;
+        }
+        let x = (i % w) as f32 + sign * (*v as f32 / sgm::DISP_SCALE as f32);
+        let xm = x.round();
+        let matched = xm >= 0.0 && (xm as usize) < w && other_inside[i - i % w + xm as usize];
+        if !inside[i] || !matched {
+            *v = disp.invalid;
+        }
+    }
+}
+
+/// An image as interleaved 8-bit RGB (grey repeated; alpha dropped).
+pub fn eight_bit_rgb(image: &Image) -> Vec<u8> {
+    let q = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+    let mut out = Vec::with_capacity(image.width * image.height * 3);
+    for p in image.data.chunks(image.channels.max(1)) {
+        match image.channels {
+            1 | 2 => out.extend([q(p[0]); 3]),
+            _ => out.extend([q(p[0]), q(p[1]), q(p[2])]),
+        }
+    }
+    out
+}
+
+/// Semi-Global Matching on rectified pairs of the given views.
+pub struct SgmSource<'a> {
+    pub views: &'a [StereoView<'a>],
+    pub params: SgmParams,
+    pub range: DisparityRange,
+    /// Sub-pixel refinement of the disparities (`None`: SGM's own).
+    pub refine: Option<RefineOptions>,
+}
+
+impl DepthSource for SgmSource<'_> {
+    fn name(&self) -> &str {
+        "sgm"
+    }
+
+    fn pair_depths(&self, first: usize, second: usize) -> Result<PairDepths> {
+        let pair = match_pair(
+            &self.views[first],
+            &self.views[second],
+            &self.params,
+            self.range,
+            self.refine.as_ref(),
+        )?;
+        Ok(pair.depths)
+    }
+}
+
+/// Depth maps given per view (z-depth, 0 = none), the same map for every pair a view is in.
+pub struct DepthMapSource {
+    pub maps: Vec<Vec<f32>>,
+}
+
+impl DepthMapSource {
+    /// Reads `<dir>/<view name>.npy` (float H×W) or `.png` (16-bit, `png_scale` units per step)
+    /// for every view; a missing file or a size that differs from the view's image is an error
+    /// naming the file.
+    pub fn load(dir: &Path, views: &[StereoView], png_scale: f32) -> Result<Self> {
+        let mut maps = Vec::with_capacity(views.len());
+        for v in views {
+            let npy = dir.join(format!("{}.npy", v.name));
+            let png = dir.join(format!("{}.png", v.name));
+            let path = if npy.exists() { npy } else { png };
+            if !path.exists() {
+                return Err(GeomError::format(
+                    dir.join(format!("{}.npy", v.name)),
+                    format!("no depth map for training view {} (.npy or .png)", v.name),
+                ));
+            }
+            let map = read_depth(&path, png_scale)?;
+            if (map.width, map.height) != (v.image.width, v.image.height) {
+                return Err(GeomError::format(
+                    &path,
+                    format!(
+                        "depth map is {}×{} but image {} is {}×{}",
+                        map.width, map.height, v.name, v.image.width, v.image.height
+                    ),
+                ));
+            }
+            maps.push(map.depth);
+        }
+        Ok(Self { maps })
+    }
+}
+
+impl DepthSource for DepthMapSource {
+    fn name(&self) -> &str {
+        "depth maps"
+    }
+
+    fn pair_depths(&self, first: usize, second: usize) -> Result<PairDepths> {
+        Ok(PairDepths {
+            first: ViewDepth::trusted(self.maps[first].clone()),
+            second: ViewDepth::trusted(self.maps[second].clone()),
+        })
+    }
+}

@@ -1,0 +1,87 @@
+//! The stereo start on the demo scene, whose ray tracer gives the exact depth of every pixel:
+//! how close the hierarchical cloud's points lie to the true surface, per confidence tier.
+
+use fewview_geom::stereo::hierarchy::{HierarchyOptions, Region, hierarchical_cloud};
+use fewview_geom::stereo::pairs::{OverlapRule, StereoView, stereo_pairs};
+use fewview_geom::stereo::sgm::SgmParams;
+use fewview_geom::stereo::source::{DisparityRange, SgmSource};
+use fewview_scene::synthetic::{DemoOptions, demo_dataset, demo_depth};
+use nalgebra::Vector3;
+
+/// Per tier: points, and the fraction within 1 % of the true depth, and the median error.
+fn tier_accuracy(width: usize) -> Vec<(Region, usize, f64, f64)> {
+    let ds = demo_dataset(&DemoOptions {
+        width,
+        height: width * 3 / 4,
+        ..DemoOptions::default()
+    });
+    let train: Vec<_> = ds.train_views().collect();
+    let views: Vec<StereoView> = train
+        .iter()
+        .map(|v| StereoView {
+            name: &v.name,
+            camera: &v.camera,
+            image: &v.image,
+            depth_bounds: v.depth_bounds,
+        })
+        .collect();
+    let pairs = stereo_pairs(&views, &OverlapRule::default()).unwrap();
+    let source = SgmSource {
+        views: &views,
+        params: SgmParams {
+            paths: fewview_geom::stereo::sgm::Paths::Eight,
+            ..Default::default()
+        },
+        range: DisparityRange::FromDepthBounds,
+        refine: Some(Default::default()),
+    };
+    let options = HierarchyOptions {
+        contraction: None,
+        ..Default::default()
+    };
+    let cloud = hierarchical_cloud(&views, &pairs, &source, &options, &mut |_, _| {}).unwrap();
+    let truth: Vec<Vec<f32>> = views.iter().map(|v| demo_depth(v.camera)).collect();
+    let mut errors: [Vec<f64>; 3] = Default::default();
+    for (k, &(v, p)) in cloud.sources.iter().enumerate() {
+        let cam = views[v as usize].camera;
+        let x = cloud.points.positions[k].map(|c| c as f64);
+        let z = cam.world_to_camera.transform_point(&Vector3::from(x)).z;
+        let t = truth[v as usize][p as usize] as f64;
+        let rel = if t > 0.0 { (z - t) / t } else { f64::INFINITY };
+        errors[cloud.regions[k] as usize].push(rel);
+    }
+    Region::ALL
+        .iter()
+        .zip(errors.iter_mut())
+        .map(|(&r, e)| {
+            e.sort_by(|a, b| a.total_cmp(b));
+            eprintln!(
+                "{r:?} signed quantiles: {:?}",
+                [0.05, 0.25, 0.5, 0.75, 0.95]
+                    .map(|q| e.get((q * e.len() as f64) as usize).copied().unwrap_or(0.0))
+            );
+            e.iter_mut().for_each(|x| *x = x.abs());
+            e.sort_by(|a, b| a.total_cmp(b));
+            let within = e.iter().filter(|&&x| x < 0.01).count() as f64 / e.len().max(1) as f64;
+            let median = e.get(e.len() / 2).copied().unwrap_or(f64::NAN);
+            (r, e.len(), within, median)
+        })
+        .collect()
+}
+
+#[test]
+fn consistent_points_lie_within_one_percent_of_the_true_depth() {
+    for width in [200, 400] {
+        let tiers = tier_accuracy(width);
+        for &(r, n, within, median) in &tiers {
+            eprintln!(
+                "demo {width}px {r:?}: {n} points, {:.1} % within 1 % of the true depth, median error {:.3} %",
+                100.0 * within,
+                100.0 * median
+            );
+        }
+        let (_, n, within, _) = tiers[0];
+        assert!(n > 5000, "{n} consistent points");
+        assert!(within >= 0.85, "{within}");
+    }
+}
