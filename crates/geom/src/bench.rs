@@ -9,6 +9,10 @@ use serde::Serialize;
 
 use crate::blend::{PoissonOptions, Solver, Weights, occlusion_aware_poisson_with};
 use crate::error::Result;
+use crate::stereo::pairs::StereoView;
+use crate::stereo::refine::RefineOptions;
+use crate::stereo::sgm::{Border, GrayOrRgb, Paths, SgmParams, match_left};
+use crate::stereo::source::{DisparityRange, eight_bit_rgb, match_pair};
 
 /// Figures of the occlusion-aware Poisson blend benchmark.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -112,6 +116,119 @@ pub fn blend_bench(size: usize) -> Result<BlendBench> {
             / seconds
             / threads as f64,
         threads,
+    })
+}
+
+/// Figures of the stereo benchmark: Semi-Global Matching of one rectified pair.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StereoBench {
+    pub width: usize,
+    pub height: usize,
+    pub disparities: usize,
+    /// OpenCV's configuration (5 paths, its border): median wall and CPU seconds of `runs`.
+    pub opencv_mode_seconds: f64,
+    pub opencv_mode_cpu_seconds: f64,
+    /// Pixel·disparities per CPU-second in OpenCV's configuration.
+    pub pixel_disparities_per_cpu_second: f64,
+    /// The reference: the same matching on one thread (wall seconds).
+    pub one_thread_seconds: f64,
+    /// The stereo start's configuration (8 paths, partial border), wall seconds.
+    pub default_seconds: f64,
+    /// The whole pair as the stereo start runs it (rectification, both directions, refinement,
+    /// depth maps) at the pair's own size and disparity range, wall seconds.
+    pub pair_seconds: f64,
+    pub pair_width: usize,
+    pub pair_height: usize,
+    pub pair_disparities: usize,
+    pub threads: usize,
+}
+
+/// Times the matcher on the central `width × height` of the rectified pair of `first` and
+/// `second` with `disparities` disparities from the pair's smallest one, and the whole pair.
+pub fn stereo_bench(
+    first: &StereoView,
+    second: &StereoView,
+    (width, height, disparities): (usize, usize, usize),
+    runs: usize,
+) -> Result<StereoBench> {
+    let init = SgmParams::default();
+    let t = Instant::now();
+    let pair = match_pair(
+        first,
+        second,
+        &SgmParams {
+            paths: Paths::Eight,
+            ..init.clone()
+        },
+        DisparityRange::FromDepthBounds,
+        Some(&RefineOptions::default()),
+    )?;
+    let pair_seconds = t.elapsed().as_secs_f64();
+    let crop = |img: &Image| -> Vec<u8> {
+        let (x0, y0) = (
+            img.width.saturating_sub(width) / 2,
+            img.height.saturating_sub(height) / 2,
+        );
+        let mut out = Image::new(width, height, 3);
+        for y in 0..height.min(img.height) {
+            for x in 0..width.min(img.width) {
+                for c in 0..3 {
+                    out.set(x, y, c, img.get(x0 + x, y0 + y, c.min(img.channels - 1)));
+                }
+            }
+        }
+        eight_bit_rgb(&out)
+    };
+    let (l8, r8) = (crop(&pair.left.image), crop(&pair.right.image));
+    let l = GrayOrRgb::new(width, height, 3, &l8)?;
+    let r = GrayOrRgb::new(width, height, 3, &r8)?;
+    let opencv = SgmParams {
+        min_disparity: pair.params.min_disparity,
+        num_disparities: disparities,
+        border: Border::OpenCv,
+        ..init.clone()
+    };
+    let ours = SgmParams {
+        paths: Paths::Eight,
+        border: Border::Partial,
+        ..opencv.clone()
+    };
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(|a, b| a.total_cmp(b));
+        v[v.len() / 2]
+    };
+    let mut wall = Vec::new();
+    let mut cpu = Vec::new();
+    for _ in 0..runs.max(1) {
+        let (out, w, c) = measure(|| match_left(&l, &r, &opencv));
+        out?;
+        wall.push(w);
+        cpu.push(c);
+    }
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .map_err(|e| crate::GeomError::numerical(e.to_string()))?;
+    let (out, one_thread_seconds, _) = one.install(|| measure(|| match_left(&l, &r, &opencv)));
+    out?;
+    let (out, default_seconds, _) = measure(|| match_left(&l, &r, &ours));
+    out?;
+    let (opencv_mode_seconds, opencv_mode_cpu_seconds) = (median(wall), median(cpu));
+    Ok(StereoBench {
+        width,
+        height,
+        disparities,
+        opencv_mode_seconds,
+        opencv_mode_cpu_seconds,
+        pixel_disparities_per_cpu_second: (width * height * disparities) as f64
+            / opencv_mode_cpu_seconds,
+        one_thread_seconds,
+        default_seconds,
+        pair_seconds,
+        pair_width: pair.left.image.width,
+        pair_height: pair.left.image.height,
+        pair_disparities: pair.params.num_disparities,
+        threads: rayon::current_num_threads(),
     })
 }
 

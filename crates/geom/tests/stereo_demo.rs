@@ -23,6 +23,7 @@ fn tier_accuracy(width: usize) -> Vec<(Region, usize, f64, f64)> {
             camera: &v.camera,
             image: &v.image,
             depth_bounds: v.depth_bounds,
+            mask: v.mask.as_ref().filter(|_| v.mask_is_alpha),
         })
         .collect();
     let pairs = stereo_pairs(&views, &OverlapRule::default()).unwrap();

@@ -30,9 +30,10 @@ use crate::train::{AlphaImage, Progress, TrainConfig, TrainError, TrainState, Tr
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum InitStrategy {
-    /// The dataset's sparse points if it has them, else random points in the training frustums
-    /// if the views have depth bounds (LLFF), else random points in a box around the point the
-    /// cameras look at.
+    /// The dataset's sparse points if it has them; else the stereo start when at least two
+    /// training views overlap (see [`fewview_geom::stereo::pairs::stereo_pairs`]); else random
+    /// points in the training frustums if the views have depth bounds, else random points in a
+    /// box around the point the cameras look at.
     Auto,
     /// The dataset's sparse points (COLMAP `points3D`).
     DatasetPoints,
@@ -44,8 +45,9 @@ pub enum InitStrategy {
     /// Gaussians read from an Inria-layout PLY.
     Ply(PathBuf),
     /// The stereo start of paper 000 §2: a sample of the hierarchical point cloud of the
-    /// training views' stereo pairs ([`crate::stereo_start`]).
-    Stereo(Box<StereoInit>),
+    /// training views' stereo pairs ([`crate::stereo_start`]), built as [`RunConfig::stereo`]
+    /// says.
+    Stereo,
 }
 
 /// Everything that defines a run besides the data.
@@ -55,6 +57,8 @@ pub struct RunConfig {
     pub init: InitStrategy,
     /// Number of random initial points (random strategies).
     pub init_points: usize,
+    /// How the stereo start is built, when the run uses it.
+    pub stereo: StereoInit,
 }
 
 /// The most random initial points a run accepts. Each Gaussian costs about 1 KB while training
@@ -68,6 +72,7 @@ impl RunConfig {
             train,
             init: InitStrategy::Auto,
             init_points: 20_000,
+            stereo: StereoInit::default(),
         }
     }
 }
@@ -181,6 +186,8 @@ pub struct ResolvedConfig {
 #[derive(Clone, Debug, Serialize)]
 pub struct RunSummary {
     pub dataset: String,
+    /// The initialisation used (`auto` resolved).
+    pub init: String,
     pub iterations: usize,
     pub gaussians: usize,
     pub train_seconds: f64,
@@ -267,6 +274,42 @@ pub fn default_iterations(ds: &Dataset) -> usize {
 /// Iterations per training view of the default run on scenes without depth bounds.
 const ITERATIONS_PER_VIEW: usize = 50;
 
+/// What [`InitStrategy::Auto`] means for `ds` (any other strategy is returned as it is).
+pub fn resolve_init(ds: &Dataset, init: &InitStrategy) -> InitStrategy {
+    match init {
+        InitStrategy::Auto if ds.points.as_ref().is_some_and(|p| !p.is_empty()) => {
+            InitStrategy::DatasetPoints
+        }
+        InitStrategy::Auto if views_overlap(ds) => InitStrategy::Stereo,
+        InitStrategy::Auto if ds.train_views().all(|v| v.depth_bounds.is_some()) => {
+            InitStrategy::RandomFrustum
+        }
+        InitStrategy::Auto => InitStrategy::RandomBox { half_size: None },
+        s => s.clone(),
+    }
+}
+
+/// Whether at least two training views overlap enough for stereo.
+fn views_overlap(ds: &Dataset) -> bool {
+    let views = crate::stereo_start::stereo_views(ds);
+    let rule = StereoInit::default().overlap;
+    fewview_geom::stereo::pairs::stereo_pairs(&views, &rule).is_ok()
+}
+
+impl InitStrategy {
+    /// A short name for reports.
+    pub fn name(&self) -> &'static str {
+        match self {
+            InitStrategy::Auto => "auto",
+            InitStrategy::DatasetPoints => "points",
+            InitStrategy::RandomFrustum => "frustum",
+            InitStrategy::RandomBox { .. } => "box",
+            InitStrategy::Ply(_) => "ply",
+            InitStrategy::Stereo => "stereo",
+        }
+    }
+}
+
 /// The initial Gaussians for a dataset.
 pub fn initial_model(ds: &Dataset, cfg: &RunConfig) -> Result<GaussianModel, PipelineError> {
     Ok(initial_model_and_start(ds, cfg)?.0)
@@ -285,20 +328,11 @@ pub fn initial_model_and_start(
             cfg.init_points
         )));
     }
-    let strategy = match &cfg.init {
-        InitStrategy::Auto if ds.points.as_ref().is_some_and(|p| !p.is_empty()) => {
-            InitStrategy::DatasetPoints
-        }
-        InitStrategy::Auto if ds.train_views().all(|v| v.depth_bounds.is_some()) => {
-            InitStrategy::RandomFrustum
-        }
-        InitStrategy::Auto => InitStrategy::RandomBox { half_size: None },
-        s => s.clone(),
-    };
+    let strategy = resolve_init(ds, &cfg.init);
     let mut start = None;
     let model = match strategy {
-        InitStrategy::Stereo(init) => {
-            let s = stereo_start(ds, &init, seed, &mut |_, _| {})
+        InitStrategy::Stereo => {
+            let s = stereo_start(ds, &cfg.stereo, seed, &mut |_, _| {})
                 .map_err(|e| PipelineError::Init(e.to_string()))?;
             let model = from_points(&s.sample, degree);
             start = Some(s);
@@ -490,6 +524,7 @@ pub fn train_run(
     }
     let summary = RunSummary {
         dataset: ds.name.clone(),
+        init: resolve_init(ds, &cfg.init).name().to_string(),
         iterations: trainer.state.iteration,
         gaussians: model.len(),
         train_seconds,

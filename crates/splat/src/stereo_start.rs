@@ -98,6 +98,7 @@ pub fn stereo_views(ds: &Dataset) -> Vec<StereoView<'_>> {
             camera: &v.camera,
             image: &v.image,
             depth_bounds: v.depth_bounds,
+            mask: v.mask.as_ref().filter(|_| v.mask_is_alpha),
         })
         .collect();
     with_depth_bounds(&views)

@@ -20,7 +20,9 @@ use super::output_paths::check_folder;
 /// second (the demo scene, and LLFF fern 3-view when the data is available), surface training
 /// iterations per second on DTU scan65 3-view (hash grid, beside the NeuS MLP; with the poses
 /// refined and with them held, as the CPU schedule holds them), the SSIM loss,
-/// the occlusion-aware Poisson blend at 1024², and peak memory. Prints a table and writes JSON.
+/// the occlusion-aware Poisson blend at 1024², Semi-Global Matching on fern's rectified pair
+/// (1, 10) cropped to 504×378 with 64 disparities (beside the same on one thread; the whole
+/// stereo pair at its own size too), and peak memory. Prints a table and writes JSON.
 ///
 /// Throughput is reported per CPU-second (CPU time summed over threads), which does not change
 /// much when other programs load the machine; wall-clock seconds are reported too. The
@@ -67,6 +69,7 @@ struct Report {
     train_surface: Option<fewview_surface::bench::SurfaceStepBench>,
     ssim: fewview_metrics::bench::SsimBench,
     blend: Option<fewview_geom::bench::BlendBench>,
+    stereo: Option<fewview_geom::bench::StereoBench>,
     peak_memory_mib: Option<f64>,
 }
 
@@ -158,6 +161,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let ssim = fewview_metrics::bench::ssim_bench(504, 378, 10);
     eprintln!("Poisson blend 1024x1024x3 ...");
     let blend = fewview_geom::bench::blend_1024().ok();
+    let stereo = stereo_bench(args.fern.clone(), args.runs)?;
     let report = Report {
         machine,
         raster,
@@ -166,6 +170,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         train_surface,
         ssim,
         blend,
+        stereo,
         peak_memory_mib: peak_memory_mib(),
     };
     print_table(&report);
@@ -175,6 +180,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     fewview_scene::atomic::write_bytes(&args.json, &serde_json::to_vec_pretty(&report)?)?;
     println!("\nJSON report: {}", args.json.display());
     Ok(())
+}
+
+/// Semi-Global Matching on fern's rectified pair (1, 10), cropped to 504×378, 64 disparities.
+fn stereo_bench(
+    fern: Option<PathBuf>,
+    runs: usize,
+) -> anyhow::Result<Option<fewview_geom::bench::StereoBench>> {
+    let dir = fern
+        .or_else(|| std::env::var_os("FEWVIEW_DATA").map(|d| PathBuf::from(d).join("llff/fern")));
+    let Some(dir) = dir.filter(|d| d.exists()) else {
+        eprintln!("stereo: skipped (pass --fern or set FEWVIEW_DATA)");
+        return Ok(None);
+    };
+    eprintln!("stereo: fern views 1 and 10 ...");
+    let ds = load_dataset(&dir, &LoadOptions::default())
+        .with_context(|| format!("cannot load {}", dir.display()))?;
+    let view = |i: usize| {
+        let v = &ds.views[i];
+        fewview_geom::stereo::pairs::StereoView {
+            name: &v.name,
+            camera: &v.camera,
+            image: &v.image,
+            depth_bounds: v.depth_bounds,
+            mask: v.mask.as_ref().filter(|_| v.mask_is_alpha),
+        }
+    };
+    let bench = fewview_geom::bench::stereo_bench(&view(1), &view(10), (504, 378, 64), runs)?;
+    Ok(Some(bench))
 }
 
 fn print_table(r: &Report) {
@@ -273,6 +306,34 @@ fn print_table(r: &Report) {
         if let Some(c) = b.cpu_seconds {
             println!("{:<46} {:>14.2} {:>14}", "  CPU seconds", c, "");
         }
+    }
+    if let Some(b) = &r.stereo {
+        println!(
+            "{:<46} {:>14} {:>14}",
+            format!(
+                "SGM pix·disp/CPU-s ({}x{}, {} d, vs 1 thread)",
+                b.width, b.height, b.disparities
+            ),
+            g(b.pixel_disparities_per_cpu_second),
+            g((b.width * b.height * b.disparities) as f64 / b.one_thread_seconds)
+        );
+        println!(
+            "{:<46} {:>14.3} {:>14.3}",
+            "  SGM s: 5 paths (vs 1 thread)", b.opencv_mode_seconds, b.one_thread_seconds
+        );
+        println!(
+            "{:<46} {:>14.3} {:>14}",
+            "  SGM s: 8 paths, partial border", b.default_seconds, ""
+        );
+        println!(
+            "{:<46} {:>14.3} {:>14}",
+            format!(
+                "  stereo pair s ({}x{}, {} d, both ways, refined)",
+                b.pair_width, b.pair_height, b.pair_disparities
+            ),
+            b.pair_seconds,
+            ""
+        );
     }
     if let Some(m) = r.peak_memory_mib {
         println!("{:<46} {:>14.0} {:>14}", "peak memory MiB", m, "");

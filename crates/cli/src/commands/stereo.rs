@@ -100,6 +100,7 @@ pub fn run(args: Args) -> Result<()> {
                 camera: &v.camera,
                 image: &v.image,
                 depth_bounds: v.depth_bounds,
+                mask: v.mask.as_ref().filter(|_| v.mask_is_alpha),
             }
         })
         .collect();

@@ -107,6 +107,7 @@ pub fn train_with_progress(
 
 pub fn print_summary(s: &RunSummary, out: &std::path::Path) {
     println!("dataset          {}", s.dataset);
+    println!("initialisation   {}", s.init);
     println!(
         "iterations       {}{}",
         s.iterations,

@@ -27,15 +27,17 @@ pub struct TrainArgs {
     /// Largest spherical-harmonics degree (0–3).
     #[arg(long, default_value_t = 3)]
     pub sh_degree: usize,
-    /// Initial Gaussians: `auto` (dataset points, else random in the training frustums when the
-    /// views have depth bounds, else random in a box), `stereo` (paper 000 §2: the hierarchical
+    /// Initial Gaussians: `auto` (dataset points; else `stereo` when at least two training views
+    /// overlap; else random in the training frustums when the views have depth bounds, else
+    /// random in a box), `stereo` (paper 000 §2: the hierarchical
     /// point cloud of the training views' stereo pairs, by Semi-Global Matching), `depth:DIR`
     /// (the same from your own depth maps, `DIR/<view>.npy` float z-depth or 16-bit `.png` in
     /// millimetres), `points`, `frustum`, `box`, `box:HALF_SIZE`, or `ply:FILE`.
     #[arg(long, default_value = "auto", value_name = "HOW")]
     pub init: String,
     /// Fraction of the stereo point cloud that becomes Gaussians (paper 000: 0.1; its sparse
-    /// alternative (a): 0.01).
+    /// alternative (a): 0.01), whenever the stereo start runs (`stereo`, `depth:DIR`, or `auto`
+    /// choosing it).
     #[arg(long, default_value_t = 0.1, value_parser = super::number_args::fraction)]
     pub stereo_fraction: f64,
     /// Number of random initial points.
@@ -72,10 +74,12 @@ impl TrainArgs {
         if let Err(m) = train.validate() {
             bail!("invalid training options: {m}");
         }
-        let mut init = parse_init(&self.init)?;
-        if let InitStrategy::Stereo(s) = &mut init {
-            s.fraction = self.stereo_fraction;
-        }
+        let (init, depth) = parse_init(&self.init)?;
+        let stereo = StereoInit {
+            depth,
+            fraction: self.stereo_fraction,
+            ..StereoInit::default()
+        };
         if self.init_points == 0 {
             bail!("--init-points must be at least 1");
         }
@@ -90,6 +94,7 @@ impl TrainArgs {
             train,
             init,
             init_points: self.init_points,
+            stereo,
         })
     }
 }
@@ -101,8 +106,12 @@ impl TrainArgs {
 /// and their projections stay far inside single precision.
 const MAX_BOX_HALF_SIZE: f64 = 1e6;
 
-fn parse_init(s: &str) -> anyhow::Result<InitStrategy> {
-    Ok(match s {
+/// The strategy of `--init`, and where the stereo start's depth comes from.
+fn parse_init(s: &str) -> anyhow::Result<(InitStrategy, DepthFrom)> {
+    if let Some(dir) = s.strip_prefix("depth:") {
+        return Ok((InitStrategy::Stereo, DepthFrom::Maps(PathBuf::from(dir))));
+    }
+    let strategy = match s {
         "auto" => InitStrategy::Auto,
         "points" => InitStrategy::DatasetPoints,
         "frustum" => InitStrategy::RandomFrustum,
@@ -122,13 +131,10 @@ fn parse_init(s: &str) -> anyhow::Result<InitStrategy> {
             InitStrategy::RandomBox { half_size: Some(v) }
         }
         _ if s.starts_with("ply:") => InitStrategy::Ply(PathBuf::from(&s[4..])),
-        "stereo" => InitStrategy::Stereo(Box::default()),
-        _ if s.starts_with("depth:") => InitStrategy::Stereo(Box::new(StereoInit {
-            depth: DepthFrom::Maps(PathBuf::from(&s[6..])),
-            ..StereoInit::default()
-        })),
+        "stereo" => InitStrategy::Stereo,
         _ => bail!(
             "--init {s}: expected auto, stereo, depth:DIR, points, frustum, box, box:HALF_SIZE or ply:FILE"
         ),
-    })
+    };
+    Ok((strategy, DepthFrom::Sgm))
 }

@@ -2,7 +2,10 @@
 //! every pair of adjacent training views, back-projected and accepted in three tiers of falling
 //! confidence, so that doubtful depth may only add geometry *behind* what is already trusted.
 //!
-//! 1. Every depth map of a pair is filtered with the depth-edge test of Eq. (1).
+//! 1. Every depth map of a pair is filtered with the depth-edge test of Eq. (1). Its measure is
+//!    `1/(fₓ f_y)` on a plane facing the camera, so τ = 1e-4 would drop every pixel of an image
+//!    whose focal length is below 100 px; τ is raised to [`FLAT_MARGIN`]`/(fₓ f_y)` where that is
+//!    larger (an image of a few hundred pixels; at the paper's sizes τ stays as printed).
 //! 2. Each pixel with depth is classified against the pair's other view: **R^c** (pairwise
 //!    consistent) when its point lands in the partner's image, the partner's depth there
 //!    (interpolated) back-projects to within `max_reprojection_px` of the pixel and agrees with
@@ -29,6 +32,9 @@ use crate::contract::{Contraction, ContractionKind, contraction_reference, sampl
 use crate::depth::{DepthOptions, valid_pixels};
 use crate::error::{GeomError, Result};
 use crate::mesh::Points;
+
+/// The smallest Eq. (1) threshold, in units of a camera-facing plane's measure `1/(fₓ f_y)`.
+pub const FLAT_MARGIN: f64 = 4.0;
 
 /// The three confidence tiers of Fig. 1, most confident first.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
@@ -185,7 +191,8 @@ fn pixel_count(camera: &Camera) -> usize {
     camera.width() as usize * camera.height() as usize
 }
 
-/// `depth` with the pixels that fail Eq. (1) set to 0; the error names the view.
+/// `depth` with the pixels that fail Eq. (1), or lie outside the view's mask, set to 0; the error
+/// names the view.
 fn edge_filtered(
     mut depth: ViewDepth,
     view: &StereoView,
@@ -198,10 +205,33 @@ fn edge_filtered(
             "verified mask and depth differ in size",
         ));
     }
-    let keep = valid_pixels(&depth.depth, view.camera, &o.depth)
+    let k = &view.camera.intrinsics;
+    let options = DepthOptions {
+        // τ ≤ 0 turns the filter off, and stays off.
+        tau: if o.depth.tau > 0.0 {
+            o.depth.tau.max((FLAT_MARGIN / (k.fx * k.fy)) as f32)
+        } else {
+            o.depth.tau
+        },
+        ..o.depth
+    };
+    let keep = valid_pixels(&depth.depth, view.camera, &options)
         .map_err(|e| GeomError::invalid(name(), e.to_string()))?;
-    for ((d, v), k) in depth.depth.iter_mut().zip(&mut depth.verified).zip(keep) {
-        if !k {
+    let mask = view.mask.map(|m| &m.data);
+    if mask.is_some_and(|m| m.len() != depth.depth.len()) {
+        return Err(GeomError::invalid(
+            name(),
+            "the mask's size differs from the depth map's",
+        ));
+    }
+    for (p, ((d, v), k)) in depth
+        .depth
+        .iter_mut()
+        .zip(&mut depth.verified)
+        .zip(keep)
+        .enumerate()
+    {
+        if !k || mask.is_some_and(|m| m[p] < 0.5) {
             *d = 0.0;
             *v = false;
         }
@@ -512,6 +542,7 @@ mod tests {
             camera,
             image,
             depth_bounds: Some((2.0, 10.0)),
+            mask: None,
         }
     }
 

@@ -14,6 +14,9 @@ pub struct StereoView<'a> {
     pub image: &'a Image,
     /// Near and far z-depth of the scene in this view, when the dataset knows them (LLFF).
     pub depth_bounds: Option<(f64, f64)>,
+    /// Where the image shows the scene (1) and where only its background (0): the alpha of an
+    /// RGBA capture. Pixels below 0.5 get no depth.
+    pub mask: Option<&'a Image>,
 }
 
 /// How much two views must share to be matched.
@@ -153,9 +156,40 @@ pub fn check_overlap(
 }
 
 /// The stereo pairs of a set of training views: consecutive views along the baseline, plus the
-/// two ends when they overlap (with three views: (1, 2), (2, 3) and (1, 3)). Two consecutive
-/// views that do not overlap are an error naming them.
+/// two ends when they overlap (with three views: (1, 2), (2, 3) and (1, 3)).
+///
+/// When two consecutive views do not overlap (a rig around an object rather than along a line,
+/// such as NeRF-synthetic's views on a sphere), each view is paired instead with the view whose
+/// optical axis is closest to its own among those it overlaps, and views that overlap none are
+/// left out. Two views that do not overlap at all are an error naming them.
 pub fn stereo_pairs(views: &[StereoView], rule: &OverlapRule) -> Result<Vec<(usize, usize)>> {
+    match pairs_along_baseline(views, rule)? {
+        Ok(pairs) => Ok(pairs),
+        Err(failure) => {
+            let look_at = look_at_point(views);
+            let overlaps = |a: usize, b: usize| check_overlap(&views[a], &views[b], &look_at, rule);
+            let nearest = nearest_overlapping(views, &overlaps);
+            if nearest.is_empty() {
+                Err(failure)
+            } else {
+                Ok(nearest)
+            }
+        }
+    }
+}
+
+fn look_at_point(views: &[StereoView]) -> Vector3<f64> {
+    let poses: Vec<_> = views.iter().map(|v| v.camera.world_to_camera).collect();
+    fewview_scene::axes_meeting_point(&poses)
+}
+
+/// The pairs of views set along a line (consecutive views along the baseline and, when they
+/// overlap, the two ends), or the error naming the first consecutive views that do not overlap.
+/// The outer error is for fewer than two views.
+pub fn pairs_along_baseline(
+    views: &[StereoView],
+    rule: &OverlapRule,
+) -> Result<std::result::Result<Vec<(usize, usize)>, GeomError>> {
     if views.len() < 2 {
         return Err(GeomError::invalid(
             "training views",
@@ -163,19 +197,46 @@ pub fn stereo_pairs(views: &[StereoView], rule: &OverlapRule) -> Result<Vec<(usi
         ));
     }
     let cameras: Vec<&Camera> = views.iter().map(|v| v.camera).collect();
-    let poses: Vec<_> = cameras.iter().map(|c| c.world_to_camera).collect();
-    let look_at = fewview_scene::axes_meeting_point(&poses);
+    let look_at = look_at_point(views);
     let order = order_along_baseline(&cameras);
+    let overlaps = |a: usize, b: usize| check_overlap(&views[a], &views[b], &look_at, rule);
     let mut pairs = Vec::new();
     for w in order.windows(2) {
-        check_overlap(&views[w[0]], &views[w[1]], &look_at, rule)?;
+        if let Err(e) = overlaps(w[0], w[1]) {
+            return Ok(Err(e));
+        }
         pairs.push((w[0], w[1]));
     }
     let (first, last) = (order[0], order[order.len() - 1]);
-    if order.len() > 2 && check_overlap(&views[first], &views[last], &look_at, rule).is_ok() {
+    if order.len() > 2 && overlaps(first, last).is_ok() {
         pairs.push((first, last));
     }
-    Ok(pairs)
+    Ok(Ok(pairs))
+}
+
+/// Each view with the overlapping view whose optical axis is closest to its own; each pair once.
+fn nearest_overlapping(
+    views: &[StereoView],
+    overlaps: &dyn Fn(usize, usize) -> Result<()>,
+) -> Vec<(usize, usize)> {
+    let mut pairs = Vec::new();
+    for a in 0..views.len() {
+        let mut others: Vec<usize> = (0..views.len()).filter(|&b| b != a).collect();
+        others.sort_by(|&b, &c| {
+            let (ab, ac) = (
+                axis_angle_deg(views[a].camera, views[b].camera),
+                axis_angle_deg(views[a].camera, views[c].camera),
+            );
+            ab.total_cmp(&ac)
+        });
+        if let Some(&b) = others.iter().find(|&&b| overlaps(a, b).is_ok()) {
+            let pair = (a.min(b), a.max(b));
+            if !pairs.contains(&pair) {
+                pairs.push(pair);
+            }
+        }
+    }
+    pairs
 }
 
 #[cfg(test)]
@@ -201,6 +262,7 @@ mod tests {
             camera,
             image,
             depth_bounds: Some((3.0, 8.0)),
+            mask: None,
         }
     }
 
@@ -249,6 +311,43 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("0 % of a lands in b"), "{e}");
+    }
+
+    #[test]
+    fn views_around_an_object_pair_with_their_nearest_neighbours() {
+        // Six cameras on a circle around the origin, 60° apart, in scrambled order: consecutive
+        // views along the main axis face each other across the circle, so each view is paired
+        // with a neighbour on the circle instead.
+        let image = Image::new(320, 240, 3);
+        let angles = [0.0f64, 180.0, 60.0, 240.0, 120.0, 300.0];
+        let cams: Vec<Camera> = angles
+            .iter()
+            .map(|a| {
+                let eye =
+                    Vector3::new(4.0 * a.to_radians().sin(), 0.0, -4.0 * a.to_radians().cos());
+                Camera::look_at(
+                    Intrinsics::centered(200.0, 320, 240),
+                    eye,
+                    Vector3::zeros(),
+                    Vector3::new(0.0, -1.0, 0.0),
+                )
+            })
+            .collect();
+        let names = ["a", "b", "c", "d", "e", "f"];
+        let views: Vec<_> = (0..6).map(|i| view(names[i], &cams[i], &image)).collect();
+        let rule = OverlapRule {
+            max_angle_deg: 70.0,
+            ..Default::default()
+        };
+        let pairs = stereo_pairs(&views, &rule).unwrap();
+        assert!(!pairs.is_empty());
+        for &(a, b) in &pairs {
+            let apart = (angles[a] - angles[b]).abs();
+            assert!(apart == 60.0 || apart == 300.0, "{a}, {b}: {apart}°");
+        }
+        let paired: std::collections::HashSet<usize> =
+            pairs.iter().flat_map(|&(a, b)| [a, b]).collect();
+        assert_eq!(paired.len(), 6, "{pairs:?}");
     }
 
     #[test]

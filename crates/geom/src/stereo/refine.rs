@@ -14,6 +14,9 @@ use fewview_scene::Image;
 use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
 
+/// A disparity step below this (pixels) ends the iterations.
+const CONVERGED_PX: f64 = 0.005;
+
 /// Options of the refinement.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RefineOptions {
@@ -154,49 +157,63 @@ impl Images<'_> {
             if (theta[0] - d0 as f64).abs() > 1.0 || !theta[0].is_finite() {
                 return None;
             }
-            if step[0].abs() < 1e-3 {
-                break;
+            if step[0].abs() < CONVERGED_PX {
+                // Judged on the residual before this last small step, which can only lower it.
+                let explained = fit.residual_energy <= (1.0 - o.min_fit) * fit.variance_energy;
+                return explained.then_some(theta[0] as f32);
             }
         }
-        let fit = self.window_fit(x, y, r, s, &theta)?;
-        if fit.residual_energy > (1.0 - o.min_fit) * fit.variance_energy {
-            return None;
-        }
-        Some(theta[0] as f32)
+        None
     }
 
     /// The normal equations of the window at parameters `theta`, and how well it fits.
     fn window_fit(&self, x: i64, y: i64, r: i64, s: f64, theta: &SVector<f64, 5>) -> Option<Fit> {
-        let mut fit = Fit {
-            normal: SMatrix::zeros(),
-            rhs: SVector::zeros(),
-            gradient_energy: 0.0,
-            residual_energy: 0.0,
-            variance_energy: 0.0,
-        };
-        let (mut sum, mut sum2) = (0.0, 0.0);
+        // Upper triangle of JᵀJ for J = (s·g, s·g·i, s·g·j, −ref, −1), then Jᵀr.
+        let mut m = [0.0f64; 15];
+        let mut rhs = [0.0f64; 5];
+        let (mut gradient_energy, mut residual_energy, mut sum, mut sum2) = (0.0, 0.0, 0.0, 0.0);
         for j in -r..=r {
+            let yj = (y + j) as usize;
             for i in -r..=r {
-                let (xi, yj) = (x + i, (y + j) as usize);
+                let xi = x + i;
                 let d = theta[0] + theta[1] * i as f64 + theta[2] * j as f64;
                 let xo = xi as f64 + s * d;
                 let o_val = self.along_row(self.other, xo, yj)?;
                 let g = self.along_row(self.gradient, xo, yj)?;
                 let rv = self.reference[yj * self.width + xi as usize] as f64;
                 let residual = o_val - (theta[3] * rv + theta[4]);
-                let sg = s * g;
-                let jac = SVector::<f64, 5>::new(sg, sg * i as f64, sg * j as f64, -rv, -1.0);
-                fit.normal += jac * jac.transpose();
-                fit.rhs += jac * residual;
-                fit.gradient_energy += g * g;
-                fit.residual_energy += residual * residual;
+                let jac = [s * g, s * g * i as f64, s * g * j as f64, -rv, -1.0];
+                let mut k = 0;
+                for a in 0..5 {
+                    for b in a..5 {
+                        m[k] += jac[a] * jac[b];
+                        k += 1;
+                    }
+                    rhs[a] += jac[a] * residual;
+                }
+                gradient_energy += g * g;
+                residual_energy += residual * residual;
                 sum += o_val;
                 sum2 += o_val * o_val;
             }
         }
+        let mut normal = SMatrix::<f64, 5, 5>::zeros();
+        let mut k = 0;
+        for a in 0..5 {
+            for b in a..5 {
+                normal[(a, b)] = m[k];
+                normal[(b, a)] = m[k];
+                k += 1;
+            }
+        }
         let n = ((2 * r + 1) * (2 * r + 1)) as f64;
-        fit.variance_energy = sum2 - sum * sum / n;
-        Some(fit)
+        Some(Fit {
+            normal,
+            rhs: SVector::from(rhs),
+            gradient_energy,
+            residual_energy,
+            variance_energy: sum2 - sum * sum / n,
+        })
     }
 }
 

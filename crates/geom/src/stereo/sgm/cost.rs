@@ -47,6 +47,9 @@ impl Layout {
     }
 }
 
+/// Rows per parallel task of [`block_costs`]: each band recomputes the `2r` rows around it.
+const BAND: usize = 32;
+
 /// The block-summed cost volume, `height × columns × d` values.
 pub(crate) fn block_costs(
     left: &GrayOrRgb,
@@ -56,18 +59,26 @@ pub(crate) fn block_costs(
 ) -> Vec<i16> {
     let (h, n) = (left.height, layout.row_len());
     let r = p.half_block;
-    let mut horizontal = vec![0i16; h * n];
-    horizontal
-        .par_chunks_mut(n)
-        .enumerate()
-        .for_each(|(y, row)| row_costs(left, right, y, layout, p, row));
     let mut block = vec![0i16; h * n];
-    block.par_chunks_mut(n).enumerate().for_each(|(y, out)| {
-        for k in 0..=2 * r {
-            let yy = (y as i64 + k as i64 - r as i64).clamp(0, h as i64 - 1) as usize;
-            add_into(out, &horizontal[yy * n..(yy + 1) * n]);
-        }
-    });
+    block
+        .par_chunks_mut(BAND * n)
+        .enumerate()
+        .for_each(|(b, out)| {
+            // The rows this band's blocks reach, with the image's first and last row repeated.
+            let (y0, y1) = (b * BAND, (b * BAND + BAND).min(h));
+            let first = y0 as i64 - r as i64;
+            let rows = y1 - y0 + 2 * r;
+            let mut horizontal = vec![0i16; rows * n];
+            for (k, row) in horizontal.chunks_mut(n).enumerate() {
+                let y = (first + k as i64).clamp(0, h as i64 - 1) as usize;
+                row_costs(left, right, y, layout, p, row);
+            }
+            for (k, o) in out.chunks_mut(n).enumerate() {
+                for j in 0..=2 * r {
+                    add_into(o, &horizontal[(k + j) * n..(k + j + 1) * n]);
+                }
+            }
+        });
     block
 }
 

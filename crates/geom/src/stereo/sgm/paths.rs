@@ -2,9 +2,9 @@
 //! `L_r(p, d) = C(p, d) + min(L_r(p−r, d), L_r(p−r, d±1) + P1, min_k L_r(p−r, k) + P2)
 //! − min_k L_r(p−r, k)`, summed over the paths into `S(p, d)`.
 //!
-//! The horizontal paths run row by row in parallel; the paths from the row above (and, with
-//! eight paths, from the row below) run down (up) the image, each row vectorised over columns and
-//! disparities, beside the horizontal ones. Outside the image a path starts from zero costs.
+//! The horizontal paths run row by row in parallel; then the paths from the row above (and, with
+//! eight paths, beside them those from the row below) run down (up) the image, each row
+//! vectorised over columns and disparities. Outside the image a path starts from zero costs.
 //! Values are saturating `i16`, as OpenCV keeps them: every `L_r ≥ 0`, so the saturated sum does
 //! not depend on the order of the additions.
 
@@ -19,24 +19,31 @@ const OUTSIDE: i16 = i16::MAX;
 /// `S`, the aggregated cost volume (`height × columns × d`).
 pub(crate) fn aggregate(c: &[i16], height: usize, layout: &Layout, p: &Resolved) -> Vec<i16> {
     let n = layout.row_len();
-    let ((mut s, down), up) = rayon::join(
-        || {
-            rayon::join(
-                || horizontal(c, layout, p),
-                || vertical(c, height, layout, p, Direction::Down),
-            )
-        },
-        || match p.paths {
-            Paths::Eight => Some(vertical(c, height, layout, p, Direction::Up)),
-            Paths::Five => None,
-        },
-    );
-    s.par_chunks_mut(n).enumerate().for_each(|(y, row)| {
-        saturating_add_into(row, &down[y * n..(y + 1) * n]);
-        if let Some(up) = &up {
-            saturating_add_into(row, &up[y * n..(y + 1) * n]);
+    // The horizontal paths first, every row in parallel; then the paths from above into the same
+    // sums, beside those from below into their own.
+    let mut s = horizontal(c, layout, p);
+    let up = match p.paths {
+        Paths::Eight => {
+            let (_, up) = rayon::join(
+                || vertical(c, height, layout, p, Direction::Down, &mut s),
+                || {
+                    let mut up = vec![0i16; c.len()];
+                    vertical(c, height, layout, p, Direction::Up, &mut up);
+                    up
+                },
+            );
+            Some(up)
         }
-    });
+        Paths::Five => {
+            vertical(c, height, layout, p, Direction::Down, &mut s);
+            None
+        }
+    };
+    if let Some(up) = up {
+        s.par_chunks_mut(n)
+            .zip(up.par_chunks(n))
+            .for_each(|(row, u)| saturating_add_into(row, u));
+    }
     s
 }
 
@@ -166,19 +173,27 @@ fn horizontal_row(c: &[i16], s: &mut [i16], layout: &Layout, p: &Resolved) {
 
 /// The three paths from the row above (`Down`) or below (`Up`): from the pixel straight above
 /// and the two diagonal neighbours.
-fn vertical(c: &[i16], height: usize, layout: &Layout, p: &Resolved, dir: Direction) -> Vec<i16> {
+/// Adds the three paths' costs into `s`.
+fn vertical(
+    c: &[i16],
+    height: usize,
+    layout: &Layout,
+    p: &Resolved,
+    dir: Direction,
+    s: &mut [i16],
+) {
     #[cfg(target_arch = "x86_64")]
     {
         #[target_feature(enable = "avx2")]
-        fn avx2(c: &[i16], h: usize, l: &Layout, p: &Resolved, dir: Direction) -> Vec<i16> {
-            vertical_paths(c, h, l, p, dir)
+        fn avx2(c: &[i16], h: usize, l: &Layout, p: &Resolved, dir: Direction, s: &mut [i16]) {
+            vertical_paths(c, h, l, p, dir, s)
         }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above).
-            return unsafe { avx2(c, height, layout, p, dir) };
+            return unsafe { avx2(c, height, layout, p, dir, s) };
         }
     }
-    vertical_paths(c, height, layout, p, dir)
+    vertical_paths(c, height, layout, p, dir, s)
 }
 
 /// Path rows of one image row for the three vertical directions: `columns × (d + 2)` padded
@@ -208,10 +223,10 @@ fn vertical_paths(
     layout: &Layout,
     p: &Resolved,
     dir: Direction,
-) -> Vec<i16> {
+    s: &mut [i16],
+) {
     let (n, d, cols) = (layout.row_len(), layout.d, layout.columns);
     let stride = d + 2;
-    let mut s = vec![0i16; c.len()];
     let (mut prev, mut cur) = (PathRows::zeros(layout), PathRows::zeros(layout));
     let border = zero_padded(d);
     for k in 0..height {
@@ -242,5 +257,4 @@ fn vertical_paths(
         }
         std::mem::swap(&mut prev, &mut cur);
     }
-    s
 }
