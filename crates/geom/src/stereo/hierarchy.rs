@@ -74,6 +74,8 @@ pub struct HierarchyOptions {
     pub max_relative_depth: f64,
     /// How far (relative) a later-tier point may lie in front of accepted geometry.
     pub free_space_margin: f64,
+    /// Fewest R^c pixels among an R^c pixel's 8 neighbours; with fewer it counts as R^o.
+    pub min_consistent_neighbours: usize,
     /// The depth-edge filter of Eq. (1) applied to every depth map.
     #[serde(skip, default)]
     pub depth: DepthOptions,
@@ -94,6 +96,7 @@ impl Default for HierarchyOptions {
             max_reprojection_px: 1.0,
             max_relative_depth: 0.01,
             free_space_margin: 0.01,
+            min_consistent_neighbours: 4,
             depth: DepthOptions::default(),
             contraction: default_contraction(),
             contraction_quantile: 0.9,
@@ -147,8 +150,18 @@ pub fn hierarchical_cloud(
         let PairDepths { first, second } = source.pair_depths(a, b)?;
         let da = edge_filtered(first, &views[a], options)?;
         let db = edge_filtered(second, &views[b], options)?;
-        let ca = classify(&views[a], &da, &views[b], &db, options);
-        let cb = classify(&views[b], &db, &views[a], &da, options);
+        let mut ca = classify(&views[a], &da, &views[b], &db, options);
+        let mut cb = classify(&views[b], &db, &views[a], &da, options);
+        demote_isolated(
+            &mut ca,
+            views[a].camera.width() as usize,
+            options.min_consistent_neighbours,
+        );
+        demote_isolated(
+            &mut cb,
+            views[b].camera.width() as usize,
+            options.min_consistent_neighbours,
+        );
         keep_most_confident(&mut best[a], &ca, &da.depth);
         keep_most_confident(&mut best[b], &cb, &db.depth);
         filtered.push((da.depth, a));
@@ -295,6 +308,36 @@ fn classify(
             })
         })
         .collect()
+}
+
+/// Demotes to R^o every R^c pixel with fewer than `min` R^c pixels among its 8 neighbours: a
+/// consistent pixel alone among inconsistent ones agrees by chance more often than not (at
+/// occlusion borders, where both views' windows straddle the same edge).
+fn demote_isolated(classes: &mut [Option<Region>], width: usize, min: usize) {
+    if min == 0 || width == 0 {
+        return;
+    }
+    let height = classes.len() / width;
+    let consistent: Vec<bool> = classes
+        .iter()
+        .map(|c| *c == Some(Region::Consistent))
+        .collect();
+    for y in 0..height {
+        for x in 0..width {
+            if !consistent[y * width + x] {
+                continue;
+            }
+            let mut n = 0;
+            for yy in y.saturating_sub(1)..(y + 2).min(height) {
+                for xx in x.saturating_sub(1)..(x + 2).min(width) {
+                    n += ((xx, yy) != (x, y) && consistent[yy * width + xx]) as usize;
+                }
+            }
+            if n < min {
+                classes[y * width + x] = Some(Region::Overlap);
+            }
+        }
+    }
 }
 
 /// The depth of `map` at continuous pixel coordinates `(u, v)`: bilinear when the four
