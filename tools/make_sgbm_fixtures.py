@@ -120,6 +120,32 @@ def rectified(data_args, views):
         return load("rectified_left.png"), load("rectified_right.png"), p["min_disparity"], p["num_disparities"]
 
 
+def time_fern_crop(out, p):
+    """OpenCV's median time on the central 504x378 of the rectified fern pair with 64
+    disparities from the pair's smallest, on 2 threads and on 1: the pair `fewview bench` times."""
+    left = np.array(Image.open(os.path.join(out, "fern_1_10_left.png")))
+    right = np.array(Image.open(os.path.join(out, "fern_1_10_right.png")))
+    h, w = left.shape[:2]
+    y0, x0 = (h - 378) // 2, (w - 504) // 2
+    crop = lambda a: np.ascontiguousarray(a[y0:y0 + 378, x0:x0 + 504])
+    timing = {}
+    for threads in (2, 1):
+        cv2.setNumThreads(threads)
+        for paths in ("five", "eight"):
+            q = dict(p, num_disparities=64, paths=paths)
+            matcher = sgbm(q, 3)
+            matcher.compute(crop(left), crop(right))
+            times = []
+            for _ in range(7):
+                t = time.perf_counter()
+                matcher.compute(crop(left), crop(right))
+                times.append(time.perf_counter() - t)
+            timing[f"{paths}_paths_{threads}_threads_seconds"] = float(np.median(times))
+    cv2.setNumThreads(2)
+    print("fern crop 504x378x64:", timing)
+    return timing
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("out")
@@ -142,6 +168,8 @@ def main():
         left, right, min_d, num_d = rectified(["--demo"], "2,11")
         run_case(args.out, "demo_2_11", left, right, params(min_d=min_d, num_d=num_d), cases)
     meta = {"opencv_version": cv2.__version__, "cases": cases}
+    if "fern_1_10" in cases:
+        meta["timing"] = time_fern_crop(args.out, cases["fern_1_10"]["params"])
     with open(os.path.join(args.out, "cases.json"), "w") as f:
         json.dump(meta, f, indent=2, sort_keys=True)
 

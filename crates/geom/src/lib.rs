@@ -2,6 +2,9 @@
 //!
 //! - [`depth`]: depth maps to meshes and point clouds with the depth-edge test of Eq. (1),
 //!   [`contract`]: the contraction of Eq. (2) and point subsampling (paper 000 §1–2).
+//! - [`stereo`]: calibrated rectification, Semi-Global Matching (OpenCV's `StereoSGBM`,
+//!   bit for bit), sub-pixel refinement and the confidence-based hierarchical point cloud of
+//!   paper 000 §2, the start of its Gaussians; [`colormap`]: false colour for depth and disparity.
 //! - [`blend`]: occlusion-aware Poisson blending (Eq. 3), standard Poisson, Laplacian-pyramid and
 //!   Gaussian-feather blending (paper 000 §4, Fig. 2/9).
 //! - [`mcubes`]: marching cubes on dense grids and chunked closures; [`cleanup`]: largest

@@ -15,17 +15,7 @@ fn tier_accuracy(width: usize) -> Vec<(Region, usize, f64, f64)> {
         height: width * 3 / 4,
         ..DemoOptions::default()
     });
-    let train: Vec<_> = ds.train_views().collect();
-    let views: Vec<StereoView> = train
-        .iter()
-        .map(|v| StereoView {
-            name: &v.name,
-            camera: &v.camera,
-            image: &v.image,
-            depth_bounds: v.depth_bounds,
-            mask: v.mask.as_ref().filter(|_| v.mask_is_alpha),
-        })
-        .collect();
+    let views: Vec<StereoView> = ds.train_views().map(StereoView::of).collect();
     let pairs = stereo_pairs(&views, &OverlapRule::default()).unwrap();
     let source = SgmSource {
         views: &views,

@@ -91,16 +91,7 @@ pub enum StereoStartError {
 /// The training views of `ds` as the stereo code sees them (missing depth bounds guessed from
 /// where the cameras look, see [`with_depth_bounds`]).
 pub fn stereo_views(ds: &Dataset) -> Vec<StereoView<'_>> {
-    let views: Vec<StereoView> = ds
-        .train_views()
-        .map(|v| StereoView {
-            name: &v.name,
-            camera: &v.camera,
-            image: &v.image,
-            depth_bounds: v.depth_bounds,
-            mask: v.mask.as_ref().filter(|_| v.mask_is_alpha),
-        })
-        .collect();
+    let views: Vec<StereoView> = ds.train_views().map(StereoView::of).collect();
     with_depth_bounds(&views)
 }
 

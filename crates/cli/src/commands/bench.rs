@@ -196,16 +196,7 @@ fn stereo_bench(
     eprintln!("stereo: fern views 1 and 10 ...");
     let ds = load_dataset(&dir, &LoadOptions::default())
         .with_context(|| format!("cannot load {}", dir.display()))?;
-    let view = |i: usize| {
-        let v = &ds.views[i];
-        fewview_geom::stereo::pairs::StereoView {
-            name: &v.name,
-            camera: &v.camera,
-            image: &v.image,
-            depth_bounds: v.depth_bounds,
-            mask: v.mask.as_ref().filter(|_| v.mask_is_alpha),
-        }
-    };
+    let view = |i: usize| fewview_geom::stereo::pairs::StereoView::of(&ds.views[i]);
     let bench = fewview_geom::bench::stereo_bench(&view(1), &view(10), (504, 378, 64), runs)?;
     Ok(Some(bench))
 }

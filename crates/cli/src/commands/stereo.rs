@@ -93,16 +93,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let listed: Vec<StereoView> = [a, b]
         .iter()
-        .map(|&i| {
-            let v = &ds.views[i];
-            StereoView {
-                name: &v.name,
-                camera: &v.camera,
-                image: &v.image,
-                depth_bounds: v.depth_bounds,
-                mask: v.mask.as_ref().filter(|_| v.mask_is_alpha),
-            }
-        })
+        .map(|&i| StereoView::of(&ds.views[i]))
         .collect();
     let views = with_depth_bounds(&listed);
     let look_at = fewview_scene::axes_meeting_point(&[

@@ -1,5 +1,16 @@
-//! Calibrated two-view stereo (paper 000 §2): rectification, Semi-Global Matching, and the
-//! confidence-based hierarchical point cloud built from the disparities.
+//! Calibrated two-view stereo for the start of "Splat-based Gradient-domain Fusion for Seamless
+//! View Transition" (paper 000 §2), in the order the work happens:
+//!
+//! 1. [`pairs`]: which training views are matched (consecutive views along the baseline);
+//! 2. [`rectify`]: both views of a pair turned to a common image plane, rows aligned;
+//! 3. [`sgm`]: Semi-Global Matching of the rectified pair, as OpenCV's `StereoSGBM` does it (the
+//!    paper uses UniMatch, a learned model whose weights cannot be fetched here);
+//! 4. [`refine`]: each disparity refined to sub-pixel on a slanted window, and marked verified
+//!    when the window fits;
+//! 5. [`source`]: the [`source::DepthSource`] seam: SGM on a rectified pair, mapped back to depth
+//!    in the original cameras, or the user's own depth maps;
+//! 6. [`hierarchy`]: the confidence-based hierarchical point cloud (R^c, R^o, R^s) and its
+//!    contraction, from which a 10 % sample becomes the initial Gaussians.
 
 pub mod hierarchy;
 pub mod pairs;

@@ -19,6 +19,20 @@ pub struct StereoView<'a> {
     pub mask: Option<&'a Image>,
 }
 
+impl<'a> StereoView<'a> {
+    /// A dataset view: its name, camera, image, depth bounds, and its mask when that is the
+    /// image's alpha (a mask drawn around an object, as DTU's, leaves the background in).
+    pub fn of(view: &'a fewview_scene::View) -> Self {
+        Self {
+            name: &view.name,
+            camera: &view.camera,
+            image: &view.image,
+            depth_bounds: view.depth_bounds,
+            mask: view.mask.as_ref().filter(|_| view.mask_is_alpha),
+        }
+    }
+}
+
 /// How much two views must share to be matched.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct OverlapRule {
