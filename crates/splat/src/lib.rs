@@ -14,5 +14,6 @@ pub mod ply;
 pub mod raster;
 pub mod real;
 pub mod sh;
+pub mod stereo_pair;
 pub mod stereo_start;
 pub mod train;
