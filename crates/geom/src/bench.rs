@@ -3,12 +3,16 @@
 
 use std::time::Instant;
 
-use fewview_scene::Image;
 use fewview_scene::cputime::measure;
+use fewview_scene::{Camera, Image, Intrinsics, Se3};
+use nalgebra::{Rotation3, Vector3};
 use serde::Serialize;
 
 use crate::blend::{PoissonOptions, Solver, Weights, occlusion_aware_poisson_with};
+use crate::depth::depth_to_mesh;
 use crate::error::Result;
+use crate::mesh::Mesh;
+use crate::raster::rasterize_mesh_colors;
 use crate::stereo::pairs::StereoView;
 use crate::stereo::refine::RefineOptions;
 use crate::stereo::sgm::{Border, GrayOrRgb, Paths, SgmParams, match_left};
@@ -232,6 +236,133 @@ pub fn stereo_bench(
     })
 }
 
+/// The triangle rasterisation problem: a sphere before a slanted plane, ray-cast exactly in
+/// `camera`, meshed without the depth-edge filter (two triangles per pixel block), to be
+/// reprojected into `virtual_camera` (turned by a few degrees, 0.2 units to the side).
+#[derive(Clone, Debug)]
+pub struct RasterProblem {
+    pub camera: Camera,
+    /// z-depth of every pixel centre of `camera` (row-major).
+    pub depth: Vec<f32>,
+    /// A smooth colour texture in `camera`; the mesh's vertex colours.
+    pub image: Image,
+    pub mesh: Mesh,
+    pub virtual_camera: Camera,
+}
+
+/// A camera at world `centre`, turned by Euler angles `(roll, pitch, yaw)` from looking along +z.
+pub(crate) fn turned_camera(k: Intrinsics, angles: [f64; 3], centre: Vector3<f64>) -> Camera {
+    let r = Rotation3::from_euler_angles(angles[0], angles[1], angles[2]).into_inner();
+    Camera::new(k, Se3::new(r, -(r * centre)))
+}
+
+/// Distance along the unit ray `(o, d)` to the nearer of the sphere (centre (0, 0, 1.5), radius
+/// 0.6) and the plane `z = 3 + 0.3 x`.
+fn sphere_or_plane(o: Vector3<f64>, d: Vector3<f64>) -> f64 {
+    let n = Vector3::new(-0.3, 0.0, 1.0);
+    let plane = (3.0 - n.dot(&o)) / n.dot(&d);
+    let oc = o - Vector3::new(0.0, 0.0, 1.5);
+    let b = oc.dot(&d);
+    let disc = b * b - (oc.norm_squared() - 0.36);
+    let sphere = if disc >= 0.0 {
+        -b - disc.sqrt()
+    } else {
+        f64::INFINITY
+    };
+    if sphere > 0.0 {
+        sphere.min(plane)
+    } else {
+        plane
+    }
+}
+
+/// [`RasterProblem`] at `width × height` (focal length 0.9 × width).
+pub fn raster_problem(width: usize, height: usize) -> Result<RasterProblem> {
+    let k = Intrinsics::centered(0.9 * width as f64, width as u32, height as u32);
+    let camera = turned_camera(k, [0.05, -0.03, 0.02], Vector3::new(0.1, -0.2, -1.0));
+    let virtual_camera = turned_camera(k, [-0.02, 0.06, 0.03], Vector3::new(0.3, -0.15, -0.95));
+    let mut depth = vec![0.0; width * height];
+    let mut image = Image::new(width, height, 3);
+    for j in 0..height {
+        for i in 0..width {
+            let (o, d) = camera.ray(i as f64 + 0.5, j as f64 + 0.5);
+            let x = o + d * sphere_or_plane(o, d);
+            depth[j * width + i] = camera.world_to_camera.transform_point(&x).z as f32;
+            for c in 0..3 {
+                let v = 0.5 + 0.4 * (7.0 * x.x + 1.3 * c as f64).sin() * (5.0 * x.y).cos();
+                image.set(i, j, c, v as f32);
+            }
+        }
+    }
+    let mesh = depth_to_mesh(&depth, &camera, Some(&image), 0.0)?;
+    Ok(RasterProblem {
+        camera,
+        depth,
+        image,
+        mesh,
+        virtual_camera,
+    })
+}
+
+/// Figures of the triangle rasterisation benchmark: a depth mesh reprojected into a virtual
+/// camera with its colours ([`raster_problem`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TriangleRasterBench {
+    pub width: usize,
+    pub height: usize,
+    pub triangles: usize,
+    pub covered_pixels: usize,
+    /// Median wall and CPU seconds of `runs` rasterisations on all threads.
+    pub seconds: f64,
+    pub cpu_seconds: f64,
+    /// Triangles per CPU-second (all threads).
+    pub triangles_per_cpu_second: f64,
+    /// The reference: the same rasterisation on one thread (wall seconds).
+    pub one_thread_seconds: f64,
+    pub threads: usize,
+}
+
+/// Times [`rasterize_mesh_colors`] on [`raster_problem`] at `width × height`.
+pub fn triangle_raster_bench(
+    width: usize,
+    height: usize,
+    runs: usize,
+) -> Result<TriangleRasterBench> {
+    let p = raster_problem(width, height)?;
+    let run = || rasterize_mesh_colors(&p.mesh, &p.virtual_camera, 0.0);
+    let mut wall = Vec::new();
+    let mut cpu = Vec::new();
+    let mut covered_pixels = 0;
+    for _ in 0..runs.max(1) {
+        let (out, w, c) = measure(run);
+        covered_pixels = out?.coverage().iter().filter(|&&c| c).count();
+        wall.push(w);
+        cpu.push(c);
+    }
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .map_err(|e| crate::GeomError::numerical(e.to_string()))?;
+    let (out, one_thread_seconds, _) = one.install(|| measure(run));
+    out?;
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(|a, b| a.total_cmp(b));
+        v[v.len() / 2]
+    };
+    let (seconds, cpu_seconds) = (median(wall), median(cpu));
+    Ok(TriangleRasterBench {
+        width,
+        height,
+        triangles: p.mesh.faces.len(),
+        covered_pixels,
+        seconds,
+        cpu_seconds,
+        triangles_per_cpu_second: p.mesh.faces.len() as f64 / cpu_seconds,
+        one_thread_seconds,
+        threads: rayon::current_num_threads(),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
@@ -240,5 +371,13 @@ mod tests {
         assert!(b.relative_residual < 1e-6, "{b:?}");
         assert!(b.unknowns > 96 * 96 / 2 && b.reference_unknowns > 48 * 48 / 2);
         assert!(b.seconds > 0.0 && b.reference_seconds > 0.0);
+    }
+
+    #[test]
+    fn small_triangle_raster_benchmark_runs() {
+        let b = super::triangle_raster_bench(40, 30, 1).unwrap();
+        assert_eq!(b.triangles, 2 * 39 * 29);
+        assert!(b.covered_pixels > 40 * 30 / 2, "{b:?}");
+        assert!(b.seconds > 0.0 && b.one_thread_seconds > 0.0);
     }
 }

@@ -7,6 +7,8 @@
 //!   paper 000 §2, the start of its Gaussians; [`colormap`]: false colour for depth and disparity.
 //! - [`blend`]: occlusion-aware Poisson blending (Eq. 3), standard Poisson, Laplacian-pyramid and
 //!   Gaussian-feather blending (paper 000 §4, Fig. 2/9).
+//! - [`raster`]: triangle rasterisation with a z-buffer and perspective-correct attributes, to
+//!   reproject depth meshes into virtual views (paper 000 §1, §4).
 //! - [`mcubes`]: marching cubes on dense grids and chunked closures; [`cleanup`]: largest
 //!   component and mask culling.
 //! - [`registration`]: similarity pre-alignment, FPFH + RANSAC, ICP (paper 001 Alg. 3).
@@ -29,6 +31,7 @@ pub mod io;
 pub mod knn;
 pub mod mcubes;
 pub mod mesh;
+pub mod raster;
 pub mod registration;
 pub mod sampling;
 pub mod similarity;
