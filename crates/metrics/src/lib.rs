@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod error;
+pub mod flow;
 pub mod lpips;
 pub mod pose_error;
 pub mod psnr;
@@ -10,6 +11,7 @@ pub mod study;
 pub mod temporal;
 
 pub use error::MetricsError;
+pub use flow::{flow_between, path_flows};
 pub use psnr::{mse, psnr, psnr_from_mse, psnr_masked};
 pub use ssim::{
     SsimBorder, SsimOptions, SsimWorkspace, ssim, ssim_masked, ssim_masked_with_grad, ssim_with,

@@ -270,12 +270,22 @@ pub fn train_step_bench(
     ds: &fewview_scene::Dataset,
     iterations: usize,
 ) -> Result<TrainStepBench, crate::pipeline::PipelineError> {
-    use crate::pipeline::{RunConfig, initial_model};
-    use crate::raster::RenderCamera;
-    use crate::train::{TrainConfig, TrainView, Trainer};
-    let mut cfg = RunConfig::new(TrainConfig::sparse_view(3000));
+    let mut cfg = crate::pipeline::RunConfig::new(crate::train::TrainConfig::sparse_view(3000));
     cfg.train.background = ds.background;
-    let model = initial_model(ds, &cfg)?;
+    train_step_bench_with(ds, &cfg, Vec::new(), iterations)
+}
+
+/// [`train_step_bench`] of the run `cfg` with extra loss terms (e.g. the fusion method's).
+pub fn train_step_bench_with(
+    ds: &fewview_scene::Dataset,
+    cfg: &crate::pipeline::RunConfig,
+    terms: Vec<Box<dyn crate::train::LossTerm>>,
+    iterations: usize,
+) -> Result<TrainStepBench, crate::pipeline::PipelineError> {
+    use crate::pipeline::initial_model;
+    use crate::raster::RenderCamera;
+    use crate::train::{TrainView, Trainer};
+    let model = initial_model(ds, cfg)?;
     let device = burn::tensor::Device::flex().autodiff();
     let views: Vec<TrainView> = ds
         .train_views()
@@ -284,7 +294,10 @@ pub fn train_step_bench(
     let (_, extent) = ds.camera_extent();
     let first = &ds.views[ds.train[0]].image;
     let gaussians = model.len();
-    let mut trainer = Trainer::new(cfg.train, model, views, extent as f32, device)?;
+    let mut trainer = Trainer::new(cfg.train.clone(), model, views, extent as f32, device)?;
+    for term in terms {
+        trainer.add_term(term);
+    }
     trainer.step()?;
     trainer.step()?;
     let (result, seconds, cpu_seconds) = measure(|| {

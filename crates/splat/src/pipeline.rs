@@ -24,7 +24,9 @@ use crate::model::GaussianModel;
 use crate::ply::{read_ply, write_ply};
 use crate::raster::{RenderCamera, RenderSettings};
 use crate::stereo_start::{StereoInit, StereoStart, stereo_start};
-use crate::train::{AlphaImage, Progress, TrainConfig, TrainError, TrainState, TrainView, Trainer};
+use crate::train::{
+    AlphaImage, LossTerm, Progress, TrainConfig, TrainError, TrainState, TrainView, Trainer,
+};
 
 /// How to place the initial Gaussians.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -147,7 +149,7 @@ impl RunData {
     }
 
     /// A one-line description of how `self` (the checkpoint's) differs from `now`, or `None`.
-    fn difference(&self, now: &RunData) -> Option<String> {
+    pub fn difference(&self, now: &RunData) -> Option<String> {
         if self.dataset != now.dataset {
             Some(format!("dataset {} (now {})", self.dataset, now.dataset))
         } else if (self.width, self.height) != (now.width, now.height) {
@@ -411,6 +413,20 @@ pub fn train_run(
     resume: bool,
     on_progress: impl FnMut(&Progress),
 ) -> Result<RunSummary, PipelineError> {
+    train_run_with(ds, cfg, dir, resume, Vec::new(), on_progress)
+}
+
+/// [`train_run`] with extra loss terms added to the photometric loss (the fusion method of paper
+/// 000 and its alternatives). The terms must be pure functions of the iteration and the model
+/// for a resumed run to repeat an uninterrupted one.
+pub fn train_run_with(
+    ds: &Dataset,
+    cfg: &RunConfig,
+    dir: &Path,
+    resume: bool,
+    terms: Vec<Box<dyn LossTerm>>,
+    on_progress: impl FnMut(&Progress),
+) -> Result<RunSummary, PipelineError> {
     let run = RunDir(dir.to_path_buf());
     // Before anything is written: a run that cannot score its held-out views would otherwise
     // leave config.json and point_cloud.ply behind and fail only after training.
@@ -499,6 +515,9 @@ pub fn train_run(
         }
         (None, None) => unreachable!("one of model or state"),
     };
+    for term in terms {
+        trainer.add_term(term);
+    }
     let resumed_from = (trainer.state.iteration > 0).then_some(trainer.state.iteration);
     let start = Instant::now();
     let ckpt_path = run.checkpoint();

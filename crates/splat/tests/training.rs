@@ -2,7 +2,7 @@
 //! trained models, divergence reporting, and that training actually learns the scene.
 
 use burn::tensor::Device;
-use fewview_scene::synthetic::{DemoOptions, demo_dataset};
+use fewview_scene::synthetic::{DemoOptions, DemoShading, demo_dataset};
 use fewview_scene::{Dataset, Image};
 use fewview_splat::eval::{evaluate, render_model};
 use fewview_splat::pipeline::{
@@ -20,6 +20,7 @@ fn demo(width: usize, height: usize, train: Vec<usize>) -> Dataset {
         views: 8,
         train,
         supersample: 2,
+        shading: DemoShading::Lambertian,
     })
 }
 
@@ -246,6 +247,7 @@ fn training_learns_the_demo_scene() {
         views: 9,
         train: vec![1, 4, 7],
         supersample: 2,
+        shading: DemoShading::Lambertian,
     });
     let mut cfg = RunConfig::new(TrainConfig::sparse_view(600));
     cfg.init_points = 5000;

@@ -65,6 +65,8 @@ struct Report {
     machine: Machine,
     raster: fewview_splat::bench::RasterBench,
     train_demo: fewview_splat::bench::TrainStepBench,
+    /// Demo training steps with the gradient-domain fusion term on every step.
+    fusion_demo: fewview_fusion::bench::FusionStepBench,
     train_fern: Option<fewview_splat::bench::TrainStepBench>,
     train_surface: Option<fewview_surface::bench::SurfaceStepBench>,
     ssim: fewview_metrics::bench::SsimBench,
@@ -113,6 +115,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     eprintln!("training steps: demo scene ...");
     let demo = demo_dataset(&DemoOptions::default());
     let train_demo = fewview_splat::bench::train_step_bench(&demo, args.train_steps)?;
+    eprintln!("training steps with the fusion term: demo scene ...");
+    let fusion_demo = fewview_fusion::bench::fusion_step_bench(&demo, args.train_steps)?;
     let fern_dir = args
         .fern
         .clone()
@@ -166,6 +170,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         machine,
         raster,
         train_demo,
+        fusion_demo,
         train_fern,
         train_surface,
         ssim,
@@ -262,6 +267,17 @@ fn print_table(r: &Report) {
             "  it per CPU-second", t.iterations_per_cpu_second, ""
         );
     }
+    let f = &r.fusion_demo;
+    println!(
+        "{:<46} {:>14.2} {:>14.2}",
+        "demo it/s with fusion term (vs without)",
+        f.fusion.iterations_per_second,
+        f.plain.iterations_per_second
+    );
+    println!(
+        "{:<46} {:>14.2} {:>14}",
+        "  fusion term's share of a step", f.term_share, ""
+    );
     if let Some(s) = &r.train_surface {
         println!(
             "{:<46} {:>14.3} {:>14.4}",

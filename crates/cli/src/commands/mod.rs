@@ -9,6 +9,7 @@ mod depth_mesh;
 mod depth_points;
 mod eval;
 pub mod eval_video;
+mod fusion;
 mod geom_common;
 mod mcubes;
 mod number_args;
@@ -30,6 +31,7 @@ use clap::Subcommand;
 pub enum Command {
     Demo(demo::Args),
     Train(train::Args),
+    Fusion(Box<fusion::Args>),
     Render(render::Args),
     Eval(eval::Args),
     Bench(bench::Args),
@@ -53,6 +55,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Demo(a) => demo::run(a),
         Command::Train(a) => train::run(a),
+        Command::Fusion(a) => fusion::run(*a),
         Command::Render(a) => render::run(a),
         Command::Eval(a) => eval::run(a),
         Command::Bench(a) => bench::run(a),

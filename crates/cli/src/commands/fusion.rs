@@ -1,0 +1,290 @@
+//! `fewview fusion`: sparse-view splatting with gradient-domain fusion on virtual views
+//! (paper 000), or one of its alternatives, and the transition video it is judged by.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use clap::Args as ClapArgs;
+use fewview_fusion::transition::{TransitionReport, transition_of_run};
+use fewview_fusion::{FusionConfig, Variant, fusion_run};
+use fewview_scene::Dataset;
+use fewview_scene::synthetic::{DemoOptions, demo_dataset, demo_render};
+use fewview_splat::pipeline::{RunConfig, RunSummary, default_iterations};
+
+use super::dataset_args::{ViewList, parse_views};
+use super::output_paths::check_folder;
+use super::progress;
+use super::train::print_summary;
+use super::train_args::TrainArgs;
+
+/// Train Gaussians whose colours change smoothly between the input views (paper 000).
+///
+/// Trains as `train` does, from the stereo start, and adds the chosen variant's regulariser on
+/// virtual views between adjacent training views: `gf` (ours: the rendered view's gradients
+/// follow the guidance field of its two neighbours reprojected through meshes of rendered depth),
+/// or the supplement's alternatives `plain`, `sparse-init` (a), `knn-color` (b), `tv` (c),
+/// `l1-virtual` (d), `poisson` (e). Then renders `transition.mp4` (8 s at 20 fps through the
+/// training views and back) and scores it (`transition.json`: warping error with the exact flow
+/// of the rendered depth; on `--demo`, PSNR/SSIM/LPIPS against the ray-traced truth along the
+/// path). Writes the run directory of `train` plus `fusion.json`.
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    /// Dataset folder (any format `train` reads).
+    #[arg(
+        long,
+        value_name = "DIR",
+        required_unless_present_any = ["demo", "study", "table"],
+        conflicts_with = "demo"
+    )]
+    pub data: Option<PathBuf>,
+    /// Use the demo scene built in-process (3 of 24 ray-traced views, view-dependent shading)
+    /// instead of a dataset; the path is then scored against its ray-traced truth.
+    #[arg(long)]
+    pub demo: bool,
+    /// Demo image width (height 3/4 of it).
+    #[arg(long, default_value_t = 200, requires = "demo")]
+    pub width: usize,
+    /// Downscale images by this integer factor on load.
+    #[arg(long, default_value_t = 1, value_name = "K")]
+    pub downscale: u32,
+    /// Number of training views of the format's standard sparse split.
+    #[arg(long, value_name = "N")]
+    pub n_train: Option<usize>,
+    /// Explicit training views (indices in the dataset's view order; with `--demo`, of its 24
+    /// views on an arc).
+    #[arg(long, value_name = "LIST", value_parser = parse_views)]
+    pub train_views: Option<ViewList>,
+    /// Explicit held-out views.
+    #[arg(long, value_name = "LIST", value_parser = parse_views)]
+    pub test_views: Option<ViewList>,
+    #[command(flatten)]
+    pub train: TrainArgs,
+    /// The regulariser: gf (f, ours), plain, sparse-init (a), knn-color (b), tv (c),
+    /// l1-virtual (d), poisson (e).
+    #[arg(long, default_value = "gf", value_parser = parse_variant)]
+    pub variant: Variant,
+    /// Weight λ of the virtual-view loss of gf, l1-virtual and poisson.
+    #[arg(long, default_value_t = 0.3, value_parser = super::number_args::non_negative_f32)]
+    pub weight: f32,
+    /// Take the virtual-view loss every N iterations (from 20 % of the run).
+    #[arg(long, default_value_t = 3, value_parser = super::number_args::positive_count)]
+    pub every: usize,
+    /// Re-render and re-mesh the training views' depth every N iterations.
+    #[arg(long, default_value_t = 500, value_parser = super::number_args::positive_count)]
+    pub refresh: usize,
+    /// Skip the transition video and its scores.
+    #[arg(long)]
+    pub no_transition: bool,
+    /// Skip LPIPS (held-out views and, on `--demo`, the path).
+    #[arg(long)]
+    pub no_lpips: bool,
+    /// Run directory (with `--study`: the study's folder).
+    #[arg(long, value_name = "DIR", required_unless_present = "table")]
+    pub out: Option<PathBuf>,
+    /// Instead of training: put the transition videos of these finished runs (same dataset and
+    /// views; each folder's name becomes a method's name) into a pairwise study in `--out`
+    /// (`study.toml` with paper 000's two questions, and `videos/`), ready for `fewview study
+    /// serve --config OUT/study.toml`.
+    #[arg(long, num_args = 2.., value_name = "RUN", conflicts_with_all = ["demo", "data", "table"])]
+    pub study: Vec<PathBuf>,
+    /// Instead of training: print the comparison table (Markdown) of these finished runs.
+    #[arg(long, num_args = 1.., value_name = "RUN", conflicts_with_all = ["demo", "data"])]
+    pub table: Vec<PathBuf>,
+    /// Continue the run in `--out` from its last checkpoint (same flags).
+    #[arg(long)]
+    pub resume: bool,
+}
+
+fn parse_variant(s: &str) -> Result<Variant, String> {
+    s.parse()
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if !args.table.is_empty() {
+        return print_table(&args.table);
+    }
+    let out = args.out.clone().expect("clap requires --out");
+    check_folder(&out, "--out")?;
+    if !args.study.is_empty() {
+        return write_study(&args.study, &out);
+    }
+    let (ds, demo) = load(&args)?;
+    let default = if demo.is_some() {
+        2000
+    } else {
+        default_iterations(&ds)
+    };
+    let cfg = args.train.run_config(ds.background, default)?;
+    let fusion = FusionConfig {
+        variant: args.variant,
+        weight: args.weight,
+        every: args.every,
+        refresh_interval: args.refresh,
+        ..FusionConfig::default()
+    };
+    if let Err(m) = fusion.validate() {
+        bail!("invalid fusion options: {m}");
+    }
+    eprintln!(
+        "fusion ({}) on {} ({} train / {} held-out views) → {}",
+        fusion.variant,
+        ds.name,
+        ds.train.len(),
+        ds.test.len(),
+        out.display()
+    );
+    let summary = train_with_progress(&ds, &cfg, &fusion, &out, args.resume)?;
+    print_summary(&summary, &out);
+    if !args.no_transition {
+        let report = transition(&ds, demo.as_ref(), &out, !args.no_lpips)?;
+        print_transition(&report);
+    }
+    Ok(())
+}
+
+/// Trains one fusion run with a progress bar.
+pub fn train_with_progress(
+    ds: &Dataset,
+    cfg: &RunConfig,
+    fusion: &FusionConfig,
+    out: &Path,
+    resume: bool,
+) -> anyhow::Result<RunSummary> {
+    let bar = progress::iterations(cfg.train.iterations as u64, "train");
+    let (summary, _) = fusion_run(ds, cfg, fusion, out, resume, |p| {
+        bar.set_position(p.iteration as u64);
+        if p.iteration % 10 == 0 {
+            bar.set_message(format!("loss {:.4}  {} Gaussians", p.loss, p.gaussians));
+        }
+    })
+    .with_context(|| format!("fusion run in {}", out.display()))?;
+    bar.finish_and_clear();
+    Ok(summary)
+}
+
+/// Renders and scores the run's transition; on the demo scene against its ray-traced truth
+/// (with LPIPS when `lpips`).
+pub fn transition(
+    ds: &Dataset,
+    demo: Option<&DemoOptions>,
+    out: &Path,
+    lpips: bool,
+) -> anyhow::Result<TransitionReport> {
+    eprintln!("rendering and scoring the transition ...");
+    let truth = demo.map(|opts| move |c: &fewview_scene::Camera| demo_render(c, opts));
+    let truth_ref = truth
+        .as_ref()
+        .map(|f| f as &(dyn Fn(&fewview_scene::Camera) -> fewview_scene::Image + Sync));
+    let lpips = lpips
+        .then(fewview_metrics::lpips::Lpips::default_st_alex)
+        .transpose()?;
+    Ok(transition_of_run(ds, out, truth_ref, lpips.as_ref())?)
+}
+
+pub fn print_transition(r: &TransitionReport) {
+    println!(
+        "path warping err {:.5} (Δ {:.5}), warp PSNR {:.2} dB",
+        r.warping_error.mean, r.warping_error.delta.mean, r.warp_psnr.mean
+    );
+    if let Some(l) = r.held_out_lpips {
+        println!("held-out LPIPS   {l:.4} (ST-LPIPS AlexNet)");
+    }
+    if let Some(t) = &r.truth {
+        println!(
+            "path vs truth    PSNR {:.2} dB (Δ {:.3}), SSIM {:.4}{}",
+            t.psnr.mean,
+            t.psnr.delta.mean,
+            t.ssim.mean,
+            t.lpips
+                .as_ref()
+                .map(|l| format!(", LPIPS {:.4}", l.mean))
+                .unwrap_or_default()
+        );
+    }
+}
+
+fn load(args: &Args) -> anyhow::Result<(Dataset, Option<DemoOptions>)> {
+    if args.demo {
+        let mut opts = DemoOptions {
+            width: args.width,
+            height: args.width * 3 / 4,
+            ..DemoOptions::default()
+        };
+        if let Some(train) = &args.train_views {
+            opts.train = train.0.clone();
+        }
+        return Ok((demo_dataset(&opts), Some(opts)));
+    }
+    let folder = args
+        .data
+        .as_deref()
+        .expect("clap requires --data without --demo");
+    let options = fewview_scene::load::LoadOptions {
+        downscale: args.downscale,
+        n_train: args.n_train,
+        train_views: args.train_views.clone().map(|v| v.0),
+        test_views: args.test_views.clone().map(|v| v.0),
+        ..Default::default()
+    };
+    let ds = fewview_scene::load_dataset(folder, &options)
+        .with_context(|| format!("cannot load dataset {}", folder.display()))?;
+    Ok((ds, None))
+}
+
+fn print_table(runs: &[PathBuf]) -> anyhow::Result<()> {
+    let rows = runs
+        .iter()
+        .map(|r| fewview_fusion::table::read_row(r))
+        .collect::<Result<Vec<_>, _>>()?;
+    print!("{}", fewview_fusion::table::markdown(&rows));
+    Ok(())
+}
+
+/// The study configuration `fewview study serve` reads (see `study::config`).
+#[derive(serde::Serialize)]
+struct StudyFile {
+    title: String,
+    seed: u64,
+    database: String,
+    methods: Vec<String>,
+    scenes: Vec<String>,
+    questions: Vec<super::study::config::Question>,
+    videos: std::collections::BTreeMap<String, std::collections::BTreeMap<String, String>>,
+}
+
+fn write_study(runs: &[PathBuf], out: &Path) -> anyhow::Result<()> {
+    // Every check happens here, before anything is written.
+    let plan = fewview_fusion::study::plan_study(runs)?;
+    let folder = PathBuf::from("videos").join(&plan.scene);
+    std::fs::create_dir_all(out.join(&folder))
+        .with_context(|| format!("cannot create {}", out.join(&folder).display()))?;
+    let mut videos = std::collections::BTreeMap::new();
+    for (method, video) in &plan.videos {
+        let relative = folder.join(format!("{method}.mp4"));
+        std::fs::copy(video, out.join(&relative))
+            .with_context(|| format!("cannot copy {}", video.display()))?;
+        videos.insert(method.clone(), relative.to_string_lossy().into_owned());
+    }
+    let file = StudyFile {
+        title: format!("View transitions on {}", plan.scene),
+        seed: 0,
+        database: "responses.sqlite".into(),
+        methods: plan.videos.iter().map(|(m, _)| m.clone()).collect(),
+        scenes: vec![plan.scene.clone()],
+        questions: super::study::config::paper_questions(),
+        videos: [(plan.scene.clone(), videos)].into_iter().collect(),
+    };
+    let config = out.join("study.toml");
+    std::fs::write(&config, toml::to_string_pretty(&file)?)
+        .with_context(|| format!("cannot write {}", config.display()))?;
+    println!(
+        "study            {} methods on {}",
+        plan.videos.len(),
+        plan.scene
+    );
+    println!(
+        "serve it with    fewview study serve --config {}",
+        config.display()
+    );
+    Ok(())
+}
