@@ -1,6 +1,8 @@
 // End-to-end test of the study page, driven by crates/cli/tests/study_e2e.rs.
 // Environment: STUDY_URL (server base URL), STUDY_RESULT (JSON file to write), CHROMIUM
-// (browser binary), SIMULATED (number of concurrent API participants). Needs playwright-core
+// (browser binary), SIMULATED (number of concurrent API participants), MEDIA (`img`, the
+// default, or `video`: what each side must show), MIN_TOTAL (fewest comparisons expected, 3 by
+// default). Needs playwright-core
 // (scripts/setup-browser.sh installs it into .cache/browser; run with NODE_PATH pointing there).
 "use strict";
 const fs = require("fs");
@@ -11,6 +13,8 @@ const { chromium } = require("playwright-core");
 const base = process.env.STUDY_URL;
 const resultPath = process.env.STUDY_RESULT;
 const simulated = Number(process.env.SIMULATED || "24");
+const media = process.env.MEDIA || "img";
+const minTotal = Number(process.env.MIN_TOTAL || "3");
 
 function check(cond, message) {
   if (!cond) throw new Error(message);
@@ -41,16 +45,26 @@ async function browserSession() {
     await page.goto(`${base}/?participant=${participant}`);
     await page.waitForSelector("#study:not([hidden])");
     const total = Number((await page.textContent("#progress")).split("/")[1]);
-    check(total > 2, `total ${total}`);
+    check(total >= minTotal, `total ${total}`);
     const questions = await page.$$eval("fieldset legend", (ls) => ls.map((l) => l.textContent));
     check(questions.length === 2 && questions[0].startsWith("Q1: Which video shows more natural color transitions"), `questions ${questions}`);
     const answerOne = async (k) => {
       const progress = (await page.textContent("#progress")).trim();
       check(progress === `${k + 1} / ${total}`, `progress shows ${progress}, expected ${k + 1} / ${total}`);
       const index = Number(await page.getAttribute("#study", "data-trial"));
-      // Both sides show their (image) media, loaded from the server.
+      // Both sides show their media, loaded from the server: an image decoded, or a video
+      // element whose file the server delivers as a video.
       for (const side of ["left", "right"]) {
-        await page.waitForFunction((s) => { const i = document.querySelector(`#${s}-media img`); return i && i.complete && i.naturalWidth > 0; }, side);
+        if (media === "video") {
+          await page.waitForFunction((s) => { const v = document.querySelector(`#${s}-media video`); return v && v.src; }, side);
+          const served = await page.evaluate(async (s) => {
+            const r = await fetch(document.querySelector(`#${s}-media video`).src);
+            return `${r.status} ${r.headers.get("content-type")} ${(await r.arrayBuffer()).byteLength}`;
+          }, side);
+          check(/^200 video\/mp4 [1-9]/.test(served), `${side} video: ${served}`);
+        } else {
+          await page.waitForFunction((s) => { const i = document.querySelector(`#${s}-media img`); return i && i.complete && i.naturalWidth > 0; }, side);
+        }
       }
       check(await page.isDisabled("#next"), "Next enabled before answering");
       const answers = { Q1: k % 2 === 0 ? "left" : "right", Q2: k % 3 === 0 ? "right" : "left" };

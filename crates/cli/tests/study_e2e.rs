@@ -1,7 +1,8 @@
 //! The user study end to end: `fewview study serve` on loopback, a participant in headless
 //! Chromium (answers half, reloads, finishes), 24 concurrent simulated participants through the
 //! API, then the server is killed (SIGKILL) and `fewview study analyze` must find every answer
-//! and count the wins right. Needs `scripts/setup-browser.sh` (the test command runs it).
+//! and count the wins right. A second test builds a study from `fewview fusion` runs and walks a
+//! participant through its videos. Needs `scripts/setup-browser.sh` (the test command runs it).
 
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
@@ -152,4 +153,89 @@ fn browser_session_reload_concurrency_and_analysis() {
     }
     assert_eq!(rows, 2 * 3 * 2, "2 questions × 3 pairs × both directions");
     assert!(out.join("ranking_Q1.png").exists() && out.join("report.md").exists());
+}
+
+/// Starts `fewview study serve` on a free loopback port; returns the server and its base URL.
+fn serve(config: &Path) -> (std::process::Child, String) {
+    let mut server = Command::new(env!("CARGO_BIN_EXE_fewview"))
+        .args(["study", "serve", "--config"])
+        .arg(config)
+        .args(["--addr", "127.0.0.1:0"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(server.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let url = line
+        .split_whitespace()
+        .nth(1)
+        .expect("server prints its URL")
+        .trim_end_matches('/')
+        .to_string();
+    (server, url)
+}
+
+#[test]
+fn a_study_of_fusion_runs_shows_their_transition_videos_to_a_participant() {
+    let node_modules = repo().join(".cache/browser/node_modules");
+    assert!(
+        node_modules.join("playwright-core").exists() && Path::new("/usr/bin/chromium").exists(),
+        "headless browser missing: run scripts/setup-browser.sh (scripts/test.sh does)"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let exe = env!("CARGO_BIN_EXE_fewview");
+    let mut runs = Vec::new();
+    for variant in ["gf", "plain", "tv"] {
+        let out = dir.path().join(variant);
+        let status = Command::new(exe)
+            .args(["fusion", "--demo", "--width", "64", "--iterations", "40"])
+            .args([
+                "--checkpoint-every",
+                "0",
+                "--no-lpips",
+                "--variant",
+                variant,
+                "--out",
+            ])
+            .arg(&out)
+            .stdout(Stdio::null())
+            .status()
+            .unwrap();
+        assert!(status.success(), "fusion --variant {variant}");
+        runs.push(out);
+    }
+    let study = dir.path().join("study");
+    let status = Command::new(exe)
+        .args(["fusion", "--study"])
+        .args(&runs)
+        .arg("--out")
+        .arg(&study)
+        .stdout(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(status.success(), "fusion --study");
+    let (mut server, url) = serve(&study.join("study.toml"));
+    let result = dir.path().join("e2e.json");
+    let status = Command::new("node")
+        .arg(repo().join("web/tests/study_e2e.cjs"))
+        .env("NODE_PATH", &node_modules)
+        .env("STUDY_URL", &url)
+        .env("STUDY_RESULT", &result)
+        .env("SIMULATED", "2")
+        .env("MEDIA", "video")
+        .env("MIN_TOTAL", "3")
+        .status()
+        .unwrap();
+    server.kill().unwrap();
+    server.wait().unwrap();
+    assert!(status.success(), "node end-to-end script failed");
+    // One scene, three methods: three comparisons of two questions for each of the browser
+    // participant and the two simulated ones, all stored.
+    let db = rusqlite::Connection::open(study.join("responses.sqlite")).unwrap();
+    let stored: i64 = db
+        .query_row("SELECT COUNT(*) FROM responses", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(stored, 3 * 3 * 2);
 }
