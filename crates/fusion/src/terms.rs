@@ -54,6 +54,8 @@ pub const RECOVERY: usize = 100;
 pub struct VirtualViewTerm {
     config: FusionConfig,
     views: Vec<FusionView>,
+    /// The views' cameras, for drawing virtual cameras between them.
+    cameras: Vec<Camera>,
     pairs: Vec<Neighbours>,
     start: usize,
     seed: u64,
@@ -83,6 +85,7 @@ impl VirtualViewTerm {
             .collect();
         Self {
             config,
+            cameras: views.iter().map(|v| v.camera.clone()).collect(),
             views,
             pairs,
             start,
@@ -300,8 +303,7 @@ impl VirtualViewTerm {
         let mut rng = StdRng::seed_from_u64(
             self.seed ^ (ctx.iteration as u64).wrapping_mul(0xA24B_AED4_963E_E407),
         );
-        let cameras: Vec<Camera> = self.views.iter().map(|v| v.camera.clone()).collect();
-        let Some(v) = sample_virtual(&cameras, &self.pairs, &mut rng) else {
+        let Some(v) = sample_virtual(&self.cameras, &self.pairs, &mut rng) else {
             return Ok(None);
         };
         let out = ctx.render(&RenderCamera::from(&v.camera));
