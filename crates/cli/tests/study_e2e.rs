@@ -13,6 +13,16 @@ fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
+/// Where playwright-core lives; fails when the headless browser is not installed.
+fn browser() -> PathBuf {
+    let node_modules = repo().join(".cache/browser/node_modules");
+    assert!(
+        node_modules.join("playwright-core").exists() && Path::new("/usr/bin/chromium").exists(),
+        "headless browser missing: run scripts/setup-browser.sh (scripts/test.sh does)"
+    );
+    node_modules
+}
+
 fn write_study(dir: &Path) -> PathBuf {
     let methods = ["FreeNeRF", "MVPGS", "Ours"];
     let scenes = ["truck", "train"];
@@ -36,32 +46,12 @@ fn write_study(dir: &Path) -> PathBuf {
 
 #[test]
 fn browser_session_reload_concurrency_and_analysis() {
-    let node_modules = repo().join(".cache/browser/node_modules");
-    assert!(
-        node_modules.join("playwright-core").exists() && Path::new("/usr/bin/chromium").exists(),
-        "headless browser missing: run scripts/setup-browser.sh (scripts/test.sh does)"
-    );
+    let node_modules = browser();
     let dir = tempfile::tempdir().unwrap();
     let config = write_study(dir.path());
     let exe = env!("CARGO_BIN_EXE_fewview");
-    let mut server = Command::new(exe)
-        .args(["study", "serve", "--config"])
-        .arg(&config)
-        .args(["--addr", "127.0.0.1:0"])
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(server.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let url = line
-        .split_whitespace()
-        .nth(1)
-        .expect("server prints its URL")
-        .trim_end_matches('/')
-        .to_string();
-    assert!(url.starts_with("http://127.0.0.1:"), "{line}");
+    let (mut server, url) = serve(&config);
+    assert!(url.starts_with("http://127.0.0.1:"), "{url}");
 
     let result = dir.path().join("e2e.json");
     let status = Command::new("node")
@@ -179,11 +169,7 @@ fn serve(config: &Path) -> (std::process::Child, String) {
 
 #[test]
 fn a_study_of_fusion_runs_shows_their_transition_videos_to_a_participant() {
-    let node_modules = repo().join(".cache/browser/node_modules");
-    assert!(
-        node_modules.join("playwright-core").exists() && Path::new("/usr/bin/chromium").exists(),
-        "headless browser missing: run scripts/setup-browser.sh (scripts/test.sh does)"
-    );
+    let node_modules = browser();
     let dir = tempfile::tempdir().unwrap();
     let exe = env!("CARGO_BIN_EXE_fewview");
     let mut runs = Vec::new();
