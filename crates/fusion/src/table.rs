@@ -44,6 +44,14 @@ fn number(v: &Value, pointer: &str, file: &Path) -> Result<f64, FusionError> {
         .ok_or_else(|| FusionError::Invalid(format!("{}: no number at {pointer}", file.display())))
 }
 
+/// A string at a JSON pointer, or an error naming the file and the field.
+fn text(v: &Value, pointer: &str, file: &Path) -> Result<String, FusionError> {
+    v.pointer(pointer)
+        .and_then(Value::as_str)
+        .map(str::to_string)
+        .ok_or_else(|| FusionError::Invalid(format!("{}: no text at {pointer}", file.display())))
+}
+
 /// The row of the finished run in `dir`.
 pub fn read_row(dir: &Path) -> Result<TableRow, FusionError> {
     let (m, f, t) = (
@@ -55,11 +63,8 @@ pub fn read_row(dir: &Path) -> Result<TableRow, FusionError> {
     let optional = |p: &str| transition.pointer(p).and_then(Value::as_f64);
     Ok(TableRow {
         run: dir.to_path_buf(),
-        dataset: metrics["dataset"].as_str().unwrap_or_default().to_string(),
-        variant: fusion["config"]["variant"]
-            .as_str()
-            .unwrap_or_default()
-            .to_string(),
+        dataset: text(&metrics, "/dataset", &m)?,
+        variant: text(&fusion, "/config/variant", &f)?,
         held_out_psnr: number(&metrics, "/test/mean_psnr", &m)?,
         held_out_ssim: number(&metrics, "/test/mean_ssim", &m)?,
         held_out_lpips: optional("/held_out_lpips"),

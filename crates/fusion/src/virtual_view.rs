@@ -3,7 +3,7 @@
 //! the path a transition video follows.
 
 use fewview_geom::stereo::pairs::{OverlapRule, StereoView, stereo_pairs};
-use fewview_scene::{Camera, Se3};
+use fewview_scene::Camera;
 use rand::{Rng, RngExt};
 
 use crate::error::FusionError;
@@ -31,14 +31,8 @@ pub const T_RANGE: (f64, f64) = (0.2, 0.8);
 /// interpolation, rotation by SLERP, and the intrinsics (and image size) of the nearer view, so
 /// that the virtual image has the resolution of the photo it is compared with.
 pub fn virtual_camera(a: &Camera, b: &Camera, t: f64) -> Camera {
-    let q = a
-        .world_to_camera
-        .quaternion()
-        .slerp(&b.world_to_camera.quaternion(), t);
-    let r = q.to_rotation_matrix().into_inner();
-    let c = a.center() * (1.0 - t) + b.center() * t;
-    let intrinsics = if t <= 0.5 { a.intrinsics } else { b.intrinsics };
-    Camera::new(intrinsics, Se3::new(r, -(r * c)))
+    let nearer = if t <= 0.5 { a } else { b };
+    Camera::new(nearer.intrinsics, a.interpolate(b, t).world_to_camera)
 }
 
 /// The adjacent pairs of the training views: consecutive views along their baseline and the
