@@ -11,6 +11,8 @@
 //!   reproject depth meshes into virtual views (paper 000 §1, §4).
 //! - [`mcubes`]: marching cubes on dense grids and chunked closures; [`cleanup`]: largest
 //!   component and mask culling.
+//! - [`epipolar`]: the five-point relative pose with RANSAC, rotation averaging and camera
+//!   centres from baseline directions: a global start for noisy poses (paper 001).
 //! - [`registration`]: similarity pre-alignment, FPFH + RANSAC, ICP (paper 001 Alg. 3).
 //! - [`chamfer`]: the DTU Chamfer protocol and Chamfer-L1 / F-score / normal consistency.
 //! - [`io`]: PLY, OBJ, OFF, `.npy`, depth PNGs and camera JSON.
@@ -26,6 +28,7 @@ pub mod cleanup;
 pub mod colormap;
 pub mod contract;
 pub mod depth;
+pub mod epipolar;
 pub mod error;
 pub mod io;
 pub mod knn;

@@ -14,6 +14,7 @@ pub use fewview_scene::cputime;
 pub mod error;
 pub mod extract;
 pub mod field;
+pub mod global_start;
 pub mod hashgrid;
 pub mod losses;
 pub mod matching;

@@ -36,6 +36,7 @@ use serde::{Deserialize, Serialize};
 use crate::checkpoint;
 use crate::error::{Result, SurfaceError};
 use crate::extract::{MeshOptions, final_mesh, render_view};
+use crate::global_start::PairPose;
 use crate::matching::densify::{DensifyOptions, densify_matches};
 use crate::matching::refine::{AffineRefineOptions, refine_matches};
 use crate::matching::sift::{SiftMatcher, SiftOptions};
@@ -448,6 +449,10 @@ pub struct RunReport {
     pub warmup: Option<WarmupReport>,
     /// After the epipolar warm-up (before the patch adjustment, when that ran).
     pub warmup_pose_error: Option<PoseError>,
+    /// The error (degrees) of each relative rotation the global start's five-point step found
+    /// (in the order of [`WarmupReport::global_start`]) against the true poses.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub global_start_rotation_errors_deg: Vec<f64>,
     /// The photometric patch adjustment after the warm-up, when it ran, and the pose error of
     /// the poses it gave the training.
     pub patch_adjustment: Option<PatchAdjustmentReport>,
@@ -538,6 +543,8 @@ pub enum Event<'a> {
     WarmedUp {
         report: &'a WarmupReport,
         pose_error: &'a PoseError,
+        /// [`RunReport::global_start_rotation_errors_deg`].
+        pair_errors_deg: &'a [f64],
     },
     /// The photometric patch adjustment finished; the pose error of its poses.
     PatchesAdjusted {
@@ -554,6 +561,20 @@ pub enum Event<'a> {
     /// [`RunConfig::pose_timing_without_warmup`], this timing.
     PoseTimingFallback(&'a PoseTiming),
     Stage(&'static str),
+}
+
+/// The angle (degrees) between each pair's relative rotation and the true one, `R_b R_aᵀ` of
+/// the true world-to-camera rotations.
+fn pair_rotation_errors(pairs: &[PairPose], truth: &[Se3]) -> Vec<f64> {
+    pairs
+        .iter()
+        .filter_map(|p| {
+            let (a, b) = (truth.get(p.view_a)?, truth.get(p.view_b)?);
+            let found = nalgebra::Matrix3::from_fn(|i, j| p.rotation[i][j]);
+            let true_rel = b.rotation * a.rotation.transpose();
+            Some(crate::pose::rotation_angle_deg(&found, &true_rel))
+        })
+        .collect()
 }
 
 fn pose_error(est: &[Se3], gt: &[Se3]) -> Result<PoseError> {
@@ -737,12 +758,18 @@ pub fn run(
         .patch_adjustment
         .as_ref()
         .map_or(&prep.start, |(_, before)| before);
+    let global_start_rotation_errors_deg = prep
+        .warmup
+        .as_ref()
+        .map(|w| pair_rotation_errors(&w.global_start, &prep.ground_truth))
+        .unwrap_or_default();
     let warmup_pose_error = match &prep.warmup {
         Some(report) => {
             let err = pose_error(epipolar_poses, &prep.ground_truth)?;
             on_event(Event::WarmedUp {
                 report,
                 pose_error: &err,
+                pair_errors_deg: &global_start_rotation_errors_deg,
             });
             Some(err)
         }
@@ -944,6 +971,7 @@ pub fn run(
         initial_pose_error: initial_err,
         warmup: prep.warmup.clone(),
         warmup_pose_error,
+        global_start_rotation_errors_deg,
         patch_adjustment: prep.patch_adjustment.as_ref().map(|(r, _)| r.clone()),
         patch_adjustment_pose_error,
         pose_timing,

@@ -170,7 +170,7 @@ mod tests {
             in_front: 1.0,
             initial_median_px: 1.0,
             final_median_px: 1.0,
-            covariance_weighted: 0,
+            ..crate::warmup::WarmupReport::unstarted()
         }
     }
 

@@ -174,6 +174,11 @@ pub struct Args {
     /// No covariance polish after the warm-up, whatever `--schedule` says.
     #[arg(long)]
     pub no_warmup_covariance: bool,
+    /// Start the warm-up from the initial poses only, without the global start the matches
+    /// imply on their own (five-point relative poses of every matched pair, rotation averaging,
+    /// baseline directions; the default, as structure from motion starts).
+    #[arg(long)]
+    pub no_global_start: bool,
     /// After a warm-up on dense matches, refine the poses photometrically: each match seeds a
     /// small plane in 3D (depth and normal), compared across every view that sees it through
     /// the homography it induces, in a bundle adjustment with the poses (a deviation: the paper
@@ -391,6 +396,7 @@ impl Args {
             connectivity,
             cauchy_px: self.warmup_cauchy,
             covariance_polish,
+            global_start: !self.no_global_start,
             ..Default::default()
         });
         let needs_matches = warm_up || !(self.no_matching && self.no_ncc && self.no_gc);
@@ -608,17 +614,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 100.0 * pose_error.translation
             )
         }),
-        Event::WarmedUp { report, pose_error } => bar.suspend(|| match &report.skipped {
-            Some(why) => eprintln!("epipolar warm-up skipped: {why}"),
-            None => eprintln!(
-                "epipolar warm-up ({} iterations, median Sampson distance {:.2} → {:.2} px): \
-                     rotation error {:.3}°, translation error (×100) {:.3}",
-                report.iterations,
-                report.initial_median_px,
-                report.final_median_px,
-                pose_error.rotation_deg,
-                100.0 * pose_error.translation
-            ),
+        Event::WarmedUp {
+            report,
+            pose_error,
+            pair_errors_deg,
+        } => bar.suspend(|| {
+            if let Some(why) = &report.global_start_failed {
+                eprintln!("global start: none ({why})");
+            }
+            for (p, err) in report.global_start.iter().zip(pair_errors_deg) {
+                eprintln!(
+                    "global start: views {}–{} five-point pose from {} of {} matches \
+                     (median {:.3} px), relative rotation {err:.3}° from the truth",
+                    p.view_a, p.view_b, p.inliers, p.matches, p.median_px
+                );
+            }
+            match &report.skipped {
+                Some(why) => eprintln!("epipolar warm-up skipped: {why}"),
+                None => eprintln!(
+                    "epipolar warm-up (from the {} start, {} iterations, median Sampson distance \
+                     {:.2} → {:.2} px): rotation error {:.3}°, translation error (×100) {:.3}",
+                    report.chosen_start,
+                    report.iterations,
+                    report.initial_median_px,
+                    report.final_median_px,
+                    pose_error.rotation_deg,
+                    100.0 * pose_error.translation
+                ),
+            }
         }),
         Event::PatchesAdjusted { report, pose_error } => bar.suspend(|| match &report.skipped {
             Some(why) => eprintln!("patch adjustment skipped: {why}"),

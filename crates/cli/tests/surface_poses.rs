@@ -1,0 +1,77 @@
+//! Paper 001's pose recovery on more than the scan it was developed on: the default
+//! `fewview surface` command's matching, global start and epipolar warm-up on DTU scan37 and
+//! scan65 (wide triplet 22, 25, 28 at 400 × 300, σ = 0.15 noise), stopped after one training
+//! iteration. They need `FEWVIEW_DATA` (CI sets it to `../shared/data`).
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn scan(name: &str) -> PathBuf {
+    let dir = std::env::var_os("FEWVIEW_DATA")
+        .expect("FEWVIEW_DATA must name the shared data folder (e.g. ../shared/data)");
+    PathBuf::from(dir).join("dtu").join(name)
+}
+
+/// The run's `metrics.json` after matching, the warm-up and one iteration.
+fn warm_up(name: &str) -> serde_json::Value {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join(name);
+    let done = Command::new(env!("CARGO_BIN_EXE_fewview"))
+        .arg("surface")
+        .arg("--data")
+        .arg(scan(name))
+        .args(["--train-views", "22,25,28", "--downscale", "2", "--seed", "0"])
+        .args(["--iterations", "1", "--mesh-resolution", "32", "--eval-views", "1"])
+        .args(["--eval-scale", "4", "--checkpoint-every", "0", "--out"])
+        .arg(&out)
+        .output()
+        .expect("run fewview");
+    let stderr = String::from_utf8_lossy(&done.stderr);
+    assert!(done.status.success(), "{name}: {stderr}");
+    eprintln!("{name}:\n{stderr}");
+    serde_json::from_slice(&std::fs::read(out.join("metrics.json")).unwrap()).unwrap()
+}
+
+/// Rotation error (degrees) of one of the report's pose errors.
+fn rotation(metrics: &serde_json::Value, key: &str) -> f64 {
+    metrics[key]["rotation_deg"].as_f64().unwrap()
+}
+
+/// The warm-up ends better than it started, by the matches and by the truth.
+fn assert_not_worse(name: &str, metrics: &serde_json::Value) {
+    let warmup = &metrics["warmup"];
+    assert!(warmup["skipped"].is_null(), "{name}: {warmup}");
+    let (before, after) = (
+        warmup["initial_cost"].as_f64().unwrap(),
+        warmup["final_cost"].as_f64().unwrap(),
+    );
+    assert!(after < before, "{name}: epipolar cost {before} → {after}");
+    let (r0, r1) = (
+        rotation(metrics, "initial_pose_error"),
+        rotation(metrics, "warmup_pose_error"),
+    );
+    assert!(r1 < r0, "{name}: rotation {r0}° → {r1}°");
+}
+
+/// scan37's wide triplet: the local warm-up alone settled 12.8° off (from 12.4°); from the
+/// global start the warm-up must end below 0.3°.
+#[test]
+#[ignore = "needs FEWVIEW_DATA (dataset tests)"]
+fn scan37_wide_warm_up_recovers_the_poses() {
+    let metrics = warm_up("scan37");
+    assert_not_worse("scan37", &metrics);
+    let r = rotation(&metrics, "warmup_pose_error");
+    assert!(r < 0.3, "scan37 warm-up rotation error {r}°");
+    let pairs = metrics["global_start_rotation_errors_deg"].as_array().unwrap();
+    assert_eq!(pairs.len(), 3, "every pair of the triplet has a relative pose");
+}
+
+/// scan65's wide triplet, where the local warm-up already worked: no worse than its 0.103°.
+#[test]
+#[ignore = "needs FEWVIEW_DATA (dataset tests)"]
+fn scan65_wide_warm_up_is_not_worse_with_the_global_start() {
+    let metrics = warm_up("scan65");
+    assert_not_worse("scan65", &metrics);
+    let r = rotation(&metrics, "warmup_pose_error");
+    assert!(r < 0.15, "scan65 warm-up rotation error {r}°");
+}
