@@ -201,6 +201,36 @@ pub fn prepare(dataset: &Dataset, truth: Option<&Dataset>, config: &RunConfig) -
     prepare_with_matching(dataset, truth, None, config)
 }
 
+/// Masks that would spoil a run unnoticed. An empty mask on a training view (no pixel above
+/// 0.5) leaves the matcher and the masked losses nothing: an error before anything is written.
+/// Masks covering every pixel of every training view change nothing: the run goes on, and the
+/// returned notice says so.
+fn check_masks(dataset: &Dataset, use_masks: bool) -> Result<Option<String>> {
+    if !use_masks {
+        return Ok(None);
+    }
+    let mut with_mask = 0;
+    let mut full = 0;
+    for (&index, view) in dataset.train.iter().zip(dataset.train_views()) {
+        let Some(mask) = &view.mask else { continue };
+        with_mask += 1;
+        let mut pixels = mask.data.iter().step_by(mask.channels.max(1));
+        if !pixels.clone().any(|&v| v > 0.5) {
+            return Err(SurfaceError::invalid(
+                format!("mask of view {index} ({})", view.name),
+                "is empty (no pixel above 0.5): fix the masks or pass --no-masks",
+            ));
+        }
+        full += pixels.all(|&v| v > 0.5) as usize;
+    }
+    Ok((with_mask > 0 && full == with_mask).then(|| {
+        format!(
+            "the masks of all {with_mask} training views cover every pixel: they change nothing \
+             (the run goes on as with --no-masks)"
+        )
+    }))
+}
+
 /// Two views at least: one view fixes no relative pose and no correspondence.
 fn check_view_count(dataset: &Dataset) -> Result<()> {
     if dataset.train.len() < 2 {
@@ -561,6 +591,8 @@ pub enum Event<'a> {
     /// [`RunConfig::pose_timing_without_warmup`], this timing.
     PoseTimingFallback(&'a PoseTiming),
     Stage(&'static str),
+    /// Something about the input the user should know, the run going on regardless.
+    Notice(String),
 }
 
 /// The angle (degrees) between each pair's relative rotation and the true one, `R_b R_aᵀ` of
@@ -715,6 +747,9 @@ pub fn run(
     check_view_count(dataset)?;
     if let Some(reference) = reference {
         check_reference(reference)?;
+    }
+    if let Some(notice) = check_masks(dataset, config.train.use_masks)? {
+        on_event(Event::Notice(notice));
     }
     let identity = run_identity(dataset, truth, matching, config)?;
     let ckpt = checkpoint_path(out);
@@ -1117,6 +1152,46 @@ pub fn checkpoint_path(out: &Path) -> PathBuf {
 mod tests {
     use super::*;
     use nalgebra::Vector3;
+
+    /// An empty training mask stops the run before its folder exists; masks covering every
+    /// pixel let it go on with a notice; ordinary masks, and no masks asked for, say nothing.
+    #[test]
+    fn empty_masks_stop_the_run_and_full_ones_are_noticed() {
+        let mut ds = crate::sdf_scene::sdf_dataset(&crate::sdf_scene::SdfSceneOptions {
+            width: 32,
+            height: 24,
+            views: 4,
+            train: vec![0, 1, 2],
+            supersample: 1,
+            ..Default::default()
+        });
+        assert_eq!(check_masks(&ds, true).unwrap(), None);
+        let fill = |ds: &mut Dataset, view: usize, value: f32| {
+            if let Some(m) = ds.views[view].mask.as_mut() {
+                m.data.iter_mut().for_each(|v| *v = value);
+            }
+        };
+        for v in 0..3 {
+            fill(&mut ds, v, 1.0);
+        }
+        let notice = check_masks(&ds, true).unwrap().expect("a notice");
+        assert!(notice.contains("cover every pixel"), "{notice}");
+        fill(&mut ds, 1, 0.0);
+        let err = check_masks(&ds, true).unwrap_err().to_string();
+        assert!(err.contains("view 1") && err.contains("empty"), "{err}");
+        assert_eq!(check_masks(&ds, false).unwrap(), None, "--no-masks");
+        let out = tempfile::tempdir().unwrap().path().join("run");
+        let inputs = RunInputs {
+            dataset: &ds,
+            truth: None,
+            matching: None,
+            reference: None,
+            reference_observed: None,
+            source: None,
+        };
+        assert!(run(inputs, &RunConfig::default(), &out, false, &mut |_| {}).is_err());
+        assert!(!out.exists(), "nothing written");
+    }
 
     /// A tilted plane seen by a turned camera: where a pixel's opacity reaches one half, the
     /// written depth is the hit point's camera-frame z (computed by transforming the point, not

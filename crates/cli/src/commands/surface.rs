@@ -669,6 +669,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             )
         }),
         Event::Stage(st) => bar.set_message(st.to_string()),
+        Event::Notice(text) => bar.suspend(|| eprintln!("note: {text}")),
     })
     .with_context(|| format!("surface run in {}", out.display()))?;
     bar.finish_and_clear();
