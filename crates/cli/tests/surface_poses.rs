@@ -20,8 +20,22 @@ fn warm_up(name: &str) -> serde_json::Value {
         .arg("surface")
         .arg("--data")
         .arg(scan(name))
-        .args(["--train-views", "22,25,28", "--downscale", "2", "--seed", "0"])
-        .args(["--iterations", "1", "--mesh-resolution", "32", "--eval-views", "1"])
+        .args([
+            "--train-views",
+            "22,25,28",
+            "--downscale",
+            "2",
+            "--seed",
+            "0",
+        ])
+        .args([
+            "--iterations",
+            "1",
+            "--mesh-resolution",
+            "32",
+            "--eval-views",
+            "1",
+        ])
         .args(["--eval-scale", "4", "--checkpoint-every", "0", "--out"])
         .arg(&out)
         .output()
@@ -62,8 +76,14 @@ fn scan37_wide_warm_up_recovers_the_poses() {
     assert_not_worse("scan37", &metrics);
     let r = rotation(&metrics, "warmup_pose_error");
     assert!(r < 0.3, "scan37 warm-up rotation error {r}°");
-    let pairs = metrics["global_start_rotation_errors_deg"].as_array().unwrap();
-    assert_eq!(pairs.len(), 3, "every pair of the triplet has a relative pose");
+    let pairs = metrics["global_start_rotation_errors_deg"]
+        .as_array()
+        .unwrap();
+    assert_eq!(
+        pairs.len(),
+        3,
+        "every pair of the triplet has a relative pose"
+    );
 }
 
 /// scan65's wide triplet, where the local warm-up already worked: no worse than its 0.103°.
