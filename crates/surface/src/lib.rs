@@ -26,6 +26,7 @@ pub mod rays;
 pub mod render;
 pub mod schedule;
 pub mod sdf_scene;
+pub mod table1;
 pub mod train;
 pub mod warmup;
 

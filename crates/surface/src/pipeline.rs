@@ -466,6 +466,19 @@ fn correspondences(
 /// What a run reports.
 #[derive(Clone, Debug, Serialize)]
 pub struct RunReport {
+    /// The dataset's name (its folder), the training views' indices in the source (DTU's
+    /// camera numbers), their size in pixels and the seed: what a results table groups by.
+    #[serde(default)]
+    pub dataset: String,
+    #[serde(default)]
+    pub train_views: Vec<usize>,
+    #[serde(default)]
+    pub image_size: [usize; 2],
+    #[serde(default)]
+    pub seed: u64,
+    /// Wall time of the whole invocation: matching, warm-up, training, meshing and evaluation.
+    #[serde(default)]
+    pub run_seconds_wall: f64,
     pub iterations: usize,
     pub train_seconds_wall: f64,
     pub train_seconds_cpu: f64,
@@ -742,6 +755,7 @@ pub fn run(
         reference_observed,
         source,
     } = inputs;
+    let started = std::time::Instant::now();
     // Refuse what is wrong before the run folder is touched: no half-written output.
     config.train.validate()?;
     check_view_count(dataset)?;
@@ -991,7 +1005,13 @@ pub fn run(
     let scores =
         reference.map(|gt| reference_scores(&mesh, gt, reference_observed, &final_err.alignment));
     let (chamfer, chamfer_observed, chamfer_error) = scores.unwrap_or_default();
+    let first = dataset.train_views().next();
     let report = RunReport {
+        dataset: dataset.name.clone(),
+        train_views: dataset.train_views().map(|v| v.source_index).collect(),
+        image_size: first.map_or([0, 0], |v| [v.image.width, v.image.height]),
+        seed: config.train.seed,
+        run_seconds_wall: started.elapsed().as_secs_f64(),
         iterations: trainer.state.iteration,
         train_seconds_wall: train_wall,
         train_seconds_cpu: train_cpu,

@@ -73,6 +73,13 @@ pub struct Args {
     /// Run directory. Default: `runs/surface-<dataset folder name>`.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Instead of a run: print paper 001's Table 1 for these finished runs (Markdown): the
+    /// initial, warm-up and final rotation and translation errors, the masked PSNR and the wall
+    /// time of each, beside the paper's row for its scan and triplet and whether it meets the
+    /// targets (rotation ≤ 0.1°, translation ×100 ≤ 1.25 × the paper's).
+    /// `scripts/surface_table1.sh` runs the whole protocol.
+    #[arg(long, num_args = 1.., value_name = "RUN", conflicts_with_all = ["synthetic", "out", "resume"])]
+    pub table: Vec<PathBuf>,
     /// Continue the run in `--out` from its checkpoint. Same data and flags as the first time;
     /// only --iterations (to extend), --checkpoint-every and the output settings (--mesh-resolution,
     /// --eval-views, --eval-scale) may change. A checkpoint of another run is refused.
@@ -469,6 +476,15 @@ fn matching_images(
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if !args.table.is_empty() {
+        let rows = args
+            .table
+            .iter()
+            .map(|r| fewview_surface::table1::read_row(r))
+            .collect::<Result<Vec<_>, _>>()?;
+        print!("{}", fewview_surface::table1::markdown(&rows));
+        return Ok(());
+    }
     if args.synthetic && args.dataset.data.is_some() {
         bail!("give either --data DIR or --synthetic, not both");
     }
