@@ -6,6 +6,7 @@
 //!
 //! [`epipolar_precision`] scores matches against ground-truth cameras.
 
+pub mod dense;
 pub mod densify;
 pub mod fundamental;
 pub mod refine;
