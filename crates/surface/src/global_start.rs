@@ -183,14 +183,8 @@ pub fn global_start(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use fewview_geom::similarity::rotation_angle_deg as angle_deg;
     use fewview_scene::Camera;
-
-    fn angle_deg(r: &Matrix3<f64>) -> f64 {
-        ((r.trace() - 1.0) / 2.0)
-            .clamp(-1.0, 1.0)
-            .acos()
-            .to_degrees()
-    }
 
     /// Three cameras around the origin with exact matches: the start equals the true poses
     /// up to the similarity it was placed with, from initial poses 10° and 30 % off.

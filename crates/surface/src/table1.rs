@@ -110,22 +110,28 @@ pub fn read_row(dir: &Path) -> Result<Table1Row> {
                 .map(|v| v as usize)
                 .collect()
         })
-        .unwrap_or_default();
+        .ok_or_else(|| invalid(&file, "no train_views"))?;
     let triplet = match views.as_slice() {
         v if v == NARROW => "narrow".to_string(),
         v if v == WIDE => "wide".to_string(),
         v => v.iter().map(usize::to_string).collect::<Vec<_>>().join(","),
     };
-    let size = m["image_size"]
-        .as_array()
-        .map(|a| [0, 1].map(|k| a.get(k).and_then(Value::as_u64).unwrap_or(0) as usize))
-        .unwrap_or([0, 0]);
+    let size = match m["image_size"].as_array().map(|a| a.as_slice()) {
+        Some([w, h]) => match (w.as_u64(), h.as_u64()) {
+            (Some(w), Some(h)) => [w as usize, h as usize],
+            _ => return Err(invalid(&file, "image_size is not two whole numbers")),
+        },
+        _ => return Err(invalid(&file, "no image_size")),
+    };
+    let seed = m["seed"]
+        .as_u64()
+        .ok_or_else(|| invalid(&file, "no seed"))?;
     Ok(Table1Row {
         run: dir.to_path_buf(),
         paper_translation: paper_row(&dataset, &triplet),
         dataset,
         triplet,
-        seed: m["seed"].as_u64().unwrap_or(0),
+        seed,
         size,
         initial: pose_error(&m, "initial_pose_error", &file)?,
         warmup: pose_error(&m, "warmup_pose_error", &file).ok(),
@@ -221,7 +227,10 @@ mod tests {
             err.contains("metrics.json") && err.contains("finished surface run"),
             "{err}"
         );
-        std::fs::write(tmp.path().join("metrics.json"), "{\"dataset\": \"scan37\"}").unwrap();
+        let partial = serde_json::json!({
+            "dataset": "scan37", "train_views": [22, 25, 28], "image_size": [400, 300], "seed": 0
+        });
+        std::fs::write(tmp.path().join("metrics.json"), partial.to_string()).unwrap();
         let err = read_row(tmp.path()).unwrap_err().to_string();
         assert!(err.contains("initial_pose_error"), "{err}");
     }

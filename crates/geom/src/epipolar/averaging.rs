@@ -28,7 +28,7 @@ pub fn project_to_rotation(m: &Matrix3<f64>) -> Matrix3<f64> {
 /// sense, up to one rotation of the world (view 0 is returned as the identity), or `None` when
 /// the edges do not connect the views.
 pub fn average_rotations(n: usize, edges: &[RelativeRotation]) -> Option<Vec<Matrix3<f64>>> {
-    if n == 0 || !connected(n, edges) {
+    if n == 0 || !connected(n, edges.iter().map(|e| (e.i, e.j))) {
         return None;
     }
     let mut g = DMatrix::<f64>::zeros(3 * n, 3 * n);
@@ -89,17 +89,17 @@ pub fn average_rotations(n: usize, edges: &[RelativeRotation]) -> Option<Vec<Mat
     Some(rotations.iter().map(|r| r * r0t).collect())
 }
 
-/// Whether the edges reach every view from view 0.
-fn connected(n: usize, edges: &[RelativeRotation]) -> bool {
+/// Whether the edges `(i, j)` reach every view from view 0.
+fn connected(n: usize, edges: impl Iterator<Item = (usize, usize)> + Clone) -> bool {
     let mut reached = vec![false; n];
     reached[0] = true;
     let mut changed = true;
     while changed {
         changed = false;
-        for e in edges {
-            if e.i < n && e.j < n && reached[e.i] != reached[e.j] {
-                reached[e.i] = true;
-                reached[e.j] = true;
+        for (i, j) in edges.clone() {
+            if i < n && j < n && reached[i] != reached[j] {
+                reached[i] = true;
+                reached[j] = true;
                 changed = true;
             }
         }
@@ -130,16 +130,7 @@ pub fn centres_from_baselines(n: usize, baselines: &[Baseline]) -> Option<Vec<Ve
     if n == 0 {
         return None;
     }
-    let as_edges: Vec<RelativeRotation> = baselines
-        .iter()
-        .map(|b| RelativeRotation {
-            i: b.i,
-            j: b.j,
-            rotation: Matrix3::identity(),
-            weight: 1.0,
-        })
-        .collect();
-    if !connected(n, &as_edges) {
+    if !connected(n, baselines.iter().map(|b| (b.i, b.j))) {
         return None;
     }
     let unknowns = 3 * (n - 1) + baselines.len();

@@ -376,15 +376,9 @@ fn tangent_basis(t: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::similarity::rotation_angle_deg as angle_deg;
     use nalgebra::Rotation3;
     use rand::RngExt;
-
-    fn angle_deg(r: &Matrix3<f64>) -> f64 {
-        ((r.trace() - 1.0) / 2.0)
-            .clamp(-1.0, 1.0)
-            .acos()
-            .to_degrees()
-    }
 
     /// A narrow field of view (f = 720 px on 400 × 300, as DTU at half size), ±0.15 px of
     /// noise and a quarter of the matches wrong: RANSAC and the refinement reach the same

@@ -60,7 +60,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::refine::{Fit, Plane, WarpModel, Window, refine_one};
-use super::{Match, MatchInput, luminance};
+use super::{Match, MatchInput, luminance, mask_admits};
 
 /// Options of [`dense_matches`]. Sizes are fractions of the long side of image `a` unless
 /// their name says pixels.
@@ -266,20 +266,6 @@ impl Pyramid {
     fn coarsest(&self) -> usize {
         self.planes.len() - 1
     }
-}
-
-/// Whether the mask (value ≥ `threshold` at the pixel under `p`) admits `p`; no mask admits
-/// everything inside the image.
-fn mask_admits(mask: Option<&Image>, p: Vector2<f64>, threshold: f32) -> bool {
-    let Some(m) = mask else {
-        return true;
-    };
-    let (x, y) = (p.x.floor(), p.y.floor());
-    x >= 0.0
-        && y >= 0.0
-        && (x as usize) < m.width
-        && (y as usize) < m.height
-        && m.get(x as usize, y as usize, 0) >= threshold
 }
 
 /// A regular grid of points over an image (full-resolution pixels), row-major; `active`

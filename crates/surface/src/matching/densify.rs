@@ -29,8 +29,8 @@ use nalgebra::Vector2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::Match;
 use super::refine::{AffineRefineOptions, Plane, Window, end_a, end_b, local_affine, refine_one};
+use super::{Match, mask_admits};
 
 /// Options of [`densify_matches`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -311,7 +311,7 @@ impl PairContext<'_> {
                     && p.y >= margin
                     && p.x <= w as f64 - margin
                     && p.y <= h as f64 - margin;
-                if inside && in_mask(self.mask_a, p) {
+                if inside && mask_admits(self.mask_a, p, 0.5) {
                     pts.push(p);
                 }
             }
@@ -337,7 +337,7 @@ impl PairContext<'_> {
         if fwd.ncc < o.min_ncc
             || (fwd.b - predicted).norm() > o.max_shift_px
             || !self.refine.bend_allowed(fwd.bend_px)
-            || !in_mask(self.mask_b, fwd.b)
+            || !mask_admits(self.mask_b, fwd.b, 0.5)
         {
             return None;
         }
@@ -358,19 +358,6 @@ impl PairContext<'_> {
             fwd.b_covariance,
         ))
     }
-}
-
-/// Whether `p` falls on a mask pixel ≥ 0.5 (always, without a mask).
-fn in_mask(mask: Option<&Image>, p: Vector2<f64>) -> bool {
-    let Some(m) = mask else {
-        return true;
-    };
-    let (x, y) = (p.x.floor(), p.y.floor());
-    x >= 0.0
-        && y >= 0.0
-        && (x as usize) < m.width
-        && (y as usize) < m.height
-        && m.get(x as usize, y as usize, 0) >= 0.5
 }
 
 #[cfg(test)]

@@ -42,6 +42,20 @@ pub struct MatchInput<'a> {
     pub mask: Option<&'a Image>,
 }
 
+/// Whether the mask (value ≥ `threshold` at the pixel under `p`) admits `p`; no mask admits
+/// everything.
+fn mask_admits(mask: Option<&Image>, p: nalgebra::Vector2<f64>, threshold: f32) -> bool {
+    let Some(m) = mask else {
+        return true;
+    };
+    let (x, y) = (p.x.floor(), p.y.floor());
+    x >= 0.0
+        && y >= 0.0
+        && (x as usize) < m.width
+        && (y as usize) < m.height
+        && m.get(x as usize, y as usize, 0) >= threshold
+}
+
 /// Grey value of a pixel as the matchers see it: Rec. 601 luminance of RGB(A), or the single
 /// channel.
 fn luminance(pixel: &[f32]) -> f32 {
