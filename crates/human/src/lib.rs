@@ -1,0 +1,36 @@
+//! People filmed by a ring of synchronized, calibrated cameras: the data layer of
+//! "PoseGaussian: Pose-Driven Novel View Synthesis for Robust 3D Human Reconstruction"
+//! (paper 002, whose supplement is in `papers/`).
+//!
+//! - [`dataset`]: the synthetic capture (`$FEWVIEW_DATA/human`), exact depth and joints.
+//! - [`zju`]: the ZJU-MoCap layout (`annots.npy`, `Camera_B*/`, `mask/`, `params/`), undistorted
+//!   to pinhole images on the fly.
+//! - [`source`]: [`MultiView`], the interface both offer, one `(camera, frame)` at a time.
+//! - [`split`]: the paper's protocol (8 input cameras, held-out views, novel poses) and
+//!   [`TrainingView`], which cannot open anything outside the training set.
+//! - [`hull`]: the visual hull of the input masks and its depth in each source view.
+//!
+//! Cameras follow fewview-scene's convention everywhere: OpenCV axes, world-to-camera, pixel
+//! centres at half-integers (both file formats put them at integers; [`opencv`] converts).
+
+// Numeric code indexes several parallel arrays with one loop variable, and tests positivity with
+// `!(x <= t)` on purpose so that NaN is rejected too.
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
+
+pub mod dataset;
+pub mod error;
+pub mod hull;
+pub mod maps;
+pub mod npy_rows;
+pub mod opencv;
+pub mod readlog;
+pub mod source;
+pub mod split;
+pub mod zju;
+
+pub use dataset::HumanDataset;
+pub use error::{HumanError, Result};
+pub use maps::{DepthMap, Mask};
+pub use source::MultiView;
+pub use split::{Split, TrainingView};
+pub use zju::ZjuDataset;
