@@ -9,6 +9,7 @@
 /// Adam and the learning-rate schedule live in `fewview-optim`, shared with the Gaussian trainer.
 pub use fewview_optim as adam;
 pub mod bench;
+pub mod bundle;
 pub mod checkpoint;
 pub use fewview_scene::cputime;
 pub mod error;
@@ -25,6 +26,7 @@ pub mod pose;
 pub mod rays;
 pub mod render;
 pub mod schedule;
+mod schur;
 pub mod sdf_scene;
 pub mod table1;
 pub mod train;

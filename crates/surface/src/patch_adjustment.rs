@@ -33,13 +33,14 @@
 //! bounding sphere was placed for the warm-up's scale).
 
 use fewview_scene::{Image, Intrinsics, Se3};
-use nalgebra::{DMatrix, DVector, Matrix3, SymmetricEigen, Vector2, Vector3};
+use nalgebra::{Matrix3, SymmetricEigen, Vector2, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::matching::Match;
 use crate::matching::refine::{Plane, Window};
 use crate::pose::se3_exp;
+use crate::schur::{BlockSystem, CameraSystem, SchurStep, keep_scale, robust_sigma, updated};
 
 /// Options of [`adjust_patches`].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -525,19 +526,6 @@ fn join_further_views(
 /// One patch's part of the weighted normal equations, from its residuals `r`, the 3 columns
 /// `J_p` of its own unknowns and the columns `J_c` of the camera parameters it depends on (6
 /// for each free camera that sees it; a patch in 3 of 24 views touches 18 of 138).
-struct PatchSystem {
-    /// `J_pᵀ J_p`, `J_pᵀ r`.
-    v: Matrix3<f64>,
-    g: Vector3<f64>,
-    /// Indices of its camera columns among all the cameras' parameters.
-    columns: Vec<usize>,
-    /// `J_cᵀ J_p`, one row per camera column.
-    w: Vec<Vector3<f64>>,
-    /// `J_cᵀ J_c` (row-major, `columns.len()` square) and `J_cᵀ r`.
-    u: Vec<f64>,
-    gc: Vec<f64>,
-}
-
 /// A Jacobian column that is zero outside `offset .. offset + values.len()`.
 struct SparseColumn {
     offset: usize,
@@ -580,21 +568,6 @@ struct Step {
     accepted: Option<(Vec<Se3>, Vec<PatchState>)>,
 }
 
-/// Poses after the left update by `xi` (6 per free camera; camera 0 held).
-fn updated(poses: &[Se3], xi: &DVector<f64>) -> Vec<Se3> {
-    poses
-        .iter()
-        .enumerate()
-        .map(|(c, p)| {
-            if c == 0 {
-                return *p;
-            }
-            let d: [f64; 6] = std::array::from_fn(|k| xi[6 * (c - 1) + k]);
-            se3_exp(&d).compose(p)
-        })
-        .collect()
-}
-
 /// One iteration: residuals and weights at the current estimate, the patch systems, then
 /// damped steps until one lowers the robust cost (raising the damping ten-fold each time it
 /// does not) or the damping exceeds 10⁶.
@@ -611,14 +584,8 @@ fn iterate(
         .zip(states)
         .map(|(p, s)| views.residuals(p, s, poses))
         .collect();
-    let mut magnitudes: Vec<f64> = residuals.iter().flatten().map(|r| r.abs()).collect();
-    let middle = magnitudes.len() / 2;
-    let median = if magnitudes.is_empty() {
-        0.0
-    } else {
-        *magnitudes.select_nth_unstable_by(middle, f64::total_cmp).1
-    };
-    let scale = (options.cauchy_sigmas * 1.4826 * median).max(1e-12);
+    let sigma = robust_sigma(residuals.iter().flatten().copied());
+    let scale = (options.cauchy_sigmas * sigma).max(1e-12);
     let weights: Vec<Vec<f64>> = residuals
         .iter()
         .map(|r| {
@@ -634,69 +601,27 @@ fn iterate(
         .map(|(r, w)| cost_of(r, w))
         .sum();
     let free = 6 * (poses.len() - 1);
-    let systems: Vec<PatchSystem> = patches
+    let systems: Vec<BlockSystem> = patches
         .par_iter()
         .zip(states)
         .zip(residuals.par_iter().zip(&weights))
         .map(|((p, s), (r, w))| patch_system(views, p, s, poses, r, w))
         .collect();
-    let mut u = DMatrix::<f64>::zeros(free, free);
-    let mut gc = DVector::<f64>::zeros(free);
-    for s in &systems {
-        let n = s.columns.len();
-        for (i, &ci) in s.columns.iter().enumerate() {
-            gc[ci] += s.gc[i];
-            for (j, &cj) in s.columns.iter().enumerate() {
-                u[(ci, cj)] += s.u[i * n + j];
-            }
-        }
-    }
+    let cameras = CameraSystem::new(free, &systems);
     while *lambda <= 1e6 {
-        let damp3 = |v: &Matrix3<f64>| {
-            let mut d = *v;
-            for i in 0..3 {
-                d[(i, i)] += *lambda * v[(i, i)] + 1e-12;
-            }
-            d
-        };
-        let inverses: Vec<Option<Matrix3<f64>>> =
-            systems.iter().map(|s| damp3(&s.v).try_inverse()).collect();
-        let mut schur = u.clone();
-        for i in 0..free {
-            schur[(i, i)] += *lambda * u[(i, i)] + 1e-12;
-        }
-        let mut rhs = -gc.clone();
-        for (s, inv) in systems.iter().zip(&inverses) {
-            if let Some(inv) = inv {
-                // Rows of W V⁻¹ for this patch's columns.
-                let w_inv: Vec<Vector3<f64>> = s.w.iter().map(|w| inv.transpose() * w).collect();
-                for (i, &ci) in s.columns.iter().enumerate() {
-                    rhs[ci] += w_inv[i].dot(&s.g);
-                    for (j, &cj) in s.columns.iter().enumerate() {
-                        schur[(ci, cj)] -= w_inv[i].dot(&s.w[j]);
-                    }
-                }
-            }
-        }
-        let Some(camera_step) = schur.clone().cholesky().map(|c| c.solve(&rhs)) else {
+        let Some(SchurStep {
+            cameras: camera_step,
+            blocks: block_steps,
+        }) = cameras.step(&systems, *lambda)
+        else {
             *lambda *= 10.0;
             continue;
         };
-        let new_states: Vec<PatchState> = systems
+        let new_states: Vec<PatchState> = block_steps
             .iter()
-            .zip(&inverses)
             .zip(states)
-            .map(|((s, inv), state)| match inv {
-                Some(inv) => {
-                    let coupled: Vector3<f64> = s
-                        .columns
-                        .iter()
-                        .zip(&s.w)
-                        .map(|(&c, w)| w * camera_step[c])
-                        .sum();
-                    let step = inv * (-s.g - coupled);
-                    state.moved(&[step.x, step.y, step.z])
-                }
+            .map(|(step, state)| match step {
+                Some(step) => state.moved(&[step.x, step.y, step.z]),
                 None => *state,
             })
             .collect();
@@ -734,7 +659,7 @@ fn patch_system(
     poses: &[Se3],
     r: &[f64],
     weights: &[f64],
-) -> PatchSystem {
+) -> BlockSystem {
     let sw: Vec<f64> = weights.iter().map(|w| w.sqrt()).collect();
     let column = |perturbed: Vec<f64>, step: f64| -> Vec<f64> {
         perturbed
@@ -798,7 +723,7 @@ fn patch_system(
             u[j * n + i] = value;
         }
     }
-    PatchSystem {
+    BlockSystem {
         v,
         g,
         columns: camera_columns.iter().map(|(c, _)| *c).collect(),
@@ -812,32 +737,6 @@ fn patch_system(
             .map(|(_, c)| c.dot_full(&weighted_r))
             .collect(),
     }
-}
-
-/// `adjusted` with the camera centres scaled about view 0's so that their mean distance from
-/// it is that of `start`: the images cannot see a common scale, and the step along it is
-/// undone.
-fn keep_scale(start: &[Se3], adjusted: &[Se3]) -> Vec<Se3> {
-    let spread = |poses: &[Se3]| {
-        let origin = poses[0].inverse().translation;
-        poses[1..]
-            .iter()
-            .map(|p| (p.inverse().translation - origin).norm())
-            .sum::<f64>()
-    };
-    let (before, after) = (spread(start), spread(adjusted));
-    if !(before > 0.0 && after > 0.0) {
-        return adjusted.to_vec();
-    }
-    let s = before / after;
-    let origin = adjusted[0].inverse().translation;
-    adjusted
-        .iter()
-        .map(|p| {
-            let centre = origin + s * (p.inverse().translation - origin);
-            Se3::new(p.rotation, -(p.rotation * centre))
-        })
-        .collect()
 }
 
 #[cfg(test)]

@@ -33,6 +33,7 @@ use fewview_scene::pose_export::{PoseSource, write_refined_poses};
 use fewview_scene::{Camera, Dataset, Image, Intrinsics, Se3};
 use serde::{Deserialize, Serialize};
 
+use crate::bundle::{BundleOptions, BundleReport, bundle_adjust};
 use crate::checkpoint;
 use crate::error::{Result, SurfaceError};
 use crate::extract::{MeshOptions, final_mesh, render_view};
@@ -110,6 +111,10 @@ pub struct RunConfig {
     /// `train`'s.
     #[serde(default)]
     pub pose_timing_without_warmup: Option<PoseTiming>,
+    /// Deviation, used by [`crate::schedule::Schedule::Cpu`]: after an epipolar warm-up, adjust
+    /// the poses and the matches' tracks on their reprojection errors ([`crate::bundle`]).
+    #[serde(default)]
+    pub bundle_adjustment: Option<BundleOptions>,
     /// Deviation, used by [`crate::schedule::Schedule::Cpu`]: after an epipolar warm-up that
     /// ran on dense matches, refine the poses photometrically on small planes seeded by the
     /// matches ([`crate::patch_adjustment`]).
@@ -142,6 +147,7 @@ impl Default for RunConfig {
             densify: None,
             densify_if_needed: None,
             pose_timing_without_warmup: None,
+            bundle_adjustment: None,
             patch_adjustment: None,
             hold_poses_after_patch_adjustment: false,
         }
@@ -184,8 +190,13 @@ pub struct Prepared {
     /// epipolar warm-up.
     pub start: Vec<Se3>,
     pub warmup: Option<WarmupReport>,
-    /// The photometric patch adjustment's report and the warm-up's poses it started from,
-    /// when it ran ([`RunConfig::patch_adjustment`]).
+    /// The poses after the epipolar warm-up (`initial` when it did not run).
+    pub warmup_poses: Vec<Se3>,
+    /// The bundle adjustment's report and the poses it gave, when it ran
+    /// ([`RunConfig::bundle_adjustment`]).
+    pub bundle_adjustment: Option<(BundleReport, Vec<Se3>)>,
+    /// The photometric patch adjustment's report and the poses it started from, when it ran
+    /// ([`RunConfig::patch_adjustment`]).
     pub patch_adjustment: Option<(PatchAdjustmentReport, Vec<Se3>)>,
     pub matches: Vec<Match>,
     pub match_precision: Option<MatchPrecision>,
@@ -318,6 +329,14 @@ pub fn prepare_with_matching(
     };
     let dense = densified_because.is_some() || config.densify.is_some();
     let warmed_up = warmup.as_ref().is_some_and(|w| w.skipped.is_none());
+    let warmup_poses = start.clone();
+    let (start, bundle_adjustment) = match &config.bundle_adjustment {
+        Some(opts) if warmed_up => {
+            let (poses, report) = bundle_adjust(&match_intrinsics, &start, &fine_matches, opts);
+            (poses.clone(), Some((report, poses)))
+        }
+        _ => (start, None),
+    };
     let (start, patch_adjustment) = match &config.patch_adjustment {
         Some(opts) if dense && warmed_up => {
             let images: Vec<&Image> = matching.train_views().map(|v| &v.image).collect();
@@ -352,6 +371,8 @@ pub fn prepare_with_matching(
         initial,
         start,
         warmup,
+        warmup_poses,
+        bundle_adjustment,
         patch_adjustment,
         matches,
         match_precision,
@@ -496,6 +517,11 @@ pub struct RunReport {
     /// (in the order of [`WarmupReport::global_start`]) against the true poses.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub global_start_rotation_errors_deg: Vec<f64>,
+    /// The bundle adjustment after the warm-up, when it ran, and the pose error of its poses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bundle_adjustment: Option<BundleReport>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bundle_adjustment_pose_error: Option<PoseError>,
     /// The photometric patch adjustment after the warm-up, when it ran, and the pose error of
     /// the poses it gave the training.
     pub patch_adjustment: Option<PatchAdjustmentReport>,
@@ -539,6 +565,8 @@ pub struct SparfEpsRotation {
     pub eps: f64,
     pub initial_deg: f64,
     pub warmup_deg: Option<f64>,
+    /// After the bundle adjustment, when it ran.
+    pub bundle_adjustment_deg: Option<f64>,
     /// After the patch adjustment, when it ran.
     pub patch_adjustment_deg: Option<f64>,
     pub final_deg: f64,
@@ -588,6 +616,11 @@ pub enum Event<'a> {
         pose_error: &'a PoseError,
         /// [`RunReport::global_start_rotation_errors_deg`].
         pair_errors_deg: &'a [f64],
+    },
+    /// The bundle adjustment finished; the pose error of its poses.
+    BundleAdjusted {
+        report: &'a BundleReport,
+        pose_error: &'a PoseError,
     },
     /// The photometric patch adjustment finished; the pose error of its poses.
     PatchesAdjusted {
@@ -803,10 +836,7 @@ pub fn run(
         &out.join("poses_initial.json"),
         &cams(&prep.initial),
     )?;
-    let epipolar_poses = prep
-        .patch_adjustment
-        .as_ref()
-        .map_or(&prep.start, |(_, before)| before);
+    let epipolar_poses = &prep.warmup_poses;
     let global_start_rotation_errors_deg = prep
         .warmup
         .as_ref()
@@ -819,6 +849,17 @@ pub fn run(
                 report,
                 pose_error: &err,
                 pair_errors_deg: &global_start_rotation_errors_deg,
+            });
+            Some(err)
+        }
+        None => None,
+    };
+    let bundle_adjustment_pose_error = match &prep.bundle_adjustment {
+        Some((report, poses)) => {
+            let err = pose_error(poses, &prep.ground_truth)?;
+            on_event(Event::BundleAdjusted {
+                report,
+                pose_error: &err,
             });
             Some(err)
         }
@@ -895,6 +936,10 @@ pub fn run(
         initial_deg: at_sparf_eps(&prep.initial)?.rotation_deg,
         warmup_deg: match &warmup_pose_error {
             Some(_) => Some(at_sparf_eps(epipolar_poses)?.rotation_deg),
+            None => None,
+        },
+        bundle_adjustment_deg: match &prep.bundle_adjustment {
+            Some((_, poses)) => Some(at_sparf_eps(poses)?.rotation_deg),
             None => None,
         },
         patch_adjustment_deg: match &patch_adjustment_pose_error {
@@ -1027,6 +1072,8 @@ pub fn run(
         warmup: prep.warmup.clone(),
         warmup_pose_error,
         global_start_rotation_errors_deg,
+        bundle_adjustment: prep.bundle_adjustment.as_ref().map(|(r, _)| r.clone()),
+        bundle_adjustment_pose_error,
         patch_adjustment: prep.patch_adjustment.as_ref().map(|(r, _)| r.clone()),
         patch_adjustment_pose_error,
         pose_timing,

@@ -14,6 +14,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::adam::ExpSchedule;
+use crate::bundle::BundleOptions;
 use crate::matching::densify::DensifyOptions;
 use crate::patch_adjustment::PatchAdjustmentOptions;
 use crate::pipeline::RunConfig;
@@ -78,11 +79,10 @@ pub enum Schedule {
     /// [`PoseTiming::LATE_RELEASE`]. When the sparse matches cannot tie the views together for
     /// the warm-up, dense ones are grown on a 4-pixel grid first
     /// ([`RunConfig::densify_if_needed`]), and the warm-up ends with the covariance polish
-    /// ([`WarmupOptions::covariance_polish`]; DTU's wide triplet: 12° → 0.10–0.13°, without
-    /// the polish 0.16–0.19°; the analytic ring 13.3° → 0.265°, without 0.297°), followed by
-    /// the photometric patch adjustment ([`RunConfig::patch_adjustment`]; the wide triplet
-    /// 0.082–0.085°, the ring 0.107°), whose poses are then kept for the whole run
-    /// ([`RunConfig::hold_poses_after_patch_adjustment`]). When the
+    /// ([`WarmupOptions::covariance_polish`]), followed by the bundle adjustment of the
+    /// matches' tracks ([`RunConfig::bundle_adjustment`]) and, on dense matches, the
+    /// photometric patch adjustment ([`RunConfig::patch_adjustment`]), whose poses are then
+    /// kept for the whole run ([`RunConfig::hold_poses_after_patch_adjustment`]). When the
     /// warm-up still declines (e.g. a ring of views whose neighbours alone are matched),
     /// holding the unrefined noisy poses for most of the run would waste it, so the run falls
     /// back to [`PoseTiming::PAPER`] ([`RunConfig::pose_timing_without_warmup`]).
@@ -100,6 +100,7 @@ impl Schedule {
                 PoseTiming::PAPER.apply_to(&mut config.train);
                 config.densify_if_needed = None;
                 config.pose_timing_without_warmup = None;
+                config.bundle_adjustment = None;
                 config.patch_adjustment = None;
                 config.hold_poses_after_patch_adjustment = false;
             }
@@ -115,6 +116,7 @@ impl Schedule {
                     ..Default::default()
                 });
                 config.pose_timing_without_warmup = Some(PoseTiming::PAPER);
+                config.bundle_adjustment = Some(BundleOptions::default());
                 config.patch_adjustment = Some(PatchAdjustmentOptions::default());
                 config.hold_poses_after_patch_adjustment = true;
             }
@@ -150,6 +152,7 @@ mod tests {
         assert_eq!(c.pose_timing_without_warmup, Some(PoseTiming::PAPER));
         assert_eq!(c.densify, None);
         assert_eq!(c.densify_if_needed.as_ref().map(|d| d.spacing_px), Some(4));
+        assert_eq!(c.bundle_adjustment, Some(BundleOptions::default()));
         assert_eq!(c.patch_adjustment, Some(PatchAdjustmentOptions::default()));
         assert!(c.hold_poses_after_patch_adjustment);
         // After a patch adjustment the poses are held for the whole run.

@@ -189,15 +189,21 @@ pub struct Args {
     /// After a warm-up on dense matches, refine the poses photometrically: each match seeds a
     /// small plane in 3D (depth and normal), compared across every view that sees it through
     /// the homography it induces, in a bundle adjustment with the poses (a deviation: the paper
-    /// has no warm-up; see crates/surface/README.md). On with `--schedule cpu`; affects only
-    /// runs with dense matches (`--densify`, or grown by `--densify auto`). With `--schedule
-    /// cpu` the adjusted poses are then held for the whole run unless `--pose-start` or
-    /// `--pose-lr` is given.
+    /// has no warm-up; see crates/surface/README.md). On with `--schedule cpu`, after the
+    /// bundle adjustment; affects only runs with dense matches (`--densify`, or grown by
+    /// `--densify auto`). With `--schedule cpu` the adjusted poses are then held for the whole
+    /// run unless `--pose-start` or `--pose-lr` is given.
     #[arg(long, conflicts_with = "no_patch_adjustment")]
     pub patch_adjustment: bool,
     /// No patch adjustment after the warm-up, whatever `--schedule` says.
     #[arg(long)]
     pub no_patch_adjustment: bool,
+    /// No bundle adjustment after the warm-up, whatever `--schedule` says. With `--schedule
+    /// cpu` the warmed-up poses and the matches' tracks (a grid point matched into two views is
+    /// one 3D point seen three times) are adjusted on their reprojection errors, as structure
+    /// from motion ends its start (a deviation: see crates/surface/README.md).
+    #[arg(long)]
+    pub no_bundle_adjustment: bool,
     /// What those pairs must form for the warm-up to run: `rigid` (their baseline directions fix
     /// every baseline's length up to one scale, e.g. chained triangles; default; `triangles` is
     /// the old name) or `connected` (any connected graph, e.g. the wide DTU triplet's chain
@@ -398,6 +404,9 @@ impl Args {
         let patch_adjustment =
             (c.patch_adjustment.is_some() || self.patch_adjustment) && !self.no_patch_adjustment;
         c.patch_adjustment = patch_adjustment.then(PatchAdjustmentOptions::default);
+        if self.no_bundle_adjustment {
+            c.bundle_adjustment = None;
+        }
         c.pose_warmup = warm_up.then(|| WarmupOptions {
             min_matches_per_pair: self.warmup_min_matches,
             connectivity,
@@ -659,6 +668,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 ),
             }
         }),
+        Event::BundleAdjusted { report, pose_error } => bar.suspend(|| match &report.skipped {
+            Some(why) => eprintln!("bundle adjustment skipped: {why}"),
+            None => eprintln!(
+                "bundle adjustment ({} tracks, {} in three views or more; {} iterations, median \
+                 reprojection error {:.3} → {:.3} px): rotation error {:.3}°, translation error \
+                 (×100) {:.3}",
+                report.tracks,
+                report.multi_view_tracks,
+                report.iterations,
+                report.median_px_before,
+                report.median_px_after,
+                pose_error.rotation_deg,
+                100.0 * pose_error.translation
+            ),
+        }),
         Event::PatchesAdjusted { report, pose_error } => bar.suspend(|| match &report.skipped {
             Some(why) => eprintln!("patch adjustment skipped: {why}"),
             None => eprintln!(
@@ -709,6 +733,17 @@ fn print_report(r: &RunReport, out: &std::path::Path) {
             100.0 * w.translation
         );
     }
+    let bundled = r
+        .bundle_adjustment
+        .as_ref()
+        .is_some_and(|b| b.skipped.is_none());
+    if let Some(b) = r.bundle_adjustment_pose_error.as_ref().filter(|_| bundled) {
+        println!(
+            "  after bundle   R {:.3}°   t(×100) {:.2}",
+            b.rotation_deg,
+            100.0 * b.translation
+        );
+    }
     let adjusted = r
         .patch_adjustment
         .as_ref()
@@ -727,6 +762,7 @@ fn print_report(r: &RunReport, out: &std::path::Path) {
         sparf.initial_deg,
         [
             sparf.warmup_deg.filter(|_| warmed_up),
+            sparf.bundle_adjustment_deg.filter(|_| bundled),
             sparf.patch_adjustment_deg.filter(|_| adjusted)
         ]
         .iter()

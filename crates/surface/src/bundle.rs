@@ -1,0 +1,670 @@
+//! Bundle adjustment of the warmed-up poses on the matches' tracks, as structure from motion
+//! ends its start (a deviation from paper 001, which refines the poses through the field
+//! alone; `--no-bundle-adjustment` switches it off).
+//!
+//! **Why.** The epipolar warm-up ([`crate::warmup`]) fits each pair's matches on their own:
+//! a pair's Sampson cost cannot say that the point a match of views 0–1 sees is the point a
+//! match of views 0–2 sees at the same pixel of view 0. On a narrow field of view with a shallow
+//! object that freedom is a long, flat valley (rotation traded against baseline direction), and
+//! small biases of the matches pick a point in it. Joined into tracks, a grid point matched from
+//! one view into two others is one 3D point seen three times, and the reprojection errors of
+//! all its observations tie the three cameras together (the trifocal constraint the pairs lack).
+//!
+//! **Model.** Tracks join matches that share a view and a pixel (the dense matcher grows its
+//! matches from one grid per view, so a grid point matched into two views joins them); a track
+//! that lands on two pixels of one view is dropped. Each track is a 3D point, started by linear
+//! triangulation from the current poses; each observation contributes its reprojection error
+//! (pixels). Cameras take left se(3) steps (`P ← exp(ξ) P`, rotation first), the first view is
+//! held, and the common scale, which no image sees, is restored at the end. Levenberg–Marquardt
+//! with Marquardt's damping on analytic Jacobians, points eliminated by the Schur complement
+//! ([`crate::schur`]), Cauchy weights (iteratively reweighted) at `cauchy_sigmas` robust
+//! standard deviations of the starting residuals. Unlike [`crate::patch_adjustment`], the
+//! scale is not recomputed as the fit tightens: on DTU's triplets a shrinking scale kept
+//! moving the optimum (docs/experiments.md, 2026-11-26).
+
+use std::collections::HashMap;
+
+use fewview_scene::{Intrinsics, Se3};
+use nalgebra::{DMatrix, Matrix2x3, Matrix3, Vector2, Vector3};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::matching::Match;
+use crate::schur::{BlockSystem, CameraSystem, SchurStep, keep_scale, robust_sigma, updated};
+
+/// Options of [`bundle_adjust`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BundleOptions {
+    /// Scale of the Cauchy weights, in robust standard deviations of the starting residuals.
+    pub cauchy_sigmas: f64,
+    /// Levenberg–Marquardt iterations.
+    pub max_iterations: usize,
+    /// Stop when an accepted step lowers the robust cost by less than this fraction.
+    pub tolerance: f64,
+    /// Fewest tracks worth adjusting the poses on.
+    pub min_tracks: usize,
+}
+
+impl Default for BundleOptions {
+    fn default() -> Self {
+        Self {
+            cauchy_sigmas: 2.0,
+            max_iterations: 1000,
+            tolerance: 1e-9,
+            min_tracks: 30,
+        }
+    }
+}
+
+/// What [`bundle_adjust`] did.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct BundleReport {
+    /// Why the poses were left as they were, when they were.
+    pub skipped: Option<String>,
+    pub tracks: usize,
+    /// Tracks seen in three views or more (the ones that tie more than a pair).
+    pub multi_view_tracks: usize,
+    pub observations: usize,
+    pub iterations: usize,
+    /// Robust cost of the first and the last iteration, each under its own iteration's weights.
+    pub initial_cost: f64,
+    pub final_cost: f64,
+    /// Median reprojection error (pixels) before and after.
+    pub median_px_before: f64,
+    pub median_px_after: f64,
+}
+
+/// A point seen in several views: (view, pixel) pairs, one per view.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Track {
+    pub observations: Vec<(usize, Vector2<f64>)>,
+}
+
+/// Joins matches that share a view and a pixel (exactly) into tracks; a track that lands on two
+/// different pixels of one view is dropped.
+pub fn tracks_from_matches(matches: &[Match]) -> Vec<Track> {
+    let mut ids: HashMap<(usize, u32, u32), usize> = HashMap::new();
+    let mut nodes: Vec<(usize, [f32; 2])> = Vec::new();
+    let mut node = |view: usize, p: [f32; 2]| {
+        *ids.entry((view, p[0].to_bits(), p[1].to_bits()))
+            .or_insert_with(|| {
+                nodes.push((view, p));
+                nodes.len() - 1
+            })
+    };
+    let edges: Vec<(usize, usize)> = matches
+        .iter()
+        .map(|m| (node(m.view_a, m.a), node(m.view_b, m.b)))
+        .collect();
+    let mut parent: Vec<usize> = (0..nodes.len()).collect();
+    fn root(parent: &mut [usize], mut x: usize) -> usize {
+        while parent[x] != x {
+            parent[x] = parent[parent[x]];
+            x = parent[x];
+        }
+        x
+    }
+    for (a, b) in edges {
+        let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+        parent[ra.max(rb)] = ra.min(rb);
+    }
+    let mut groups: Vec<Vec<usize>> = vec![Vec::new(); nodes.len()];
+    for n in 0..nodes.len() {
+        let r = root(&mut parent, n);
+        groups[r].push(n);
+    }
+    groups
+        .into_iter()
+        .filter(|g| g.len() >= 2)
+        .filter_map(|g| {
+            let mut observations: Vec<(usize, Vector2<f64>)> = g
+                .iter()
+                .map(|&n| {
+                    let (v, p) = nodes[n];
+                    (v, Vector2::new(p[0] as f64, p[1] as f64))
+                })
+                .collect();
+            observations.sort_by_key(|o| o.0);
+            let unique = observations.windows(2).all(|w| w[0].0 != w[1].0);
+            unique.then_some(Track { observations })
+        })
+        .collect()
+}
+
+/// The cameras' intrinsic matrices and their inverses.
+struct Cameras {
+    k: Vec<Matrix3<f64>>,
+    k_inv: Vec<Matrix3<f64>>,
+}
+
+impl Cameras {
+    fn new(intrinsics: &[Intrinsics]) -> Self {
+        let k: Vec<Matrix3<f64>> = intrinsics
+            .iter()
+            .map(|i| Matrix3::new(i.fx, 0.0, i.cx, 0.0, i.fy, i.cy, 0.0, 0.0, 1.0))
+            .collect();
+        let k_inv = k
+            .iter()
+            .map(|k| k.try_inverse().unwrap_or_default())
+            .collect();
+        Self { k, k_inv }
+    }
+
+    /// The pixel of world point `x` in view `v`, and the 2 × 3 Jacobian of that pixel with
+    /// respect to the point in the camera's frame; `None` behind the camera.
+    fn project(
+        &self,
+        v: usize,
+        pose: &Se3,
+        x: &Vector3<f64>,
+    ) -> Option<(Vector2<f64>, Matrix2x3<f64>, Vector3<f64>)> {
+        let c = pose.rotation * x + pose.translation;
+        if c.z <= 1e-12 {
+            return None;
+        }
+        let k = &self.k[v];
+        let (fx, fy) = (k[(0, 0)], k[(1, 1)]);
+        let pixel = Vector2::new(fx * c.x / c.z + k[(0, 2)], fy * c.y / c.z + k[(1, 2)]);
+        let z2 = c.z * c.z;
+        let jac = Matrix2x3::new(fx / c.z, 0.0, -fx * c.x / z2, 0.0, fy / c.z, -fy * c.y / z2);
+        Some((pixel, jac, c))
+    }
+}
+
+/// Linear (DLT) triangulation of a track from normalised image coordinates; `None` when the
+/// point does not lie in front of every camera.
+fn triangulate(cameras: &Cameras, poses: &[Se3], track: &Track) -> Option<Vector3<f64>> {
+    let mut a = DMatrix::<f64>::zeros(2 * track.observations.len(), 4);
+    for (i, (v, p)) in track.observations.iter().enumerate() {
+        let x = cameras.k_inv[*v] * Vector3::new(p.x, p.y, 1.0);
+        let (r, t) = (&poses[*v].rotation, &poses[*v].translation);
+        for (row, coordinate) in [(2 * i, 0), (2 * i + 1, 1)] {
+            for j in 0..3 {
+                a[(row, j)] = x[coordinate] * r[(2, j)] - r[(coordinate, j)];
+            }
+            a[(row, 3)] = x[coordinate] * t.z - t[coordinate];
+        }
+    }
+    let svd = a.svd(false, true);
+    let v_t = svd.v_t?;
+    let (smallest, _) = svd
+        .singular_values
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))?;
+    let h = v_t.row(smallest).transpose();
+    if h[3].abs() < 1e-15 {
+        return None;
+    }
+    let x = Vector3::new(h[0], h[1], h[2]) / h[3];
+    let in_front = track
+        .observations
+        .iter()
+        .all(|(v, _)| (poses[*v].rotation * x + poses[*v].translation).z > 0.0);
+    in_front.then_some(x)
+}
+
+/// The reprojection residuals (2 per observation) of a track at point `x`; `None` when the
+/// point is behind one of its cameras.
+fn reprojection_errors(
+    cameras: &Cameras,
+    poses: &[Se3],
+    track: &Track,
+    x: &Vector3<f64>,
+) -> Option<Vec<f64>> {
+    let mut out = Vec::with_capacity(2 * track.observations.len());
+    for (v, p) in &track.observations {
+        let (pixel, _, _) = cameras.project(*v, &poses[*v], x)?;
+        out.extend([pixel.x - p.x, pixel.y - p.y]);
+    }
+    Some(out)
+}
+
+/// Per-observation Cauchy weights (on the residual's length) at `scale` pixels.
+fn cauchy_weights(r: &[f64], scale: f64) -> Vec<f64> {
+    r.chunks(2)
+        .map(|d| 1.0 / (1.0 + (d[0] * d[0] + d[1] * d[1]) / (scale * scale)))
+        .collect()
+}
+
+fn weighted_cost(r: &[f64], w: &[f64]) -> f64 {
+    r.chunks(2)
+        .zip(w)
+        .map(|(d, w)| w * (d[0] * d[0] + d[1] * d[1]))
+        .sum()
+}
+
+/// The weighted normal equations of one track with analytic Jacobians.
+fn track_system(
+    cameras: &Cameras,
+    poses: &[Se3],
+    track: &Track,
+    x: &Vector3<f64>,
+    r: &[f64],
+    w: &[f64],
+) -> BlockSystem {
+    let mut v = Matrix3::zeros();
+    let mut g = Vector3::zeros();
+    let mut columns = Vec::new();
+    let mut wrows = Vec::new();
+    let mut u_blocks: Vec<[[f64; 6]; 6]> = Vec::new();
+    let mut gc = Vec::new();
+    for (i, (view, _)) in track.observations.iter().enumerate() {
+        let pose = &poses[*view];
+        let Some((_, jp, c)) = cameras.project(*view, pose, x) else {
+            continue;
+        };
+        let res = Vector2::new(r[2 * i], r[2 * i + 1]);
+        let j_point = jp * pose.rotation;
+        v += w[i] * j_point.transpose() * j_point;
+        g += w[i] * j_point.transpose() * res;
+        if *view == 0 {
+            continue;
+        }
+        // d(camera point)/d(twist): −[c]× for the rotation, identity for the translation.
+        let skew = Matrix3::new(0.0, -c.z, c.y, c.z, 0.0, -c.x, -c.y, c.x, 0.0);
+        let j_rot = jp * (-skew);
+        let j_cam: [Vector2<f64>; 6] = std::array::from_fn(|k| {
+            if k < 3 {
+                j_rot.column(k).into()
+            } else {
+                jp.column(k - 3).into()
+            }
+        });
+        let mut block = [[0.0; 6]; 6];
+        for a in 0..6 {
+            for b in 0..6 {
+                block[a][b] = w[i] * j_cam[a].dot(&j_cam[b]);
+            }
+            columns.push(6 * (view - 1) + a);
+            wrows.push(w[i] * j_point.transpose() * j_cam[a]);
+            gc.push(w[i] * j_cam[a].dot(&res));
+        }
+        u_blocks.push(block);
+    }
+    let n = columns.len();
+    let mut u = vec![0.0; n * n];
+    for (b, block) in u_blocks.iter().enumerate() {
+        for a in 0..6 {
+            for c in 0..6 {
+                u[(6 * b + a) * n + 6 * b + c] = block[a][c];
+            }
+        }
+    }
+    BlockSystem {
+        v,
+        g,
+        columns,
+        w: wrows,
+        u,
+        gc,
+    }
+}
+
+/// What one Levenberg–Marquardt iteration did.
+struct Step {
+    cost_before: f64,
+    cost_after: f64,
+    accepted: Option<(Vec<Se3>, Vec<Vector3<f64>>)>,
+}
+
+/// One iteration: residuals and Cauchy weights (at `scale` pixels) at the current estimate, the
+/// tracks' systems,
+/// then damped steps until one lowers the weighted cost (the damping rising ten-fold each time
+/// it does not) or the damping exceeds 10⁶.
+fn iterate(
+    cameras: &Cameras,
+    tracks: &[Track],
+    points: &[Vector3<f64>],
+    poses: &[Se3],
+    scale: f64,
+    lambda: &mut f64,
+) -> Step {
+    let residuals: Vec<Vec<f64>> = tracks
+        .par_iter()
+        .zip(points)
+        .map(|(t, x)| reprojection_errors(cameras, poses, t, x).unwrap_or_default())
+        .collect();
+    let weights: Vec<Vec<f64>> = residuals.iter().map(|r| cauchy_weights(r, scale)).collect();
+    let cost_before: f64 = residuals
+        .iter()
+        .zip(&weights)
+        .map(|(r, w)| weighted_cost(r, w))
+        .sum();
+    let systems: Vec<BlockSystem> = tracks
+        .par_iter()
+        .zip(points)
+        .zip(residuals.par_iter().zip(&weights))
+        .map(|((t, x), (r, w))| track_system(cameras, poses, t, x, r, w))
+        .collect();
+    let system = CameraSystem::new(6 * (poses.len() - 1), &systems);
+    while *lambda <= 1e6 {
+        let Some(SchurStep {
+            cameras: camera_step,
+            blocks: point_steps,
+        }) = system.step(&systems, *lambda)
+        else {
+            *lambda *= 10.0;
+            continue;
+        };
+        let new_points: Vec<Vector3<f64>> = points
+            .iter()
+            .zip(&point_steps)
+            .map(|(x, step)| step.map_or(*x, |s| x + s))
+            .collect();
+        let new_poses = updated(poses, &camera_step);
+        // Summed in order after the parallel part, so that a run repeats bit for bit.
+        let costs: Vec<f64> = tracks
+            .par_iter()
+            .zip(&new_points)
+            .zip(&weights)
+            .map(|((t, x), w)| {
+                reprojection_errors(cameras, &new_poses, t, x)
+                    .map_or(f64::INFINITY, |r| weighted_cost(&r, w))
+            })
+            .collect();
+        let cost_after: f64 = costs.iter().sum();
+        if cost_after.is_finite() && cost_after < cost_before {
+            *lambda = (*lambda / 3.0).max(1e-9);
+            return Step {
+                cost_before,
+                cost_after,
+                accepted: Some((new_poses, new_points)),
+            };
+        }
+        *lambda *= 10.0;
+    }
+    Step {
+        cost_before,
+        cost_after: cost_before,
+        accepted: None,
+    }
+}
+
+/// Median reprojection error (pixels) of all observations.
+fn median_error(
+    cameras: &Cameras,
+    poses: &[Se3],
+    tracks: &[Track],
+    points: &[Vector3<f64>],
+) -> f64 {
+    let mut lengths: Vec<f64> = tracks
+        .iter()
+        .zip(points)
+        .filter_map(|(t, x)| reprojection_errors(cameras, poses, t, x))
+        .flat_map(|r| r.chunks(2).map(|d| d[0].hypot(d[1])).collect::<Vec<_>>())
+        .collect();
+    if lengths.is_empty() {
+        return f64::NAN;
+    }
+    let middle = lengths.len() / 2;
+    *lengths.select_nth_unstable_by(middle, f64::total_cmp).1
+}
+
+/// Adjusts `poses` (view 0 held, the common scale kept) and the tracks of `matches` to
+/// minimise the robust reprojection error (module docs). Returns the poses unchanged, with the
+/// reason in the report, when fewer than `min_tracks` tracks triangulate.
+pub fn bundle_adjust(
+    intrinsics: &[Intrinsics],
+    poses: &[Se3],
+    matches: &[Match],
+    options: &BundleOptions,
+) -> (Vec<Se3>, BundleReport) {
+    let cameras = Cameras::new(intrinsics);
+    let (tracks, mut points): (Vec<Track>, Vec<Vector3<f64>>) = tracks_from_matches(matches)
+        .into_iter()
+        .filter_map(|t| triangulate(&cameras, poses, &t).map(|x| (t, x)))
+        .unzip();
+    let mut report = BundleReport {
+        tracks: tracks.len(),
+        multi_view_tracks: tracks.iter().filter(|t| t.observations.len() >= 3).count(),
+        observations: tracks.iter().map(|t| t.observations.len()).sum(),
+        ..Default::default()
+    };
+    if tracks.len() < options.min_tracks || poses.len() < 2 {
+        report.skipped = Some(format!(
+            "{} tracks triangulate from {} matches (fewer than {})",
+            tracks.len(),
+            matches.len(),
+            options.min_tracks
+        ));
+        return (poses.to_vec(), report);
+    }
+    report.median_px_before = median_error(&cameras, poses, &tracks, &points);
+    let mut current = poses.to_vec();
+    let mut lambda = 1e-3;
+    // The Cauchy scale is set once, from the residuals at the start: recomputed every
+    // iteration it would shrink with the fit and keep re-deciding which tracks count.
+    let start_residuals = tracks
+        .iter()
+        .zip(&points)
+        .filter_map(|(t, x)| reprojection_errors(&cameras, poses, t, x))
+        .flatten();
+    let scale = (options.cauchy_sigmas * robust_sigma(start_residuals)).max(1e-9);
+    for iteration in 0..options.max_iterations {
+        let step = iterate(&cameras, &tracks, &points, &current, scale, &mut lambda);
+        report.iterations = iteration + 1;
+        if iteration == 0 {
+            report.initial_cost = step.cost_before;
+        }
+        report.final_cost = step.cost_after;
+        let Some((poses_after, points_after)) = step.accepted else {
+            break;
+        };
+        current = poses_after;
+        points = points_after;
+        let decrease =
+            (step.cost_before - step.cost_after) / step.cost_before.max(f64::MIN_POSITIVE);
+        if decrease < options.tolerance {
+            break;
+        }
+    }
+    report.median_px_after = median_error(&cameras, &current, &tracks, &points);
+    (keep_scale(poses, &current), report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pose::{rotation_angle_deg, se3_exp};
+    use nalgebra::{Rotation3, Unit};
+
+    /// Three cameras 2.5 units from a cloud of points near the origin, looking at it, 20° apart
+    /// (DTU's wide triplet in miniature).
+    fn rig() -> (Vec<Intrinsics>, Vec<Se3>, Vec<Vector3<f64>>) {
+        let intrinsics = vec![
+            Intrinsics {
+                fx: 500.0,
+                fy: 510.0,
+                cx: 200.0,
+                cy: 150.0,
+                width: 400,
+                height: 300
+            };
+            3
+        ];
+        let poses = (0..3)
+            .map(|i| {
+                let angle = (i as f64 - 1.0) * 20f64.to_radians();
+                let centre = Vector3::new(2.5 * angle.sin(), -0.3, -2.5 * angle.cos());
+                let forward = (-centre).normalize();
+                let right = Vector3::y().cross(&forward).normalize();
+                let down = forward.cross(&right);
+                let r =
+                    Matrix3::from_rows(&[right.transpose(), down.transpose(), forward.transpose()]);
+                Se3::new(r, -(r * centre))
+            })
+            .collect();
+        let points = (0..150)
+            .map(|i| {
+                let f = i as f64;
+                Vector3::new(
+                    (f * 0.37).sin() * 0.5,
+                    (f * 0.61).cos() * 0.4,
+                    (f * 0.23).sin() * 0.3,
+                )
+            })
+            .collect();
+        (intrinsics, poses, points)
+    }
+
+    /// Matches of every pair of views at the points' exact projections.
+    fn exact_matches(
+        intrinsics: &[Intrinsics],
+        poses: &[Se3],
+        points: &[Vector3<f64>],
+    ) -> Vec<Match> {
+        let cameras = Cameras::new(intrinsics);
+        let pixel = |v: usize, x: &Vector3<f64>| {
+            let (p, _, _) = cameras.project(v, &poses[v], x).unwrap();
+            [p.x as f32, p.y as f32]
+        };
+        let mut matches = Vec::new();
+        for x in points {
+            for (a, b) in [(0, 1), (0, 2), (1, 2)] {
+                matches.push(Match {
+                    view_a: a,
+                    view_b: b,
+                    a: pixel(a, x),
+                    b: pixel(b, x),
+                    confidence: 1.0,
+                    b_covariance: None,
+                });
+            }
+        }
+        matches
+    }
+
+    #[test]
+    fn tracks_join_shared_pixels_and_drop_conflicts() {
+        let m = |view_a, a: [f32; 2], view_b, b: [f32; 2]| Match {
+            view_a,
+            view_b,
+            a,
+            b,
+            confidence: 1.0,
+            b_covariance: None,
+        };
+        let matches = vec![
+            m(0, [1.0, 2.0], 1, [3.0, 4.0]),
+            m(0, [1.0, 2.0], 2, [5.0, 6.0]),
+            m(1, [3.0, 4.0], 2, [5.0, 6.0]),
+            // A pair on its own.
+            m(0, [7.0, 7.0], 1, [8.0, 8.0]),
+            // Two pixels of view 2 for one point of view 0: dropped.
+            m(0, [9.0, 9.0], 2, [1.0, 1.0]),
+            m(0, [9.0, 9.0], 1, [2.0, 2.0]),
+            m(1, [2.0, 2.0], 2, [3.0, 3.0]),
+        ];
+        let tracks = tracks_from_matches(&matches);
+        assert_eq!(tracks.len(), 2);
+        let lengths: Vec<usize> = tracks.iter().map(|t| t.observations.len()).collect();
+        assert!(lengths.contains(&3) && lengths.contains(&2));
+        let triple = tracks.iter().find(|t| t.observations.len() == 3).unwrap();
+        assert_eq!(triple.observations[2], (2, Vector2::new(5.0, 6.0)));
+    }
+
+    /// The analytic Jacobians against central differences of the weighted cost: `Jᵀ W r` is
+    /// half the cost's gradient, for the point and for each free camera's twist.
+    #[test]
+    fn the_normal_equations_match_finite_differences_of_the_cost() {
+        let (intrinsics, poses, points) = rig();
+        let cameras = Cameras::new(&intrinsics);
+        let track = Track {
+            observations: (0..3)
+                .map(|v| {
+                    let (p, _, _) = cameras.project(v, &poses[v], &points[5]).unwrap();
+                    (v, p + Vector2::new(0.7 * v as f64 - 0.4, 0.3))
+                })
+                .collect(),
+        };
+        let x = points[5] + Vector3::new(0.01, -0.02, 0.015);
+        let r = reprojection_errors(&cameras, &poses, &track, &x).unwrap();
+        let w = vec![0.9, 0.5, 0.25];
+        let system = track_system(&cameras, &poses, &track, &x, &r, &w);
+        let cost = |poses: &[Se3], x: &Vector3<f64>| {
+            weighted_cost(
+                &reprojection_errors(&cameras, poses, &track, x).unwrap(),
+                &w,
+            )
+        };
+        let h = 1e-6;
+        for k in 0..3 {
+            let mut e = Vector3::zeros();
+            e[k] = h;
+            let numeric = (cost(&poses, &(x + e)) - cost(&poses, &(x - e))) / (4.0 * h);
+            assert!(
+                (numeric - system.g[k]).abs() < 1e-5 * (1.0 + numeric.abs()),
+                "point {k}"
+            );
+        }
+        for (i, &column) in system.columns.iter().enumerate() {
+            let (view, k) = (column / 6 + 1, column % 6);
+            let moved = |sign: f64| {
+                let mut xi = [0.0; 6];
+                xi[k] = sign * h;
+                let mut p = poses.clone();
+                p[view] = se3_exp(&xi).compose(&poses[view]);
+                p
+            };
+            let numeric = (cost(&moved(1.0), &x) - cost(&moved(-1.0), &x)) / (4.0 * h);
+            assert!(
+                (numeric - system.gc[i]).abs() < 1e-5 * (1.0 + numeric.abs()),
+                "camera {view} twist {k}: {numeric} vs {}",
+                system.gc[i]
+            );
+        }
+    }
+
+    #[test]
+    fn exact_matches_bring_perturbed_poses_back_to_the_truth() {
+        let (intrinsics, truth, points) = rig();
+        let matches = exact_matches(&intrinsics, &truth, &points);
+        let mut start = truth.clone();
+        for (v, axis) in [
+            (1, Vector3::new(0.3, 1.0, -0.2)),
+            (2, Vector3::new(-1.0, 0.2, 0.5)),
+        ] {
+            let turn = Rotation3::from_axis_angle(&Unit::new_normalize(axis), 0.5f64.to_radians());
+            start[v] = Se3::new(
+                turn.into_inner() * truth[v].rotation,
+                truth[v].translation * 1.01,
+            );
+        }
+        let (adjusted, report) =
+            bundle_adjust(&intrinsics, &start, &matches, &BundleOptions::default());
+        assert_eq!(report.skipped, None);
+        assert_eq!((report.tracks, report.multi_view_tracks), (150, 150));
+        assert!(report.median_px_after < 1e-3, "{report:?}");
+        for v in 0..3 {
+            let error = rotation_angle_deg(&adjusted[v].rotation, &truth[v].rotation);
+            assert!(error < 1e-4, "view {v}: {error}°");
+            let (c, t) = (
+                adjusted[v].inverse().translation,
+                truth[v].inverse().translation,
+            );
+            // Centres agree up to the common scale, which keep_scale fixes to the start's.
+            let (c0, t0) = (
+                adjusted[0].inverse().translation,
+                truth[0].inverse().translation,
+            );
+            if v > 0 {
+                let cos = (c - c0).normalize().dot(&(t - t0).normalize());
+                assert!(
+                    cos > 1.0 - 1e-9,
+                    "view {v}: baseline direction off by {cos}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn too_few_tracks_leave_the_poses_and_say_why() {
+        let (intrinsics, truth, points) = rig();
+        let matches = exact_matches(&intrinsics, &truth, &points[..5]);
+        let (adjusted, report) =
+            bundle_adjust(&intrinsics, &truth, &matches, &BundleOptions::default());
+        assert_eq!(adjusted, truth);
+        assert!(report.skipped.unwrap().contains("5 tracks"));
+    }
+}
