@@ -1,4 +1,4 @@
-//! People filmed by a ring of synchronized, calibrated cameras: the data layer of
+//! People filmed by a ring of synchronized, calibrated cameras: the data layer and network of
 //! "PoseGaussian: Pose-Driven Novel View Synthesis for Robust 3D Human Reconstruction"
 //! (paper 002, whose supplement is in `papers/`).
 //!
@@ -9,6 +9,8 @@
 //! - [`split`]: the paper's protocol (8 input cameras, held-out views, novel poses) and
 //!   [`TrainingView`], which cannot open anything outside the training set.
 //! - [`hull`]: the visual hull of the input masks and its depth in each source view.
+//! - [`net`]: the network (three encoders, a U-Net decoder, Gaussian-parameter heads), the pose
+//!   map it reads, its multiply-add count and its checkpoints.
 //!
 //! Cameras follow fewview-scene's convention everywhere: OpenCV axes, world-to-camera, pixel
 //! centres at half-integers (both file formats put them at integers; [`opencv`] converts).
@@ -21,6 +23,7 @@ pub mod dataset;
 pub mod error;
 pub mod hull;
 pub mod maps;
+pub mod net;
 pub mod npy_rows;
 pub mod opencv;
 pub mod readlog;
