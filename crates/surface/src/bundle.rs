@@ -30,7 +30,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::matching::Match;
-use crate::schur::{BlockSystem, CameraSystem, SchurStep, keep_scale, robust_sigma, updated};
+use crate::schur::{BlockSystem, CameraSystem, LmStep, damped_step, keep_scale, robust_sigma};
 
 /// Options of [`bundle_adjust`].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -301,13 +301,6 @@ fn track_system(
     }
 }
 
-/// What one Levenberg–Marquardt iteration did.
-struct Step {
-    cost_before: f64,
-    cost_after: f64,
-    accepted: Option<(Vec<Se3>, Vec<Vector3<f64>>)>,
-}
-
 /// One iteration: residuals and Cauchy weights (at `scale` pixels) at the current estimate, the
 /// tracks' systems,
 /// then damped steps until one lowers the weighted cost (the damping rising ten-fold each time
@@ -319,7 +312,7 @@ fn iterate(
     poses: &[Se3],
     scale: f64,
     lambda: &mut f64,
-) -> Step {
+) -> LmStep<Vector3<f64>> {
     let residuals: Vec<Vec<f64>> = tracks
         .par_iter()
         .zip(points)
@@ -338,47 +331,27 @@ fn iterate(
         .map(|((t, x), (r, w))| track_system(cameras, poses, t, x, r, w))
         .collect();
     let system = CameraSystem::new(6 * (poses.len() - 1), &systems);
-    while *lambda <= 1e6 {
-        let Some(SchurStep {
-            cameras: camera_step,
-            blocks: point_steps,
-        }) = system.step(&systems, *lambda)
-        else {
-            *lambda *= 10.0;
-            continue;
-        };
-        let new_points: Vec<Vector3<f64>> = points
-            .iter()
-            .zip(&point_steps)
-            .map(|(x, step)| step.map_or(*x, |s| x + s))
-            .collect();
-        let new_poses = updated(poses, &camera_step);
-        // Summed in order after the parallel part, so that a run repeats bit for bit.
-        let costs: Vec<f64> = tracks
-            .par_iter()
-            .zip(&new_points)
-            .zip(&weights)
-            .map(|((t, x), w)| {
-                reprojection_errors(cameras, &new_poses, t, x)
-                    .map_or(f64::INFINITY, |r| weighted_cost(&r, w))
-            })
-            .collect();
-        let cost_after: f64 = costs.iter().sum();
-        if cost_after.is_finite() && cost_after < cost_before {
-            *lambda = (*lambda / 3.0).max(1e-9);
-            return Step {
-                cost_before,
-                cost_after,
-                accepted: Some((new_poses, new_points)),
-            };
-        }
-        *lambda *= 10.0;
-    }
-    Step {
+    damped_step(
+        &system,
+        &systems,
+        (poses, points),
         cost_before,
-        cost_after: cost_before,
-        accepted: None,
-    }
+        (lambda, 1e-9),
+        |x, step| x + step,
+        |new_poses, new_points| {
+            // Summed in order after the parallel part, so that a run repeats bit for bit.
+            let costs: Vec<f64> = tracks
+                .par_iter()
+                .zip(new_points)
+                .zip(&weights)
+                .map(|((t, x), w)| {
+                    reprojection_errors(cameras, new_poses, t, x)
+                        .map_or(f64::INFINITY, |r| weighted_cost(&r, w))
+                })
+                .collect();
+            costs.iter().sum()
+        },
+    )
 }
 
 /// Median reprojection error (pixels) of all observations.

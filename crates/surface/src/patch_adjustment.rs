@@ -40,7 +40,7 @@ use serde::{Deserialize, Serialize};
 use crate::matching::Match;
 use crate::matching::refine::{Plane, Window};
 use crate::pose::se3_exp;
-use crate::schur::{BlockSystem, CameraSystem, SchurStep, keep_scale, robust_sigma, updated};
+use crate::schur::{BlockSystem, CameraSystem, LmStep, damped_step, keep_scale, robust_sigma};
 
 /// Options of [`adjust_patches`].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -561,13 +561,6 @@ fn unit_twist(k: usize) -> [f64; 6] {
     xi
 }
 
-/// What one Levenberg–Marquardt iteration did.
-struct Step {
-    cost_before: f64,
-    cost_after: f64,
-    accepted: Option<(Vec<Se3>, Vec<PatchState>)>,
-}
-
 /// One iteration: residuals and weights at the current estimate, the patch systems, then
 /// damped steps until one lowers the robust cost (raising the damping ten-fold each time it
 /// does not) or the damping exceeds 10⁶.
@@ -578,7 +571,7 @@ fn iterate(
     poses: &[Se3],
     options: &PatchAdjustmentOptions,
     lambda: &mut f64,
-) -> Step {
+) -> LmStep<PatchState> {
     let residuals: Vec<Vec<f64>> = patches
         .par_iter()
         .zip(states)
@@ -608,47 +601,24 @@ fn iterate(
         .map(|((p, s), (r, w))| patch_system(views, p, s, poses, r, w))
         .collect();
     let cameras = CameraSystem::new(free, &systems);
-    while *lambda <= 1e6 {
-        let Some(SchurStep {
-            cameras: camera_step,
-            blocks: block_steps,
-        }) = cameras.step(&systems, *lambda)
-        else {
-            *lambda *= 10.0;
-            continue;
-        };
-        let new_states: Vec<PatchState> = block_steps
-            .iter()
-            .zip(states)
-            .map(|(step, state)| match step {
-                Some(step) => state.moved(&[step.x, step.y, step.z]),
-                None => *state,
-            })
-            .collect();
-        let new_poses = updated(poses, &camera_step);
-        // Summed in order after the parallel part, so that a run repeats bit for bit.
-        let costs: Vec<f64> = patches
-            .par_iter()
-            .zip(&new_states)
-            .zip(&weights)
-            .map(|((p, s), w)| cost_of(&views.residuals(p, s, &new_poses), w))
-            .collect();
-        let cost_after: f64 = costs.iter().sum();
-        if cost_after.is_finite() && cost_after < cost_before {
-            *lambda = (*lambda / 3.0).max(1e-7);
-            return Step {
-                cost_before,
-                cost_after,
-                accepted: Some((new_poses, new_states)),
-            };
-        }
-        *lambda *= 10.0;
-    }
-    Step {
+    damped_step(
+        &cameras,
+        &systems,
+        (poses, states),
         cost_before,
-        cost_after: cost_before,
-        accepted: None,
-    }
+        (lambda, 1e-7),
+        |state, step| state.moved(&[step.x, step.y, step.z]),
+        |new_poses, new_states| {
+            // Summed in order after the parallel part, so that a run repeats bit for bit.
+            let costs: Vec<f64> = patches
+                .par_iter()
+                .zip(new_states)
+                .zip(&weights)
+                .map(|((p, s), w)| cost_of(&views.residuals(p, s, new_poses), w))
+                .collect();
+            costs.iter().sum()
+        },
+    )
 }
 
 /// The weighted normal equations of one patch (forward differences around `r`).

@@ -105,6 +105,56 @@ impl CameraSystem {
     }
 }
 
+/// What one Levenberg–Marquardt iteration did: the weighted cost before and after (under the
+/// iteration's weights) and, when a step lowered it, the new poses and block states.
+pub(crate) struct LmStep<T> {
+    pub cost_before: f64,
+    pub cost_after: f64,
+    pub accepted: Option<(Vec<Se3>, Vec<T>)>,
+}
+
+/// Damped steps from `poses` and the blocks' `states` until one lowers `cost_before` (the
+/// damping then falls three-fold, to `min_lambda` at the least) or the damping exceeds 10⁶ (it
+/// rises ten-fold after each failed step). `moved` applies a block's step to its state; `cost`
+/// is the weighted cost of new poses and states.
+pub(crate) fn damped_step<T: Copy>(
+    cameras: &CameraSystem,
+    systems: &[BlockSystem],
+    (poses, states): (&[Se3], &[T]),
+    cost_before: f64,
+    (lambda, min_lambda): (&mut f64, f64),
+    moved: impl Fn(&T, &Vector3<f64>) -> T,
+    cost: impl Fn(&[Se3], &[T]) -> f64,
+) -> LmStep<T> {
+    while *lambda <= 1e6 {
+        let Some(step) = cameras.step(systems, *lambda) else {
+            *lambda *= 10.0;
+            continue;
+        };
+        let new_states: Vec<T> = states
+            .iter()
+            .zip(&step.blocks)
+            .map(|(state, block)| block.as_ref().map_or(*state, |b| moved(state, b)))
+            .collect();
+        let new_poses = updated(poses, &step.cameras);
+        let cost_after = cost(&new_poses, &new_states);
+        if cost_after.is_finite() && cost_after < cost_before {
+            *lambda = (*lambda / 3.0).max(min_lambda);
+            return LmStep {
+                cost_before,
+                cost_after,
+                accepted: Some((new_poses, new_states)),
+            };
+        }
+        *lambda *= 10.0;
+    }
+    LmStep {
+        cost_before,
+        cost_after: cost_before,
+        accepted: None,
+    }
+}
+
 /// Poses after the left update by `xi` (6 per free camera, rotation first; camera 0 held).
 pub(crate) fn updated(poses: &[Se3], xi: &DVector<f64>) -> Vec<Se3> {
     poses
