@@ -38,6 +38,7 @@ use crate::checkpoint;
 use crate::error::{Result, SurfaceError};
 use crate::extract::{MeshOptions, final_mesh, render_view};
 use crate::global_start::PairPose;
+use crate::matching::dense::{DenseOptions, dense_matches};
 use crate::matching::densify::{DensifyOptions, densify_matches};
 use crate::matching::refine::{AffineRefineOptions, refine_matches};
 use crate::matching::sift::{SiftMatcher, SiftOptions};
@@ -470,6 +471,22 @@ fn correspondences(
         let window = refinement.cloned().unwrap_or_default();
         let dense = densify_matches(&images, &masks, &matches, pairs, &window, o);
         matches.extend(dense);
+        if let Some(warmup) = &config.pose_warmup
+            && let Err(why) = matches_tie_the_views(inputs.len(), &matches, warmup)
+        {
+            // Growth from the sparse seeds did not reach every pair: seed it again from the
+            // dense matcher, which needs no seeds, and grow and compose once more.
+            let seeded = standalone_dense_matches(&inputs, pairs, options.seed);
+            let seeds: Vec<Match> = matches.iter().chain(&seeded).copied().collect();
+            let regrown = densify_matches(&images, &masks, &seeds, pairs, &window, o);
+            matches.extend(seeded);
+            matches.extend(regrown);
+            let again = format!("grown, still {why}; the dense matcher seeded the growth again");
+            densified_because = Some(match densified_because {
+                Some(first) => format!("{first}; {again}"),
+                None => again,
+            });
+        }
     }
     let cams: Vec<Camera> = intrinsics
         .iter()
@@ -482,6 +499,22 @@ fn correspondences(
         precision,
         densified_because,
     }
+}
+
+/// The dense matcher's correspondences ([`crate::matching::dense`]) of every pair in `pairs`.
+fn standalone_dense_matches(
+    inputs: &[MatchInput],
+    pairs: &[(usize, usize)],
+    seed: u64,
+) -> Vec<Match> {
+    let options = DenseOptions {
+        seed,
+        ..DenseOptions::default()
+    };
+    pairs
+        .iter()
+        .flat_map(|&(a, b)| dense_matches(&inputs[a], &inputs[b], a, b, &options))
+        .collect()
 }
 
 /// What a run reports.
