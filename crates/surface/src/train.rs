@@ -236,6 +236,9 @@ pub struct StepStats {
     pub eikonal: f32,
     pub psdf: f32,
     pub inv_s: f32,
+    /// The pose gradient was not finite, so this iteration left the poses alone.
+    #[serde(default)]
+    pub pose_step_skipped: bool,
 }
 
 /// A correspondence in a chosen direction: `(view t, p, view s, q, confidence)`.
@@ -252,6 +255,24 @@ pub struct Trainer {
     width: usize,
     height: usize,
     offsets: Vec<[f32; 2]>,
+}
+
+/// The `expected` values of a gradient read back from the device, or an error naming the
+/// parameter: a gradient of another size or type is a defect, never a skipped step.
+fn host_values(data: TensorData, name: &str, expected: usize) -> Result<Vec<f32>> {
+    let values = data.try_to_vec::<f32>().map_err(|e| {
+        SurfaceError::invalid(
+            format!("gradient of {name}"),
+            format!("not f32 values: {e:?}"),
+        )
+    })?;
+    if values.len() != expected {
+        return Err(SurfaceError::invalid(
+            format!("gradient of {name}"),
+            format!("{} values, expected {expected}", values.len()),
+        ));
+    }
+    Ok(values)
 }
 
 fn value(t: &Tensor<1>) -> f32 {
@@ -702,13 +723,11 @@ impl Trainer {
         let lr = cfg.lr.at(it, cfg.iterations);
         let names = self.field.param_shapes();
         for (k, p) in params.iter().enumerate() {
-            let g = p
-                .grad(&grads)
-                .map(|g| g.into_data().try_to_vec::<f32>().unwrap_or_default())
-                .unwrap_or_else(|| vec![0.0; self.state.params[k].len()]);
-            if g.len() != self.state.params[k].len() {
-                continue;
-            }
+            // A parameter the losses did not reach has no gradient: a zero step.
+            let g = match p.grad(&grads) {
+                Some(g) => host_values(g.into_data(), names[k].0, self.state.params[k].len())?,
+                None => vec![0.0; self.state.params[k].len()],
+            };
             let f = if names[k].0 == "hash_table" {
                 cfg.hash_lr_factor
             } else {
@@ -717,12 +736,16 @@ impl Trainer {
             self.state.adam[k].step(&mut self.state.params[k], &g, lr * f, &cfg.adam);
         }
         if step_poses && let Some(g) = d9.grad(&grads) {
-            let g = g.into_data().try_to_vec::<f32>().unwrap_or_default();
-            if g.len() == self.state.poses.len() && g.iter().all(|v| v.is_finite()) {
+            let g = host_values(g.into_data(), "poses", self.state.poses.len())?;
+            if g.iter().all(|v| v.is_finite()) {
                 let plr = cfg.pose_lr.at(it, cfg.iterations);
                 self.state
                     .pose_adam
                     .step(&mut self.state.poses, &g, plr, &cfg.adam);
+            } else {
+                // Counted, not fatal: one ray batch behind a camera can give a non-finite pose
+                // gradient while the field's stay finite.
+                stats.pose_step_skipped = true;
             }
         }
         if self
