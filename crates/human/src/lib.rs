@@ -9,6 +9,8 @@
 //! - [`split`]: the paper's protocol (8 input cameras, held-out views, novel poses) and
 //!   [`TrainingView`], which cannot open anything outside the training set.
 //! - [`hull`]: the visual hull of the input masks and its depth in each source view.
+//! - [`gaussians`]: the heads' maps to one Gaussian per foreground pixel, the source views
+//!   nearest a target, and the differentiable render into it (fewview-splat's rasterizer).
 //! - [`net`]: the network (three encoders, a U-Net decoder, Gaussian-parameter heads), the pose
 //!   map it reads, its multiply-add count and its checkpoints.
 //!
@@ -21,6 +23,7 @@
 
 pub mod dataset;
 pub mod error;
+pub mod gaussians;
 pub mod hull;
 pub mod maps;
 pub mod net;
