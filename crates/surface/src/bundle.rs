@@ -138,16 +138,30 @@ struct Cameras {
 }
 
 impl Cameras {
-    fn new(intrinsics: &[Intrinsics]) -> Self {
-        let k: Vec<Matrix3<f64>> = intrinsics
+    /// `None` unless every focal length is positive (the only way a pinhole `K` is singular).
+    fn new(intrinsics: &[Intrinsics]) -> Option<Self> {
+        if !intrinsics.iter().all(|i| i.fx > 0.0 && i.fy > 0.0) {
+            return None;
+        }
+        let k: Vec<Matrix3<f64>> = intrinsics.iter().map(Intrinsics::matrix).collect();
+        let k_inv = intrinsics
             .iter()
-            .map(|i| Matrix3::new(i.fx, 0.0, i.cx, 0.0, i.fy, i.cy, 0.0, 0.0, 1.0))
+            .map(|i| {
+                let (fx, fy) = (i.fx, i.fy);
+                Matrix3::new(
+                    1.0 / fx,
+                    0.0,
+                    -i.cx / fx,
+                    0.0,
+                    1.0 / fy,
+                    -i.cy / fy,
+                    0.0,
+                    0.0,
+                    1.0,
+                )
+            })
             .collect();
-        let k_inv = k
-            .iter()
-            .map(|k| k.try_inverse().unwrap_or_default())
-            .collect();
-        Self { k, k_inv }
+        Some(Self { k, k_inv })
     }
 
     /// The pixel of world point `x` in view `v`, and the 2 × 3 Jacobian of that pixel with
@@ -316,7 +330,12 @@ fn iterate(
     let residuals: Vec<Vec<f64>> = tracks
         .par_iter()
         .zip(points)
-        .map(|(t, x)| reprojection_errors(cameras, poses, t, x).unwrap_or_default())
+        // Accepted steps keep every point in front of its cameras (a step that puts one behind
+        // costs infinity and is refused), so no track lacks its residuals here.
+        .map(|(t, x)| {
+            reprojection_errors(cameras, poses, t, x)
+                .unwrap_or_else(|| vec![0.0; 2 * t.observations.len()])
+        })
         .collect();
     let weights: Vec<Vec<f64>> = residuals.iter().map(|r| cauchy_weights(r, scale)).collect();
     let cost_before: f64 = residuals
@@ -383,7 +402,13 @@ pub fn bundle_adjust(
     matches: &[Match],
     options: &BundleOptions,
 ) -> (Vec<Se3>, BundleReport) {
-    let cameras = Cameras::new(intrinsics);
+    let Some(cameras) = Cameras::new(intrinsics) else {
+        let report = BundleReport {
+            skipped: Some("intrinsics with a focal length that is not positive".into()),
+            ..Default::default()
+        };
+        return (poses.to_vec(), report);
+    };
     let (tracks, mut points): (Vec<Track>, Vec<Vector3<f64>>) = tracks_from_matches(matches)
         .into_iter()
         .filter_map(|t| triangulate(&cameras, poses, &t).map(|x| (t, x)))
@@ -487,7 +512,7 @@ mod tests {
         poses: &[Se3],
         points: &[Vector3<f64>],
     ) -> Vec<Match> {
-        let cameras = Cameras::new(intrinsics);
+        let cameras = Cameras::new(intrinsics).unwrap();
         let pixel = |v: usize, x: &Vector3<f64>| {
             let (p, _, _) = cameras.project(v, &poses[v], x).unwrap();
             [p.x as f32, p.y as f32]
@@ -542,7 +567,7 @@ mod tests {
     #[test]
     fn the_normal_equations_match_finite_differences_of_the_cost() {
         let (intrinsics, poses, points) = rig();
-        let cameras = Cameras::new(&intrinsics);
+        let cameras = Cameras::new(&intrinsics).unwrap();
         let track = Track {
             observations: (0..3)
                 .map(|v| {

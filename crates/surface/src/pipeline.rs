@@ -196,9 +196,9 @@ pub struct Prepared {
     /// The bundle adjustment's report and the poses it gave, when it ran
     /// ([`RunConfig::bundle_adjustment`]).
     pub bundle_adjustment: Option<(BundleReport, Vec<Se3>)>,
-    /// The photometric patch adjustment's report and the poses it started from, when it ran
-    /// ([`RunConfig::patch_adjustment`]).
-    pub patch_adjustment: Option<(PatchAdjustmentReport, Vec<Se3>)>,
+    /// The photometric patch adjustment's report, when it ran ([`RunConfig::patch_adjustment`]);
+    /// its poses are `start`.
+    pub patch_adjustment: Option<PatchAdjustmentReport>,
     pub matches: Vec<Match>,
     pub match_precision: Option<MatchPrecision>,
     /// Why dense matches were grown under [`RunConfig::densify_if_needed`] (the warm-up's
@@ -353,7 +353,7 @@ pub fn prepare_with_matching(
                 &fine_matches,
                 opts,
             );
-            (poses, Some((report, start)))
+            (poses, Some(report))
         }
         _ => (start, None),
     };
@@ -899,7 +899,7 @@ pub fn run(
         None => None,
     };
     let patch_adjustment_pose_error = match &prep.patch_adjustment {
-        Some((report, _)) => {
+        Some(report) => {
             let err = pose_error(&prep.start, &prep.ground_truth)?;
             on_event(Event::PatchesAdjusted {
                 report,
@@ -912,7 +912,7 @@ pub fn run(
     let patches_adjusted = prep
         .patch_adjustment
         .as_ref()
-        .is_some_and(|(report, _)| report.skipped.is_none());
+        .is_some_and(|report| report.skipped.is_none());
     let (train_config, fell_back) = config.effective_train(prep.warmup.as_ref(), patches_adjusted);
     let pose_timing = PoseTiming::of(&train_config);
     if fell_back {
@@ -1107,7 +1107,7 @@ pub fn run(
         global_start_rotation_errors_deg,
         bundle_adjustment: prep.bundle_adjustment.as_ref().map(|(r, _)| r.clone()),
         bundle_adjustment_pose_error,
-        patch_adjustment: prep.patch_adjustment.as_ref().map(|(r, _)| r.clone()),
+        patch_adjustment: prep.patch_adjustment.clone(),
         patch_adjustment_pose_error,
         pose_timing,
         pose_timing_fell_back: fell_back,

@@ -447,7 +447,7 @@ fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
         let why = prep.densified_because.as_deref().unwrap_or_default();
         assert!(why.contains("too few matches"), "seed {seed}: {why:?}");
         assert!(prep.warmup.as_ref().unwrap().skipped.is_none());
-        let (patches, _) = prep.patch_adjustment.as_ref().expect("patches adjusted");
+        let patches = prep.patch_adjustment.as_ref().expect("patches adjusted");
         let after = error(&prep.warmup_poses, &prep.ground_truth);
         let adjusted = error(&prep.start, &prep.ground_truth);
         eprintln!(
