@@ -13,6 +13,8 @@
 //!   nearest a target, and the differentiable render into it (fewview-splat's rasterizer).
 //! - [`net`]: the network (three encoders, a U-Net decoder, Gaussian-parameter heads), the pose
 //!   map it reads, its multiply-add count and its checkpoints.
+//! - [`tps`]: the Temporal Pose Stabilizer, each source view's maps blended with its previous
+//!   frame's, warped by the joints' motion and weighted down where they move fast.
 //!
 //! Cameras follow fewview-scene's convention everywhere: OpenCV axes, world-to-camera, pixel
 //! centres at half-integers (both file formats put them at integers; [`opencv`] converts).
@@ -32,6 +34,7 @@ pub mod opencv;
 pub mod readlog;
 pub mod source;
 pub mod split;
+pub mod tps;
 pub mod zju;
 
 pub use dataset::HumanDataset;
