@@ -35,6 +35,7 @@ pub mod readlog;
 pub mod source;
 pub mod split;
 pub mod tps;
+pub mod train;
 pub mod zju;
 
 pub use dataset::HumanDataset;

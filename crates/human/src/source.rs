@@ -17,7 +17,7 @@ use crate::readlog::ReadLog;
 
 /// A synchronized multi-view video with fixed cameras. Accessors read lazily, one
 /// `(camera, frame)` at a time, and record what they read in [`MultiView::read_log`].
-pub trait MultiView {
+pub trait MultiView: Sync {
     /// The capture's folder (named in errors).
     fn root(&self) -> &Path;
     /// The cameras, fixed for all frames.

@@ -11,6 +11,7 @@ mod eval;
 pub mod eval_video;
 mod fusion;
 mod geom_common;
+mod human;
 mod mcubes;
 mod number_args;
 mod output_paths;
@@ -49,6 +50,8 @@ pub enum Command {
     EvalVideo(eval_video::Args),
     /// Pairwise 2AFC user study: serve the page, analyse the answers.
     Study(study::Args),
+    /// Pose-guided Gaussians of moving people (paper 002).
+    Human(human::Args),
 }
 
 pub fn run(command: Command) -> anyhow::Result<()> {
@@ -70,5 +73,6 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Surface(a) => surface::run(*a),
         Command::EvalVideo(args) => eval_video::run(args),
         Command::Study(args) => study::run(args),
+        Command::Human(args) => human::run(args),
     }
 }

@@ -1,0 +1,232 @@
+//! Everything the network and the loss read for one frame, computed once: per input camera the
+//! cropped image, mask, pose joints and visual-hull depth (and the dataset's depth, which only
+//! the loss reads).
+
+use fewview_geom::Mesh;
+use fewview_scene::{Camera, Image};
+use rayon::prelude::*;
+
+use super::crop::{Crop, common_scale};
+use crate::error::{HumanError, Result};
+use crate::hull::{Bounds, Hull, HullConfig, render_depth};
+use crate::maps::{DepthMap, Mask};
+use crate::source::MultiView;
+use crate::split::{Split, TrainingView};
+
+/// Read access to the input cameras, as training (its frames only) or inference (any frame)
+/// is allowed it. Held-out cameras are never read through it.
+pub trait InputViews: Sync {
+    fn camera(&self, camera: usize) -> Result<&Camera>;
+    fn input_cameras(&self) -> &[usize];
+    fn image(&self, camera: usize, frame: usize) -> Result<Image>;
+    fn mask(&self, camera: usize, frame: usize) -> Result<Mask>;
+    /// The dataset's depth, when it has one (the loss's depth term).
+    fn depth(&self, camera: usize, frame: usize) -> Option<DepthMap>;
+    fn joints2d(&self, camera: usize, frame: usize) -> Result<Vec<[f64; 2]>>;
+}
+
+impl InputViews for TrainingView<'_> {
+    fn camera(&self, camera: usize) -> Result<&Camera> {
+        TrainingView::camera(self, camera)
+    }
+    fn input_cameras(&self) -> &[usize] {
+        &self.split().input_cameras
+    }
+    fn image(&self, camera: usize, frame: usize) -> Result<Image> {
+        TrainingView::image(self, camera, frame)
+    }
+    fn mask(&self, camera: usize, frame: usize) -> Result<Mask> {
+        TrainingView::mask(self, camera, frame)
+    }
+    fn depth(&self, camera: usize, frame: usize) -> Option<DepthMap> {
+        TrainingView::depth(self, camera, frame).ok()
+    }
+    fn joints2d(&self, camera: usize, frame: usize) -> Result<Vec<[f64; 2]>> {
+        TrainingView::joints2d(self, camera, frame)
+    }
+}
+
+/// The input cameras at every frame: what inference may read.
+pub struct InferenceInputs<'a> {
+    pub source: &'a dyn MultiView,
+    pub split: &'a Split,
+}
+
+impl InferenceInputs<'_> {
+    fn check(&self, camera: usize) -> Result<()> {
+        if self.split.input_cameras.contains(&camera) {
+            return Ok(());
+        }
+        let m = format!("camera {camera} is not an input camera");
+        Err(HumanError::argument("inference inputs", m))
+    }
+}
+
+impl InputViews for InferenceInputs<'_> {
+    fn camera(&self, camera: usize) -> Result<&Camera> {
+        self.check(camera)?;
+        Ok(&self.source.cameras()[camera])
+    }
+    fn input_cameras(&self) -> &[usize] {
+        &self.split.input_cameras
+    }
+    fn image(&self, camera: usize, frame: usize) -> Result<Image> {
+        self.check(camera)?;
+        self.source.image(camera, frame)
+    }
+    fn mask(&self, camera: usize, frame: usize) -> Result<Mask> {
+        self.check(camera)?;
+        self.source.mask(camera, frame)
+    }
+    fn depth(&self, _camera: usize, _frame: usize) -> Option<DepthMap> {
+        None
+    }
+    fn joints2d(&self, camera: usize, frame: usize) -> Result<Vec<[f64; 2]>> {
+        self.check(camera)?;
+        self.source.joints2d(camera, frame)
+    }
+}
+
+/// One input camera at one frame, cropped.
+#[derive(Clone, Debug)]
+pub struct PreparedView {
+    /// Index into the dataset's cameras.
+    pub camera_index: usize,
+    /// The crop's camera.
+    pub camera: Camera,
+    pub image: Image,
+    pub mask: Mask,
+    /// The visual hull's z-depth (0 where the ray misses it).
+    pub hull_depth: DepthMap,
+    /// The dataset's depth, when it has one.
+    pub depth: Option<DepthMap>,
+    /// 2D joints in the crop's pixels.
+    pub joints: Vec<[f64; 2]>,
+}
+
+/// The input cameras of one frame.
+#[derive(Clone, Debug)]
+pub struct PreparedFrame {
+    pub frame: usize,
+    pub views: Vec<PreparedView>,
+}
+
+impl PreparedFrame {
+    /// The view of dataset camera `camera`.
+    pub fn view(&self, camera: usize) -> Option<&PreparedView> {
+        self.views.iter().find(|v| v.camera_index == camera)
+    }
+}
+
+/// Where the person is and how the cameras are cropped around it, fixed for a run.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Framing {
+    /// The union of the training frames' visual hulls (axis-aligned box, world units).
+    pub bounds: [[f64; 3]; 2],
+    /// Output pixels per source pixel, the same for every camera.
+    pub scale: f64,
+    /// Crop `[width, height]`.
+    pub size: [usize; 2],
+    /// Nearest and farthest depth any camera sees the box at.
+    pub near: f64,
+    pub far: f64,
+}
+
+impl Framing {
+    pub fn box_bounds(&self) -> Bounds {
+        Bounds {
+            min: self.bounds[0],
+            max: self.bounds[1],
+        }
+    }
+
+    /// The crop of `camera`.
+    pub fn crop(&self, camera: &Camera) -> Crop {
+        Crop::centred(&self.box_bounds(), camera, self.scale, self.size)
+    }
+
+    /// The framing of the hulls `meshes` seen by `cameras`, at crops of `size` with a
+    /// `margin` around the box.
+    pub fn of_hulls(
+        meshes: &[Mesh],
+        cameras: &[Camera],
+        size: [usize; 2],
+        margin: f64,
+    ) -> Result<Self> {
+        let mut b = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+        for v in meshes.iter().flat_map(|m| &m.vertices) {
+            for a in 0..3 {
+                b[0][a] = b[0][a].min(v[a] as f64);
+                b[1][a] = b[1][a].max(v[a] as f64);
+            }
+        }
+        if !(b[0][0] <= b[1][0]) {
+            return Err(HumanError::argument(
+                "framing",
+                "the visual hulls are empty",
+            ));
+        }
+        let bounds = Bounds {
+            min: b[0],
+            max: b[1],
+        };
+        let centre = nalgebra::Vector3::from_fn(|a, _| 0.5 * (b[0][a] + b[1][a]));
+        let radius = 0.5
+            * (0..3)
+                .map(|a| (b[1][a] - b[0][a]).powi(2))
+                .sum::<f64>()
+                .sqrt();
+        let distances = cameras.iter().map(|c| (c.center() - centre).norm());
+        let (near, far) = distances.fold((f64::INFINITY, 0.0f64), |(n, f), d| (n.min(d), f.max(d)));
+        Ok(Self {
+            bounds: b,
+            scale: common_scale(&bounds, cameras, size, margin),
+            size,
+            near: (near - radius).max(1e-3),
+            far: far + radius,
+        })
+    }
+}
+
+/// The visual hull of `frame` carved from the input cameras' masks, as a mesh.
+pub fn frame_hull(inputs: &dyn InputViews, frame: usize, config: &HullConfig) -> Result<Mesh> {
+    let ids = inputs.input_cameras();
+    let masks = ids
+        .iter()
+        .map(|&c| inputs.mask(c, frame))
+        .collect::<Result<Vec<_>>>()?;
+    let cameras = ids
+        .iter()
+        .map(|&c| inputs.camera(c).cloned())
+        .collect::<Result<Vec<_>>>()?;
+    Hull::carve(&cameras, &masks, config)?.mesh()
+}
+
+/// The input views of `frame`, cropped by `framing`, with the hull `mesh`'s depth.
+pub fn prepare_frame(
+    inputs: &dyn InputViews,
+    frame: usize,
+    mesh: &Mesh,
+    framing: &Framing,
+) -> Result<PreparedFrame> {
+    let views = inputs
+        .input_cameras()
+        .par_iter()
+        .map(|&c| {
+            let full = inputs.camera(c)?;
+            let crop = framing.crop(full);
+            let camera = crop.camera(full);
+            let joints = inputs.joints2d(c, frame)?;
+            Ok(PreparedView {
+                camera_index: c,
+                image: crop.image(&inputs.image(c, frame)?),
+                mask: crop.mask(&inputs.mask(c, frame)?),
+                hull_depth: render_depth(mesh, &camera)?,
+                depth: inputs.depth(c, frame).map(|d| crop.depth(&d)),
+                joints: joints.iter().map(|&p| crop.point(p)).collect(),
+                camera,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(PreparedFrame { frame, views })
+}
