@@ -2,6 +2,7 @@
 //! "PoseGaussian: Pose-Driven Novel View Synthesis for Robust 3D Human Reconstruction"
 //! (paper 002, whose supplement is in `papers/`).
 //!
+//! - [`baseline`]: the "3DGS per frame" baseline, 3DGS trained on one frame's input views.
 //! - [`dataset`]: the synthetic capture (`$FEWVIEW_DATA/human`), exact depth and joints.
 //! - [`zju`]: the ZJU-MoCap layout (`annots.npy`, `Camera_B*/`, `mask/`, `params/`), undistorted
 //!   to pinhole images on the fly.
@@ -23,6 +24,7 @@
 // `!(x <= t)` on purpose so that NaN is rejected too.
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod baseline;
 pub mod dataset;
 pub mod error;
 pub mod gaussians;
