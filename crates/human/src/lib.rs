@@ -27,8 +27,10 @@
 pub mod baseline;
 pub mod dataset;
 pub mod error;
+pub mod eval;
 pub mod gaussians;
 pub mod hull;
+pub mod infer;
 pub mod maps;
 pub mod net;
 pub mod npy_rows;

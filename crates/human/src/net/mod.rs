@@ -29,5 +29,5 @@ mod tests;
 pub use config::{NetConfig, SKELETON_POSE_CHANNELS, StagePlan, Variant};
 pub use flops::forward_macs;
 pub use heads::HeadOutputs;
-pub use model::{NetInput, PoseGaussianNet};
+pub use model::{ForwardTimes, NetInput, PoseGaussianNet};
 pub use posemap::{PoseMapConfig, PoseMapStyle, pose_map, pose_map_channels};

@@ -24,6 +24,15 @@ pub struct NetInput {
 }
 
 /// PoseGaussian's network, parameters and the configuration that shaped them.
+/// Seconds spent in each part of one forward pass.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ForwardTimes {
+    pub image_encoder: f64,
+    pub pose_encoder: f64,
+    pub depth_encoder: f64,
+    pub decoder_and_heads: f64,
+}
+
 #[derive(Module, Debug)]
 pub struct PoseGaussianNet {
     pub(crate) image: Encoder,
@@ -65,6 +74,31 @@ impl PoseGaussianNet {
             self.depth.forward(input.depth),
         ];
         Ok(self.heads.forward(self.decoder.forward(features)))
+    }
+
+    /// [`PoseGaussianNet::forward`] with the wall time of each part (the CPU backend runs
+    /// eagerly, so each part's time is its own): the image, pose and depth encoders, then the
+    /// decoder with the heads.
+    pub fn forward_timed(&self, input: NetInput) -> Result<(HeadOutputs, ForwardTimes)> {
+        self.check(&input)?;
+        let clock = std::time::Instant::now();
+        let image = self.image.forward(input.image);
+        let t_image = clock.elapsed().as_secs_f64();
+        let pose = self.pose.forward(input.pose);
+        let t_pose = clock.elapsed().as_secs_f64();
+        let depth = self.depth.forward(input.depth);
+        let t_depth = clock.elapsed().as_secs_f64();
+        let heads = self
+            .heads
+            .forward(self.decoder.forward([image, pose, depth]));
+        let t_all = clock.elapsed().as_secs_f64();
+        let times = ForwardTimes {
+            image_encoder: t_image,
+            pose_encoder: t_pose - t_image,
+            depth_encoder: t_depth - t_pose,
+            decoder_and_heads: t_all - t_depth,
+        };
+        Ok((heads, times))
     }
 
     fn check(&self, input: &NetInput) -> Result<()> {

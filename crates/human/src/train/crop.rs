@@ -244,8 +244,9 @@ mod tests {
             // Every corner of the box lands inside the crop, with the margin.
             assert!(cu > 0.0 && cu < 64.0 && cv > 0.0 && cv < 128.0, "{cu} {cv}");
         }
-        // The box (0.6 m × 1.2 m at 4 m, 75 × 150 px) grown 10 % fits 128 px high: 128/165.
-        assert!((scale - 128.0 / 165.0).abs() < 1e-9, "{scale}");
+        // The box's nearest face (1.2 m high at 3.8 m) spans 157.9 px; grown 10 % it fits 128 px.
+        let want = 128.0 / (1.1 * 500.0 * 1.2 / 3.8);
+        assert!((scale - want).abs() < 1e-9, "{scale} vs {want}");
     }
 
     /// A linear ramp is reproduced exactly by bilinear sampling at scale 1 and averaged

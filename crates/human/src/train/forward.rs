@@ -147,17 +147,26 @@ pub fn predict(
     device: &Device,
 ) -> Result<Prediction> {
     let heads = net.forward(net_input(views, s, device)?)?;
-    let maps = views
+    let maps = maps_of(&heads, views, s)?;
+    Ok(Prediction { heads, maps })
+}
+
+/// The per-view Gaussian maps of the heads' outputs for `views` (one batch item each).
+pub fn maps_of(
+    heads: &HeadOutputs,
+    views: &[&PreparedView],
+    s: &ForwardSettings<'_>,
+) -> Result<Vec<PixelMaps>> {
+    views
         .iter()
         .enumerate()
         .map(|(i, v)| {
             let mut m =
-                PixelMaps::from_heads(&heads, i, s.framing.near as f32, s.framing.far as f32)?;
-            m.depth = bracket_depth(&heads, i, v, s);
+                PixelMaps::from_heads(heads, i, s.framing.near as f32, s.framing.far as f32)?;
+            m.depth = bracket_depth(heads, i, v, s);
             Ok(m)
         })
-        .collect::<Result<Vec<_>>>()?;
-    Ok(Prediction { heads, maps })
+        .collect()
 }
 
 /// The source views' Gaussians, concatenated.
