@@ -22,7 +22,7 @@ pub mod residual;
 pub mod se;
 
 #[cfg(test)]
-mod reference;
+pub(crate) mod reference;
 #[cfg(test)]
 mod tests;
 
