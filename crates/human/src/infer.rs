@@ -246,7 +246,7 @@ fn host(t: &Tensor<3>) -> Result<Vec<f32>> {
         .map_err(|e| HumanError::argument("inference", format!("cannot read a map: {e:?}")))
 }
 
-fn to_source_maps(maps: &PixelMaps, mask: &crate::Mask) -> Result<SourceMaps> {
+pub(crate) fn to_source_maps(maps: &PixelMaps, mask: &crate::Mask) -> Result<SourceMaps> {
     let (width, height) = maps.size();
     let mut values = host(&maps.scale)?;
     values.extend(host(&maps.rotation)?);

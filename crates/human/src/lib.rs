@@ -25,6 +25,7 @@
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod baseline;
+pub mod bench;
 pub mod dataset;
 pub mod error;
 pub mod eval;

@@ -22,7 +22,8 @@ use super::output_paths::check_folder;
 /// refined and with them held, as the CPU schedule holds them), the SSIM loss,
 /// the occlusion-aware Poisson blend at 1024², Semi-Global Matching on fern's rectified pair
 /// (1, 10) cropped to 504×378 with 64 disparities (beside the same on one thread; the whole
-/// stereo pair at its own size too), and peak memory. Prints a table and writes JSON.
+/// stereo pair at its own size too), PoseGaussian inference per frame for both presets (by
+/// stage, beside a matrix product's multiply-add rate), and peak memory. Prints a table and writes JSON.
 ///
 /// Throughput is reported per CPU-second (CPU time summed over threads), which does not change
 /// much when other programs load the machine; wall-clock seconds are reported too. The
@@ -49,6 +50,9 @@ pub struct Args {
     /// Surface training steps timed (the NeuS-MLP reference runs one).
     #[arg(long, default_value_t = 10)]
     pub surface_steps: usize,
+    /// Frames timed for PoseGaussian inference with the CPU preset (the paper preset times one).
+    #[arg(long, default_value_t = 3, value_parser = positive_count)]
+    pub human_frames: usize,
     /// Repetitions of each rasterizer measurement (median reported; at least 1).
     #[arg(long, default_value_t = 5, value_parser = positive_count)]
     pub runs: usize,
@@ -72,6 +76,8 @@ struct Report {
     ssim: fewview_metrics::bench::SsimBench,
     blend: Option<fewview_geom::bench::BlendBench>,
     stereo: Option<fewview_geom::bench::StereoBench>,
+    /// PoseGaussian inference per frame, both presets (synthetic frame, random weights).
+    human_inference: Vec<fewview_human::bench::InferenceBench>,
     peak_memory_mib: Option<f64>,
 }
 
@@ -166,6 +172,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     eprintln!("Poisson blend 1024x1024x3 ...");
     let blend = fewview_geom::bench::blend_1024().ok();
     let stereo = stereo_bench(args.fern.clone(), args.runs)?;
+    let mut human_inference = Vec::new();
+    for (preset, frames) in [
+        (fewview_human::train::Preset::Cpu, args.human_frames),
+        (fewview_human::train::Preset::Paper, 1),
+    ] {
+        eprintln!("PoseGaussian inference: {preset:?} preset ...");
+        human_inference.push(fewview_human::bench::inference_bench(preset, frames)?);
+    }
     let report = Report {
         machine,
         raster,
@@ -176,6 +190,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ssim,
         blend,
         stereo,
+        human_inference,
         peak_memory_mib: peak_memory_mib(),
     };
     print_table(&report);
@@ -209,6 +224,34 @@ fn stereo_bench(
 fn print_table(r: &Report) {
     let g = |v: f64| format!("{:.3e}", v);
     println!("{:<46} {:>14} {:>14}", "figure", "value", "reference");
+    for h in &r.human_inference {
+        println!(
+            "{:<46} {:>14.3} {:>14}",
+            format!(
+                "PoseGaussian {} s/frame ({}x{}, 2 sources)",
+                h.preset, h.size[0], h.size[1]
+            ),
+            h.seconds_per_frame,
+            ""
+        );
+        println!(
+            "{:<46} {:>14}",
+            "  image / pose / depth enc, decoder, TPS, render",
+            format!(
+                "{:.3} / {:.3} / {:.3} / {:.3} / {:.3} / {:.3}",
+                h.image_encoder,
+                h.pose_encoder,
+                h.depth_encoder,
+                h.decoder_and_heads,
+                h.tps,
+                h.rendering
+            )
+        );
+        println!(
+            "{:<46} {:>14.2} {:>14.2}",
+            "  network GMAC/s vs 1024³ matmul", h.network_gmacs_per_s, h.matmul_gmacs_per_s
+        );
+    }
     let rb = &r.raster;
     println!(
         "{:<46} {:>14} {:>14}",
