@@ -172,6 +172,12 @@ pub struct EvalOptions {
     pub cameras: Vec<usize>,
     /// The stabilizer's settings; `None` scores only the plain renders.
     pub tps: Option<crate::tps::TpsConfig>,
+    /// Consecutive frames (inside `frames`) on which to train and score the 3DGS-per-frame
+    /// baseline, with its options; a third table compares every method on them.
+    pub splat: Option<(
+        std::ops::Range<usize>,
+        crate::baseline::SplatBaselineOptions,
+    )>,
 }
 
 /// Both tables, and the mean time per frame of the run under test.
@@ -181,6 +187,8 @@ pub struct EvalReport {
     pub frames: std::ops::Range<usize>,
     pub novel_view: Vec<Scores>,
     pub novel_pose: Vec<Scores>,
+    /// Every method, the 3DGS-per-frame baseline included, on its frames.
+    pub splat_frames: Vec<Scores>,
     pub times: crate::infer::FrameTimes,
 }
 
@@ -243,6 +251,22 @@ pub fn evaluate(
         .iter()
         .map(|&c| truth_frames(source, &model.framing, c, options.frames.clone()))
         .collect::<Result<Vec<_>>>()?;
+    let splat = match &options.splat {
+        Some((range, opts)) => {
+            let inputs = crate::train::InferenceInputs { source, split };
+            let mut per_camera = vec![Vec::new(); k];
+            for frame in range.clone() {
+                let images =
+                    crate::baseline::splat_per_frame(&inputs, frame, &model.framing, &full, opts)?;
+                for (c, image) in images.into_iter().enumerate() {
+                    per_camera[c].push(image);
+                }
+                progress(frame);
+            }
+            Some((range.clone(), per_camera))
+        }
+        None => None,
+    };
     let table_of = |range: std::ops::Range<usize>| -> Result<Vec<Scores>> {
         let offset = options.frames.start;
         let (a, b) = (
@@ -263,6 +287,17 @@ pub fn evaluate(
         frames: options.frames.clone(),
         novel_view: table_of(options.frames.clone())?,
         novel_pose: table_of(split.test_frames.clone())?,
+        splat_frames: match &splat {
+            Some((range, images)) => {
+                let mut rows = table_of(range.clone())?;
+                let offset = options.frames.start;
+                let (a, b) = (range.start - offset, range.end - offset);
+                let cut = truths.iter().map(|c| c[a..b].to_vec()).collect::<Vec<_>>();
+                rows.push(score("3DGS per frame", images, &cut, perceptual)?);
+                rows
+            }
+            None => Vec::new(),
+        },
         times: crate::infer::FrameTimes::mean(&times),
     };
     Ok((report, renders, truths))

@@ -198,6 +198,13 @@ pub struct EvalArgs {
     /// Skip LPIPS (and its Δ).
     #[arg(long)]
     pub no_lpips: bool,
+    /// Train the 3DGS-per-frame baseline on this many consecutive frames from the first test
+    /// frame (0: none; each takes minutes) and add a table of every method on them.
+    #[arg(long, default_value_t = 0)]
+    pub splat_frames: usize,
+    /// Training iterations of each 3DGS-per-frame model.
+    #[arg(long, default_value_t = 3000)]
+    pub splat_iterations: usize,
 }
 
 fn parse_frames(text: &str) -> anyhow::Result<std::ops::Range<usize>> {
@@ -238,8 +245,17 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         frames: frames.clone(),
         cameras: split.held_out_cameras.clone(),
         tps: Some(fewview_human::tps::TpsConfig::default()),
+        splat: (args.splat_frames > 0).then(|| {
+            let start = split.test_frames.start.max(frames.start);
+            let end = (start + args.splat_frames).min(frames.end);
+            let opts = fewview_human::baseline::SplatBaselineOptions {
+                iterations: args.splat_iterations,
+                ..Default::default()
+            };
+            (start..end, opts)
+        }),
     };
-    let bar = progress::iterations(frames.len() as u64, "human eval");
+    let bar = progress::iterations((frames.len() + args.splat_frames) as u64, "human eval");
     let perceptual = lpips
         .as_ref()
         .map(|l| l as &dyn fewview_metrics::temporal::PerceptualDistance);
@@ -263,6 +279,21 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         split.test_frames.end - 1,
         table(&report.novel_pose)
     );
+    let md = if report.splat_frames.is_empty() {
+        md
+    } else {
+        let r = options
+            .splat
+            .as_ref()
+            .map(|(r, _)| r.clone())
+            .unwrap_or_default();
+        format!(
+            "{md}\n3DGS per frame and every method on its frames ({}..={})\n\n{}",
+            r.start,
+            r.end.saturating_sub(1),
+            table(&report.splat_frames)
+        )
+    };
     print!("{md}");
     std::fs::write(args.out.join("table.md"), &md)?;
     std::fs::write(
