@@ -37,10 +37,9 @@ pub enum PresetArg {
     Paper,
 }
 
-/// Train the network; writes checkpoints (`network.fvh`, `optimizer.bin`, `state.bin`) and
-/// `train_log.jsonl` to `--out`.
+/// The capture, its sequence and the output folder, shared by the subcommands.
 #[derive(Debug, ClapArgs)]
-pub struct TrainArgs {
+pub struct CaptureArgs {
     /// The capture's folder (the synthetic layout: `cameras.json`, `joints.json`, `SEQ/`).
     #[arg(long, value_name = "DIR")]
     pub data: PathBuf,
@@ -50,17 +49,28 @@ pub struct TrainArgs {
     /// Output folder.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+}
+
+/// Train the network; writes checkpoints (`network.fvh`, `optimizer.bin`, `state.bin`) and
+/// `train_log.jsonl` to `--out`.
+#[derive(Debug, ClapArgs)]
+pub struct TrainArgs {
+    #[command(flatten)]
+    pub capture: CaptureArgs,
+    /// Network widths and input size.
     #[arg(long, value_enum, default_value = "cpu")]
     pub preset: PresetArg,
     /// Network configuration of the paper's appendix (1 simplified, 2 deep residual,
     /// 3 with batch norm, 4 without downsampling).
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=4))]
     pub variant: u8,
+    /// Training steps, one target view of one frame each.
     #[arg(long, default_value_t = 2000)]
     pub iterations: usize,
     /// Adam's step size.
     #[arg(long, default_value_t = 2e-4)]
     pub lr: f64,
+    /// Seeds the initial weights and the order of the targets.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Source views per target.
@@ -102,19 +112,19 @@ fn config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
 
 fn train(args: TrainArgs) -> anyhow::Result<()> {
     let config = config(&args)?;
-    let dataset = HumanDataset::open(&args.data, &args.sequence)?;
+    let dataset = HumanDataset::open(&args.capture.data, &args.capture.sequence)?;
     let split = Split::seq_a();
     let view = TrainingView::new(&dataset, &split)?;
     let device = fewview_human::train::default_device();
     let frames = split.train_frames.clone();
     let started = Instant::now();
     let mut trainer = if args.resume {
-        Trainer::resume(&view, frames, &args.out, config.clone(), device)?
+        Trainer::resume(&view, frames, &args.capture.out, config.clone(), device)?
     } else {
-        if args.out.join("state.bin").exists() {
+        if args.capture.out.join("state.bin").exists() {
             bail!(
                 "{}: holds a run already (pass --resume to continue it)",
-                args.out.display()
+                args.capture.out.display()
             );
         }
         eprintln!(
@@ -132,19 +142,19 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
     let f = trainer.framing();
     eprintln!(
         "human train on {} ({} input cameras, frames {:?}) → {}: crops {}×{} at scale {:.3}, depth {:.2}–{:.2} m",
-        args.data.display(),
+        args.capture.data.display(),
         split.input_cameras.len(),
         split.train_frames,
-        args.out.display(),
+        args.capture.out.display(),
         f.size[0],
         f.size[1],
         f.scale,
         f.near,
         f.far
     );
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("{}: cannot create", args.out.display()))?;
-    let log_path = args.out.join("train_log.jsonl");
+    std::fs::create_dir_all(&args.capture.out)
+        .with_context(|| format!("{}: cannot create", args.capture.out.display()))?;
+    let log_path = args.capture.out.join("train_log.jsonl");
     let mut log = std::fs::OpenOptions::new()
         .create(true)
         .append(true)
@@ -159,16 +169,16 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
         bar.set_message(format!("loss {:.4}", stats.loss.total));
         let every = args.checkpoint_every.max(1);
         if stats.iteration % every == 0 || stats.iteration == config.iterations {
-            trainer.save(&args.out)?;
+            trainer.save(&args.capture.out)?;
         }
     }
     bar.finish_and_clear();
-    trainer.save(&args.out)?;
+    trainer.save(&args.capture.out)?;
     eprintln!(
         "trained {} iterations in {:.0} s; checkpoint in {}",
         trainer.iteration(),
         started.elapsed().as_secs_f64(),
-        args.out.display()
+        args.capture.out.display()
     );
     Ok(())
 }
@@ -181,14 +191,8 @@ pub struct EvalArgs {
     /// The run folder `human train` wrote.
     #[arg(long, value_name = "DIR")]
     pub run: PathBuf,
-    /// The capture the run was trained on.
-    #[arg(long, value_name = "DIR")]
-    pub data: PathBuf,
-    #[arg(long, default_value = "seq_a")]
-    pub sequence: String,
-    /// Output folder.
-    #[arg(long, value_name = "DIR")]
-    pub out: PathBuf,
+    #[command(flatten)]
+    pub capture: CaptureArgs,
     /// A run trained with `--no-pose`: the per-frame baseline.
     #[arg(long, value_name = "DIR")]
     pub per_frame: Option<PathBuf>,
@@ -223,15 +227,15 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     use fewview_human::infer::Model;
     let model = Model::load(&args.run)?;
     let per_frame = args.per_frame.as_deref().map(Model::load).transpose()?;
-    let dataset = HumanDataset::open(&args.data, &args.sequence)?;
+    let dataset = HumanDataset::open(&args.capture.data, &args.capture.sequence)?;
     let split = Split::seq_a();
     split.check_fits(&dataset)?;
     let frames = match &args.frames {
         Some(t) => parse_frames(t)?,
         None => split.all_frames(),
     };
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("{}: cannot create", args.out.display()))?;
+    std::fs::create_dir_all(&args.capture.out)
+        .with_context(|| format!("{}: cannot create", args.capture.out.display()))?;
     let lpips = if args.no_lpips {
         None
     } else {
@@ -295,9 +299,9 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         )
     };
     print!("{md}");
-    std::fs::write(args.out.join("table.md"), &md)?;
+    std::fs::write(args.capture.out.join("table.md"), &md)?;
     std::fs::write(
-        args.out.join("metrics.json"),
+        args.capture.out.join("metrics.json"),
         serde_json::to_string_pretty(&report)?,
     )?;
     let video: Vec<_> = (0..frames.len())
@@ -312,7 +316,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
             side_by_side(&cols)
         })
         .collect();
-    let path = args.out.join("side_by_side.mp4");
+    let path = args.capture.out.join("side_by_side.mp4");
     let opts = fewview_scene::video::VideoOptions::default();
     fewview_scene::video::write_video(&path, &video, 30.0, &opts)?;
     let t = &report.times;
@@ -326,7 +330,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         t.network.decoder_and_heads,
         t.tps,
         t.rendering,
-        args.out.display()
+        args.capture.out.display()
     );
     Ok(())
 }
