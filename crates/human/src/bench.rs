@@ -153,7 +153,7 @@ pub fn inference_bench(preset: Preset, frames: usize) -> Result<InferenceBench> 
         }
         let t_tps = clock.elapsed().as_secs_f64();
         let clock = Instant::now();
-        let _ = crate::infer::to_image(&render_prediction(&refs, &maps, &target, &settings)?.rgb);
+        crate::infer::to_image(&render_prediction(&refs, &maps, &target, &settings)?.rgb)?;
         let t_render = clock.elapsed().as_secs_f64();
         if frame > 0 {
             let parts = [

@@ -12,13 +12,14 @@ use fewview_scene::{Camera, Image};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{HumanError, Result};
-use crate::gaussians::{Nearness, PixelMaps, nearest_sources};
-use crate::hull::HullConfig;
+use crate::gaussians::PixelMaps;
 use crate::net::{ForwardTimes, PoseGaussianNet, checkpoint};
 use crate::source::MultiView;
 use crate::tps::{SourceMaps, Stabilizer, TpsConfig};
 use crate::train::forward::{ForwardSettings, net_input, render_prediction};
-use crate::train::prepare::{Framing, InferenceInputs, PreparedFrame, frame_hull, prepare_frame};
+use crate::train::prepare::{
+    Framing, InferenceInputs, PreparedFrame, frame_hull, hull_config, prepare_frame,
+};
 use crate::train::trainer::{TrainConfig, forward_settings, net_config, stored_run};
 
 /// A trained network with the framing and joint tree of its run.
@@ -157,7 +158,7 @@ impl<'a> SequenceRenderer<'a> {
             .collect();
         let sources: Vec<Vec<usize>> = targets
             .iter()
-            .map(|t| nearest_views(&prepared, t, k))
+            .map(|t| prepared.nearest(t, k, None))
             .collect::<Result<_>>()?;
         let mut needed: Vec<usize> = sources.iter().flatten().copied().collect();
         needed.sort_unstable();
@@ -186,7 +187,7 @@ impl<'a> SequenceRenderer<'a> {
                 .map(|(t, src)| {
                     let views: Vec<_> = src.iter().filter_map(|&c| prepared.view(c)).collect();
                     let m: Vec<PixelMaps> = src.iter().map(|c| maps[c].clone()).collect();
-                    Ok(to_image(&render_prediction(&views, &m, t, &settings)?.rgb))
+                    to_image(&render_prediction(&views, &m, t, &settings)?.rgb)
                 })
                 .collect()
         };
@@ -202,11 +203,11 @@ impl<'a> SequenceRenderer<'a> {
     }
 
     fn prepare(&self, frame: usize) -> Result<PreparedFrame> {
-        let hull = HullConfig {
-            voxel: self.model.config.hull_voxel,
-            ..HullConfig::default()
-        };
-        let mesh = frame_hull(&self.inputs, frame, &hull)?;
+        let mesh = frame_hull(
+            &self.inputs,
+            frame,
+            &hull_config(self.model.config.hull_voxel),
+        )?;
         prepare_frame(&self.inputs, frame, &mesh, &self.model.framing)
     }
 
@@ -223,17 +224,6 @@ impl<'a> SequenceRenderer<'a> {
         let maps = crate::train::forward::maps_of(&heads, &views, settings)?;
         Ok((needed.iter().copied().zip(maps).collect(), times))
     }
-}
-
-/// The `k` input views nearest `target` by view direction.
-fn nearest_views(prepared: &PreparedFrame, target: &Camera, k: usize) -> Result<Vec<usize>> {
-    let cameras: Vec<Camera> = prepared.views.iter().map(|v| v.camera.clone()).collect();
-    let all: Vec<usize> = (0..cameras.len()).collect();
-    let picked = nearest_sources(target, &cameras, &all, k, Nearness::ViewDirection)?;
-    Ok(picked
-        .into_iter()
-        .map(|i| prepared.views[i].camera_index)
-        .collect())
 }
 
 /// Channels of the maps TPS blends besides depth: scale (3), rotation (4), opacity (1).
@@ -297,18 +287,13 @@ fn stabilize_all(
         .collect()
 }
 
-/// An `[H, W, 3]` tensor as an image, clamped to `[0, 1]`.
-pub fn to_image(t: &Tensor<3>) -> Image {
+/// An `[H, W, 3]` tensor as an image, clamped to `[0, 1]`; an error if it cannot be read.
+pub fn to_image(t: &Tensor<3>) -> Result<Image> {
     let [h, w, _] = t.dims();
-    let data = t
-        .clone()
-        .into_data()
-        .try_to_vec::<f32>()
-        .unwrap_or_else(|_| vec![0.0; h * w * 3]);
-    Image {
+    Ok(Image {
         width: w,
         height: h,
         channels: 3,
-        data: data.into_iter().map(|v| v.clamp(0.0, 1.0)).collect(),
-    }
+        data: host(t)?.into_iter().map(|v| v.clamp(0.0, 1.0)).collect(),
+    })
 }

@@ -8,6 +8,7 @@ use rayon::prelude::*;
 
 use super::crop::{Crop, common_scale};
 use crate::error::{HumanError, Result};
+use crate::gaussians::{Nearness, nearest_sources};
 use crate::hull::{Bounds, Hull, HullConfig, render_depth};
 use crate::maps::{DepthMap, Mask};
 use crate::source::MultiView;
@@ -115,6 +116,28 @@ impl PreparedFrame {
     /// The view of dataset camera `camera`.
     pub fn view(&self, camera: usize) -> Option<&PreparedView> {
         self.views.iter().find(|v| v.camera_index == camera)
+    }
+
+    /// The dataset cameras of the `k` views nearest `target` by view direction, leaving out
+    /// dataset camera `except` (the target itself, when it is an input camera).
+    pub fn nearest(&self, target: &Camera, k: usize, except: Option<usize>) -> Result<Vec<usize>> {
+        let cameras: Vec<Camera> = self.views.iter().map(|v| v.camera.clone()).collect();
+        let others: Vec<usize> = (0..cameras.len())
+            .filter(|&i| Some(self.views[i].camera_index) != except)
+            .collect();
+        let picked = nearest_sources(target, &cameras, &others, k, Nearness::ViewDirection)?;
+        Ok(picked
+            .into_iter()
+            .map(|i| self.views[i].camera_index)
+            .collect())
+    }
+}
+
+/// How the hulls of a run are carved: voxels of `voxel` metres, every input camera.
+pub fn hull_config(voxel: f64) -> HullConfig {
+    HullConfig {
+        voxel,
+        ..HullConfig::default()
     }
 }
 

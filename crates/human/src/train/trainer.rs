@@ -15,10 +15,9 @@ use serde::{Deserialize, Serialize};
 
 use super::forward::{DepthBracket, ForwardSettings, predict, prediction_gaussians};
 use super::loss::{LossParts, LossWeights, training_loss};
-use super::prepare::{Framing, InputViews, PreparedFrame, frame_hull, prepare_frame};
+use super::prepare::{Framing, InputViews, PreparedFrame, frame_hull, hull_config, prepare_frame};
 use crate::error::{HumanError, Result};
-use crate::gaussians::{GaussianOptions, Nearness, nearest_sources, render_gaussians};
-use crate::hull::HullConfig;
+use crate::gaussians::{GaussianOptions, render_gaussians};
 use crate::net::{NetConfig, PoseGaussianNet, PoseMapConfig, Variant, checkpoint};
 
 /// The two network presets (NetConfig::paper and NetConfig::cpu).
@@ -242,7 +241,8 @@ impl<'a> Trainer<'a> {
         (frame, inputs[rng.random_range(0..inputs.len())])
     }
 
-    fn frame(&mut self, frame: usize) -> Result<&PreparedFrame> {
+    /// Prepares `frame` the first time a step draws it.
+    fn ensure_prepared(&mut self, frame: usize) -> Result<()> {
         if !self.prepared.contains_key(&frame) {
             if !self.hulls.contains_key(&frame) {
                 let mesh = frame_hull(self.inputs, frame, &hull_config(self.config.hull_voxel))?;
@@ -251,7 +251,7 @@ impl<'a> Trainer<'a> {
             let prepared = prepare_frame(self.inputs, frame, &self.hulls[&frame], &self.framing)?;
             self.prepared.insert(frame, prepared);
         }
-        Ok(&self.prepared[&frame])
+        Ok(())
     }
 
     /// One Adam step.
@@ -260,8 +260,15 @@ impl<'a> Trainer<'a> {
         let iteration = self.iteration + 1;
         let (frame, target) = self.sample(iteration);
         let k = self.config.source_views;
-        let prepared = self.frame(frame)?.clone();
-        let sources = source_cameras(&prepared, target, k)?;
+        self.ensure_prepared(frame)?;
+        let prepared = &self.prepared[&frame];
+        let target_camera = &prepared
+            .view(target)
+            .ok_or_else(|| {
+                HumanError::argument("training", format!("camera {target} is not prepared"))
+            })?
+            .camera;
+        let sources = prepared.nearest(target_camera, k, Some(target))?;
         let views: Vec<_> = sources.iter().filter_map(|&c| prepared.view(c)).collect();
         let target_view = prepared.view(target).ok_or_else(|| {
             HumanError::argument("training", format!("camera {target} is not prepared"))
@@ -375,13 +382,6 @@ pub fn forward_settings<'s>(
     }
 }
 
-fn hull_config(voxel: f64) -> HullConfig {
-    HullConfig {
-        voxel,
-        ..HullConfig::default()
-    }
-}
-
 fn carve_all(
     inputs: &dyn InputViews,
     frames: std::ops::Range<usize>,
@@ -390,34 +390,6 @@ fn carve_all(
     frames
         .map(|f| Ok((f, frame_hull(inputs, f, &hull_config(voxel))?)))
         .collect()
-}
-
-/// The `k` input cameras of `frame` nearest to `target` (by view direction), `target` excluded.
-pub fn source_cameras(frame: &PreparedFrame, target: usize, k: usize) -> Result<Vec<usize>> {
-    let cameras: Vec<_> = frame.views.iter().map(|v| v.camera.clone()).collect();
-    let target_camera = frame
-        .view(target)
-        .map(|v| v.camera.clone())
-        .ok_or_else(|| {
-            HumanError::argument(
-                "source views",
-                format!("camera {target} is not an input camera"),
-            )
-        })?;
-    let others: Vec<usize> = (0..cameras.len())
-        .filter(|&i| frame.views[i].camera_index != target)
-        .collect();
-    let picked = nearest_sources(
-        &target_camera,
-        &cameras,
-        &others,
-        k,
-        Nearness::ViewDirection,
-    )?;
-    Ok(picked
-        .into_iter()
-        .map(|i| frame.views[i].camera_index)
-        .collect())
 }
 
 /// The device training runs on: the CPU backend with autodiff.
