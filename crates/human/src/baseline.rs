@@ -388,7 +388,7 @@ mod tests {
     fn held_out_views_of_a_sphere_beat_a_blank_render() {
         // The splat trainer draws from Burn's global generator: hold the lock the network
         // tests hold while they seed it, so that neither changes the other's draws.
-        let _rng = crate::net::reference::seeded(1);
+        let _rng = crate::net::seed::seeded(1);
         let held_out = [2, 7];
         let ring = Ring::new(10, &held_out);
         let framing = ring.framing();

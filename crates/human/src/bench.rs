@@ -206,7 +206,7 @@ mod tests {
     /// The stages add up to the frame, and the multiply-adds are the network's for two views.
     #[test]
     fn cpu_preset_figures_add_up() {
-        let _rng = crate::net::reference::seeded(3);
+        let _rng = crate::net::seed::seeded(3);
         let b = inference_bench(Preset::Cpu, 1).unwrap();
         let stages = b.image_encoder
             + b.pose_encoder

@@ -78,7 +78,7 @@ mod tests {
     use burn::tensor::{Distribution, Tensor};
 
     use super::*;
-    use crate::net::reference::seeded;
+    use crate::net::seed::seeded;
     use crate::net::{NetInput, Variant};
 
     fn tiny() -> NetConfig {

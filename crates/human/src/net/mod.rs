@@ -20,6 +20,7 @@ pub mod model;
 pub mod posemap;
 pub mod residual;
 pub mod se;
+pub mod seed;
 
 #[cfg(test)]
 pub(crate) mod reference;

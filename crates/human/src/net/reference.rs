@@ -177,13 +177,3 @@ pub fn residual_unit(x: &Host, u: &ResidualUnit) -> Host {
     };
     squeeze_excitation(&y, &u.se).add(&skip).map(|v| v.max(0.0))
 }
-
-/// Burn's CPU generator is one process-wide state: tests that draw from it (weights are drawn
-/// lazily, at the first forward) hold this lock and seed it, so that each sees the same numbers
-/// whatever other tests run beside it.
-pub fn seeded(seed: u64) -> std::sync::MutexGuard<'static, ()> {
-    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    let guard = LOCK.lock().unwrap_or_else(|e| e.into_inner());
-    burn::tensor::Device::flex().seed(seed);
-    guard
-}

@@ -150,7 +150,8 @@ mod tests {
     use burn::tensor::{Distribution, TensorData};
 
     use super::*;
-    use crate::net::reference::{Host, residual_unit, seeded};
+    use crate::net::reference::{Host, residual_unit};
+    use crate::net::seed::seeded;
 
     fn random(shape: [usize; 4], device: &Device) -> Tensor<4> {
         Tensor::random(shape, Distribution::Uniform(-1.0, 1.0), device)

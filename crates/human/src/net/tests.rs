@@ -4,7 +4,7 @@
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::tensor::{Device, Distribution, Tensor, TensorData};
 
-use super::reference::seeded;
+use super::seed::seeded;
 use super::*;
 
 /// Widths 2/3/4/5 and a 2-channel pose map: every code path, in microseconds.

@@ -138,13 +138,16 @@ impl<'a> Trainer<'a> {
             .collect::<Result<Vec<_>>>()?;
         let meshes: Vec<Mesh> = hulls.values().cloned().collect();
         let framing = Framing::of_hulls(&meshes, &cameras, size, config.crop_margin)?;
-        // Seeds the backend the parameters are drawn on (an autodiff device wraps it).
-        Device::flex().seed(config.seed);
-        device.seed(config.seed);
-        let net = PoseGaussianNet::new(&net_config, &device)?;
-        // Burn draws parameters lazily, on first use; reading them now ties them to the seed
-        // rather than to whatever else uses the generator first.
-        let net = net.clone().load_record(net.into_record());
+        // Seeds the backend the parameters are drawn on (an autodiff device wraps it) and holds
+        // the generator until they are drawn. Burn draws parameters lazily, on first use;
+        // reading them now ties them to the seed rather than to whatever else uses the
+        // generator first.
+        let net = {
+            let _generator = crate::net::seed::seeded(config.seed);
+            device.seed(config.seed);
+            let net = PoseGaussianNet::new(&net_config, &device)?;
+            net.clone().load_record(net.into_record())
+        };
         Ok(Self {
             inputs,
             frames: frames.collect(),
