@@ -85,6 +85,10 @@ pub struct TrainArgs {
     /// Continue the run in `--out` from its checkpoint (same settings; `--iterations` may grow).
     #[arg(long)]
     pub resume: bool,
+    /// Stop after this many minutes of wall time (hull carving included) with a checkpoint, even
+    /// before `--iterations`: a training budget; `--resume` continues later.
+    #[arg(long, value_name = "MINUTES")]
+    pub max_minutes: Option<f64>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -162,7 +166,11 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
         .with_context(|| format!("{}: cannot open", log_path.display()))?;
     let bar = progress::iterations(config.iterations as u64, "human train");
     bar.set_position(trainer.iteration() as u64);
-    while trainer.iteration() < config.iterations {
+    let budget = args
+        .max_minutes
+        .map(|m| std::time::Duration::from_secs_f64(m.max(0.0) * 60.0));
+    let within_budget = || budget.is_none_or(|b| started.elapsed() < b);
+    while trainer.iteration() < config.iterations && within_budget() {
         let stats = trainer.step()?;
         writeln!(log, "{}", serde_json::to_string(&stats)?)?;
         bar.set_position(stats.iteration as u64);
