@@ -12,7 +12,7 @@ OUT_DIR (the committed copy is `crates/human/tests/fixtures/`):
   images `Camera_B{id+1}/{frame:06d}.jpg` (seq_a's JPEG files, byte for byte: cameras named by
   their seq_a id, so the names are B1, B4, B7, B10, not the list positions); masks
   `mask/Camera_B{id+1}/{frame:06d}.png` with values 0/1; world joints `joints3d/{frame}.npy`
-  (17, 3) float32; and SMPL-style `params/{frame}.npy` dicts (`poses`, `Rh`, `Th`, `shapes`)
+  (17, 3) float32 with `joints3d/parents.json` (seq_a's skeleton); and SMPL-style `params/{frame}.npy` dicts (`poses`, `Rh`, `Th`, `shapes`)
   whose values are placeholders (zeros, `Th` = the pelvis): they only exercise the reader.
   The first frame's `ims` is a NumPy string array, the others Python lists (releases differ).
 * `zju_distorted/`: one 64 x 48 camera with non-zero distortion D = (k1, k2, p1, p2, k3), its
@@ -84,6 +84,8 @@ def small(human: Path, out: Path) -> None:
             "shapes": np.zeros((1, 10), np.float32),
         }
         save_pickled(out / "params" / f"{f}.npy", params)
+    parents = json.loads((human / "joints.json").read_text())["parents"]
+    (out / "joints3d" / "parents.json").write_text(json.dumps(parents) + "\n")
     save_pickled(out / "annots.npy", annots)
 
 

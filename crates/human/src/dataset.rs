@@ -96,11 +96,6 @@ impl HumanDataset {
         Ok(data)
     }
 
-    /// Each joint's parent index (-1 for the root).
-    pub fn joint_parents(&self) -> &[i64] {
-        &self.joint_parents
-    }
-
     pub fn image_path(&self, camera: usize, frame: usize) -> PathBuf {
         self.per_view("images", camera, frame, "jpg")
     }
@@ -223,6 +218,10 @@ impl HumanDataset {
 }
 
 impl MultiView for HumanDataset {
+    fn joint_parents(&self) -> Result<Vec<i64>> {
+        Ok(self.joint_parents.clone())
+    }
+
     fn root(&self) -> &Path {
         &self.root
     }

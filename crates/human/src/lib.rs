@@ -6,6 +6,7 @@
 //! - [`dataset`]: the synthetic capture (`$FEWVIEW_DATA/human`), exact depth and joints.
 //! - [`zju`]: the ZJU-MoCap layout (`annots.npy`, `Camera_B*/`, `mask/`, `params/`), undistorted
 //!   to pinhole images on the fly.
+//! - [`capture`]: opens a capture folder of either layout.
 //! - [`source`]: [`MultiView`], the interface both offer, one `(camera, frame)` at a time.
 //! - [`split`]: the paper's protocol (8 input cameras, held-out views, novel poses) and
 //!   [`TrainingView`], which cannot open anything outside the training set.
@@ -14,6 +15,7 @@
 //!   nearest a target, and the differentiable render into it (fewview-splat's rasterizer).
 //! - [`net`]: the network (three encoders, a U-Net decoder, Gaussian-parameter heads), the pose
 //!   map it reads, its multiply-add count and its checkpoints.
+//! - [`orbit`]: a free-viewpoint camera path circling the rig.
 //! - [`tps`]: the Temporal Pose Stabilizer, each source view's maps blended with its previous
 //!   frame's, warped by the joints' motion and weighted down where they move fast.
 //!
@@ -26,6 +28,7 @@
 
 pub mod baseline;
 pub mod bench;
+pub mod capture;
 pub mod dataset;
 pub mod error;
 pub mod eval;
@@ -36,6 +39,7 @@ pub mod maps;
 pub mod net;
 pub mod npy_rows;
 pub mod opencv;
+pub mod orbit;
 pub mod readlog;
 pub mod source;
 pub mod split;

@@ -38,6 +38,9 @@ pub trait MultiView: Sync {
     fn joints2d(&self, camera: usize, frame: usize) -> Result<Vec<[f64; 2]>>;
     /// The joints' world positions, metres.
     fn joints3d(&self, frame: usize) -> Result<Vec<[f64; 3]>>;
+    /// Each joint's parent in the skeleton (`-1` for the root), which the pose maps draw limbs
+    /// along.
+    fn joint_parents(&self) -> Result<Vec<i64>>;
     /// Every file read so far.
     fn read_log(&self) -> &ReadLog;
 }

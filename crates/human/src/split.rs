@@ -12,6 +12,7 @@
 //! [`crate::readlog::ReadLog`] lets a test confirm that no other file was read.
 
 use std::ops::Range;
+use std::path::Path;
 
 use fewview_scene::{Camera, Image};
 
@@ -19,8 +20,11 @@ use crate::error::{HumanError, Result};
 use crate::maps::{DepthMap, Mask};
 use crate::source::MultiView;
 
+/// The file in a run folder that holds its split.
+pub const SPLIT_FILE: &str = "split.json";
+
 /// Input and held-out cameras, training and test frames.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Split {
     /// Cameras whose images the method sees (training and inference inputs).
     pub input_cameras: Vec<usize>,
@@ -76,6 +80,43 @@ impl Split {
             train_frames: 0..train_frames,
             test_frames: train_frames..frames,
         })
+    }
+
+    /// The protocol on any capture: `inputs` cameras spread over the rig ([`Split::uniform`]),
+    /// training on the first `train_frames` frames (default two thirds of them, which on `seq_a`
+    /// is frames 0–39) and testing on the rest.
+    pub fn for_capture(
+        source: &dyn MultiView,
+        inputs: usize,
+        train_frames: Option<usize>,
+    ) -> Result<Self> {
+        let frames = source.frame_count();
+        let train = train_frames.unwrap_or(frames * 2 / 3);
+        let split = Self::uniform(source.cameras().len(), inputs, frames, train)?;
+        split.check_fits(source)?;
+        Ok(split)
+    }
+
+    /// Writes the split as `split.json` into a run folder, so that evaluation uses the cameras
+    /// and frames training used.
+    pub fn save(&self, run: &Path) -> Result<()> {
+        let path = run.join(SPLIT_FILE);
+        let text = serde_json::to_string_pretty(self).expect("a split serializes");
+        std::fs::write(&path, text + "\n")
+            .map_err(|e| HumanError::format(&path, format!("cannot write ({e})")))
+    }
+
+    /// The split a run was trained with (`split.json`), or `None` when the run has none.
+    pub fn load(run: &Path) -> Result<Option<Self>> {
+        let path = run.join(SPLIT_FILE);
+        if !path.is_file() {
+            return Ok(None);
+        }
+        let text = std::fs::read_to_string(&path)
+            .map_err(|e| HumanError::format(&path, format!("cannot read ({e})")))?;
+        serde_json::from_str(&text)
+            .map(Some)
+            .map_err(|e| HumanError::format(&path, format!("not a split ({e})")))
     }
 
     /// Whether training may read `(camera, frame)`.

@@ -22,7 +22,7 @@ fn seq_a_training_resumes_bit_for_bit_inside_the_training_set() {
     let data = open();
     let split = Split::seq_a();
     let view = TrainingView::new(&data, &split).unwrap();
-    let parents = data.joint_parents().to_vec();
+    let parents = data.joint_parents().unwrap();
     let frames = 0..2;
     let config = TrainConfig {
         iterations: 5,
@@ -111,8 +111,14 @@ fn seq_a_held_out_view_renders_from_a_saved_run() {
         iterations: 2,
         ..TrainConfig::default()
     };
-    let mut trainer =
-        Trainer::new(&view, 0..2, data.joint_parents(), config, default_device()).unwrap();
+    let mut trainer = Trainer::new(
+        &view,
+        0..2,
+        &data.joint_parents().unwrap(),
+        config,
+        default_device(),
+    )
+    .unwrap();
     trainer.step().unwrap();
     let dir = tempfile::tempdir().unwrap();
     trainer.save(dir.path()).unwrap();

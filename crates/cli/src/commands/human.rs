@@ -8,7 +8,7 @@ use anyhow::{Context, bail};
 use clap::{Args as ClapArgs, Subcommand, ValueEnum};
 use fewview_human::net::Variant;
 use fewview_human::train::{Preset, TrainConfig, Trainer};
-use fewview_human::{HumanDataset, Split, TrainingView};
+use fewview_human::{MultiView, Split, TrainingView};
 
 use super::progress;
 
@@ -16,7 +16,9 @@ use super::progress;
 /// PoseGaussian).
 ///
 /// `train` fits the network on the input cameras of the training frames (the split of paper
-/// 002's protocol: on `seq_a`, cameras 2, 5, 8, 11 and frames 40–59 are never read).
+/// 002's protocol: on `seq_a`, cameras 2, 5, 8, 11 and frames 40–59 are never read); `render`
+/// draws any camera of the rig, or a path circling it, from the input cameras of each frame;
+/// `eval` scores the held-out cameras against the baselines.
 #[derive(Debug, ClapArgs)]
 pub struct Args {
     #[command(subcommand)]
@@ -26,6 +28,7 @@ pub struct Args {
 #[derive(Debug, Subcommand)]
 pub enum HumanCommand {
     Train(TrainArgs),
+    Render(RenderArgs),
     Eval(EvalArgs),
 }
 
@@ -40,10 +43,12 @@ pub enum PresetArg {
 /// The capture, its sequence and the output folder, shared by the subcommands.
 #[derive(Debug, ClapArgs)]
 pub struct CaptureArgs {
-    /// The capture's folder (the synthetic layout: `cameras.json`, `joints.json`, `SEQ/`).
+    /// The capture's folder: the synthetic layout (`cameras.json`, `joints.json`, `SEQ/`) or
+    /// ZJU-MoCap's (`annots.npy`, `Camera_B*/`, `mask/`, here or in `SEQ/`; 2D pose from
+    /// `joints3d/<n>.npy`).
     #[arg(long, value_name = "DIR")]
     pub data: PathBuf,
-    /// The sequence inside `--data`.
+    /// The sequence inside `--data` (ignored when `--data` itself holds `annots.npy`).
     #[arg(long, default_value = "seq_a")]
     pub sequence: String,
     /// Output folder.
@@ -85,6 +90,14 @@ pub struct TrainArgs {
     /// Continue the run in `--out` from its checkpoint (same settings; `--iterations` may grow).
     #[arg(long)]
     pub resume: bool,
+    /// Input cameras, spread uniformly over the rig (paper 002's protocol: 8; the others are
+    /// held out for evaluation).
+    #[arg(long, default_value_t = 8)]
+    pub input_cameras: usize,
+    /// Training frames, from the first (default: two thirds of the sequence; the rest test
+    /// novel poses).
+    #[arg(long, value_name = "N")]
+    pub train_frames: Option<usize>,
     /// Stop after this many minutes of wall time (hull carving included) with a checkpoint, even
     /// before `--iterations`: a training budget; `--resume` continues later.
     #[arg(long, value_name = "MINUTES")]
@@ -94,6 +107,7 @@ pub struct TrainArgs {
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.command {
         HumanCommand::Train(a) => train(a),
+        HumanCommand::Render(a) => render(a),
         HumanCommand::Eval(a) => eval(a),
     }
 }
@@ -116,32 +130,34 @@ fn config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
 
 fn train(args: TrainArgs) -> anyhow::Result<()> {
     let config = config(&args)?;
-    let dataset = HumanDataset::open(&args.capture.data, &args.capture.sequence)?;
-    let split = Split::seq_a();
-    let view = TrainingView::new(&dataset, &split)?;
+    let (_, capture) = fewview_human::capture::open(&args.capture.data, &args.capture.sequence)?;
+    let split = Split::for_capture(&*capture, args.input_cameras, args.train_frames)?;
+    let view = TrainingView::new(&*capture, &split)?;
     let device = fewview_human::train::default_device();
     let frames = split.train_frames.clone();
+    let out = &args.capture.out;
     let started = Instant::now();
     let mut trainer = if args.resume {
-        Trainer::resume(&view, frames, &args.capture.out, config.clone(), device)?
-    } else {
-        if args.capture.out.join("state.bin").exists() {
+        if Split::load(out)?.is_some_and(|s| s != split) {
             bail!(
-                "{}: holds a run already (pass --resume to continue it)",
-                args.capture.out.display()
+                "{}: the run was trained on another split (see split.json); give the same --input-cameras and --train-frames",
+                out.display()
             );
         }
+        Trainer::resume(&view, frames, out, config.clone(), device)?
+    } else {
+        if out.join("state.bin").exists() {
+            bail!(
+                "{}: holds a run already (pass --resume to continue it)",
+                out.display()
+            );
+        }
+        let parents = capture.joint_parents()?;
         eprintln!(
             "carving the visual hulls of {} training frames…",
             split.train_frames.len()
         );
-        Trainer::new(
-            &view,
-            frames,
-            dataset.joint_parents(),
-            config.clone(),
-            device,
-        )?
+        Trainer::new(&view, frames, &parents, config.clone(), device)?
     };
     let f = trainer.framing();
     eprintln!(
@@ -149,16 +165,16 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
         args.capture.data.display(),
         split.input_cameras.len(),
         split.train_frames,
-        args.capture.out.display(),
+        out.display(),
         f.size[0],
         f.size[1],
         f.scale,
         f.near,
         f.far
     );
-    std::fs::create_dir_all(&args.capture.out)
-        .with_context(|| format!("{}: cannot create", args.capture.out.display()))?;
-    let log_path = args.capture.out.join("train_log.jsonl");
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    split.save(out)?;
+    let log_path = out.join("train_log.jsonl");
     let mut log = std::fs::OpenOptions::new()
         .create(true)
         .append(true)
@@ -177,16 +193,126 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
         bar.set_message(format!("loss {:.4}", stats.loss.total));
         let every = args.checkpoint_every.max(1);
         if stats.iteration % every == 0 || stats.iteration == config.iterations {
-            trainer.save(&args.capture.out)?;
+            trainer.save(out)?;
         }
     }
     bar.finish_and_clear();
-    trainer.save(&args.capture.out)?;
+    trainer.save(out)?;
     eprintln!(
         "trained {} iterations in {:.0} s; checkpoint in {}",
         trainer.iteration(),
         started.elapsed().as_secs_f64(),
-        args.capture.out.display()
+        out.display()
+    );
+    Ok(())
+}
+
+/// Render a trained run from the input cameras of every frame: each `--cameras` camera (or a
+/// path circling the rig with `--orbit`) as `OUT/<camera>/frame_NNNN.png` and `OUT/<camera>.mp4`.
+#[derive(Debug, ClapArgs)]
+pub struct RenderArgs {
+    /// The run folder `human train` wrote.
+    #[arg(long, value_name = "DIR")]
+    pub run: PathBuf,
+    #[command(flatten)]
+    pub capture: CaptureArgs,
+    /// Cameras of the capture to render, e.g. `2,5` (default: the run's held-out cameras).
+    #[arg(long, value_delimiter = ',', conflicts_with = "orbit")]
+    pub cameras: Vec<usize>,
+    /// Render one camera circling the rig once over the frames instead (`OUT/orbit.mp4`).
+    #[arg(long)]
+    pub orbit: bool,
+    /// First and last frame (inclusive), e.g. `40..=59`; default every frame.
+    #[arg(long, value_name = "A..=B")]
+    pub frames: Option<String>,
+    /// Switch the Temporal Pose Stabilizer off.
+    #[arg(long)]
+    pub no_tps: bool,
+    /// Frames per second of the videos.
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f32,
+}
+
+fn render(args: RenderArgs) -> anyhow::Result<()> {
+    use fewview_human::infer::{Model, SequenceRenderer};
+    let model = Model::load(&args.run)?;
+    let (_, capture) = fewview_human::capture::open(&args.capture.data, &args.capture.sequence)?;
+    let split = run_split(&args.run, &*capture)?;
+    let frames = match &args.frames {
+        Some(t) => parse_frames(t)?,
+        None => split.all_frames(),
+    };
+    if frames.end > capture.frame_count() {
+        bail!(
+            "--frames {:?}: {} has {} frames",
+            frames,
+            capture.root().display(),
+            capture.frame_count()
+        );
+    }
+    let rig = capture.cameras();
+    let chosen = if args.cameras.is_empty() {
+        split.held_out_cameras.clone()
+    } else {
+        args.cameras.clone()
+    };
+    if let Some(c) = chosen.iter().find(|&&c| c >= rig.len()) {
+        bail!(
+            "--cameras: camera {c} does not exist ({} has {} cameras)",
+            capture.root().display(),
+            rig.len()
+        );
+    }
+    // Per output: its name and one camera per frame.
+    let outputs: Vec<(String, Vec<fewview_scene::Camera>)> = if args.orbit {
+        let path = fewview_human::orbit::orbit_cameras(rig, frames.len());
+        vec![("orbit".to_string(), path)]
+    } else {
+        chosen
+            .iter()
+            .map(|&c| {
+                (
+                    capture.camera_names()[c].clone(),
+                    vec![rig[c].clone(); frames.len()],
+                )
+            })
+            .collect()
+    };
+    let tps = (!args.no_tps).then(fewview_human::tps::TpsConfig::default);
+    let mut renderer = SequenceRenderer::new(&model, &*capture, &split, tps);
+    let out = &args.capture.out;
+    for (name, _) in &outputs {
+        let dir = out.join(name);
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+    }
+    let bar = progress::iterations(frames.len() as u64, "human render");
+    let mut videos: Vec<Vec<fewview_scene::Image>> = vec![Vec::new(); outputs.len()];
+    for (t, frame) in frames.clone().enumerate() {
+        let cameras: Vec<_> = outputs.iter().map(|(_, path)| path[t].clone()).collect();
+        let r = renderer.render_frame(frame, &cameras)?;
+        let images = r.stabilized.unwrap_or(r.plain);
+        for (k, image) in images.into_iter().enumerate() {
+            let path = out
+                .join(&outputs[k].0)
+                .join(format!("frame_{frame:04}.png"));
+            image.save_png(&path)?;
+            videos[k].push(image);
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let opts = fewview_scene::video::VideoOptions::default();
+    for ((name, _), video) in outputs.iter().zip(&videos) {
+        let path = out.join(format!("{name}.mp4"));
+        fewview_scene::video::write_video(&path, video, args.fps, &opts)?;
+    }
+    eprintln!(
+        "rendered {} view(s) × {} frames of {} into {}",
+        outputs.len(),
+        frames.len(),
+        args.run.display(),
+        out.display()
     );
     Ok(())
 }
@@ -219,6 +345,17 @@ pub struct EvalArgs {
     pub splat_iterations: usize,
 }
 
+/// The split `run` was trained with, or paper 002's default protocol for runs without
+/// `split.json`.
+fn run_split(run: &std::path::Path, capture: &dyn MultiView) -> anyhow::Result<Split> {
+    let split = match Split::load(run)? {
+        Some(split) => split,
+        None => Split::for_capture(capture, 8, None)?,
+    };
+    split.check_fits(capture)?;
+    Ok(split)
+}
+
 fn parse_frames(text: &str) -> anyhow::Result<std::ops::Range<usize>> {
     let (a, b) = text
         .split_once("..=")
@@ -235,9 +372,8 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     use fewview_human::infer::Model;
     let model = Model::load(&args.run)?;
     let per_frame = args.per_frame.as_deref().map(Model::load).transpose()?;
-    let dataset = HumanDataset::open(&args.capture.data, &args.capture.sequence)?;
-    let split = Split::seq_a();
-    split.check_fits(&dataset)?;
+    let (_, dataset) = fewview_human::capture::open(&args.capture.data, &args.capture.sequence)?;
+    let split = run_split(&args.run, &*dataset)?;
     let frames = match &args.frames {
         Some(t) => parse_frames(t)?,
         None => split.all_frames(),
@@ -274,7 +410,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     let (report, renders, truths) = evaluate(
         &model,
         &baselines,
-        &dataset,
+        &*dataset,
         &split,
         &options,
         perceptual,

@@ -314,9 +314,59 @@ impl MultiView for ZjuDataset {
             .collect())
     }
 
+    fn joint_parents(&self) -> Result<Vec<i64>> {
+        let joints = self.joints3d(0)?.len();
+        let listed = self.root.join("joints3d").join(PARENTS_FILE);
+        if listed.is_file() {
+            let parents = read_parents(&listed)?;
+            if parents.len() != joints {
+                let msg = format!("{} parents for {joints} joints", parents.len());
+                return Err(HumanError::invalid(&listed, msg));
+            }
+            return Ok(parents);
+        }
+        if joints == SMPL_PARENTS.len() {
+            return Ok(SMPL_PARENTS.to_vec());
+        }
+        let msg = format!(
+            "{joints} joints per frame: SMPL's {} have a known skeleton; for others list each \
+             joint's parent (-1 for the root) in joints3d/{PARENTS_FILE}",
+            SMPL_PARENTS.len()
+        );
+        Err(HumanError::invalid(self.root.join("joints3d"), msg))
+    }
+
     fn read_log(&self) -> &ReadLog {
         &self.log
     }
+}
+
+/// The file naming each joint's parent, for joints other than SMPL's 24: a JSON list of
+/// integers, `-1` for the root.
+pub const PARENTS_FILE: &str = "parents.json";
+
+/// The parents of SMPL's 24 joints (pelvis, hips, spine, knees, …), the kinematic tree of the
+/// SMPL body model.
+pub const SMPL_PARENTS: [i64; 24] = [
+    -1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21,
+];
+
+/// A parents list, checked to be a tree whose parents come before their children.
+fn read_parents(path: &Path) -> Result<Vec<i64>> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| HumanError::format(path, format!("cannot read ({e})")))?;
+    let parents: Vec<i64> = serde_json::from_str(&text)
+        .map_err(|e| HumanError::format(path, format!("expected a list of integers ({e})")))?;
+    for (j, &p) in parents.iter().enumerate() {
+        if p >= j as i64 || p < -1 || (p == -1) != (j == 0) {
+            let msg = format!(
+                "joint {j} has parent {p}: the root (joint 0) has -1, every other joint an \
+                 earlier one"
+            );
+            return Err(HumanError::invalid(path, msg));
+        }
+    }
+    Ok(parents)
 }
 
 /// The image size from the file's header (recorded as a header read).
