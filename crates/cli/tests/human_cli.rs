@@ -130,4 +130,30 @@ fn human_train_and_render_run_on_the_zju_layout() {
         assert!(lit > 500, "{}: {lit} lit pixels", png.display());
     }
     assert!(out.join("Camera_B10.mp4").metadata().unwrap().len() > 1000);
+
+    // Weights of another configuration (variant 1) in the run are refused.
+    let other = dir.path().join("other");
+    fewview_ok(&[
+        "human",
+        "train",
+        "--data",
+        s(&data),
+        "--out",
+        s(&other),
+        "--input-cameras",
+        "3",
+        "--train-frames",
+        "2",
+        "--iterations",
+        "1",
+        "--variant",
+        "1",
+    ]);
+    std::fs::copy(other.join("network.fvh"), run.join("network.fvh")).unwrap();
+    let refused = dir.path().join("refused");
+    assert_clean_error(
+        &render(&refused, &[]),
+        &["network.fvh", "weights of another network"],
+    );
+    assert!(!refused.exists(), "an output folder was written");
 }
