@@ -7,6 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use clap::{Args as ClapArgs, Subcommand, ValueEnum};
 use fewview_human::net::Variant;
+use fewview_human::tps::TpsConfig;
 use fewview_human::train::{Preset, TrainConfig, Trainer};
 use fewview_human::{MultiView, Split, TrainingView};
 
@@ -228,6 +229,8 @@ pub struct RenderArgs {
     /// Switch the Temporal Pose Stabilizer off.
     #[arg(long)]
     pub no_tps: bool,
+    #[command(flatten)]
+    pub tps: TpsArgs,
     /// Frames per second of the videos.
     #[arg(long, default_value_t = 30.0)]
     pub fps: f32,
@@ -278,7 +281,11 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
             })
             .collect()
     };
-    let tps = (!args.no_tps).then(fewview_human::tps::TpsConfig::default);
+    let tps = if args.no_tps {
+        None
+    } else {
+        Some(args.tps.config()?)
+    };
     let mut renderer = SequenceRenderer::new(&model, &*capture, &split, tps);
     let out = &args.capture.out;
     for (name, _) in &outputs {
@@ -343,6 +350,31 @@ pub struct EvalArgs {
     /// Training iterations of each 3DGS-per-frame model.
     #[arg(long, default_value_t = 3000)]
     pub splat_iterations: usize,
+    #[command(flatten)]
+    pub tps: TpsArgs,
+}
+
+/// The Temporal Pose Stabilizer's settings (our design; see `fewview_human::tps`).
+#[derive(Debug, ClapArgs)]
+pub struct TpsArgs {
+    /// Weight of the previous frame's (warped) maps where the body is still, in [0, 1].
+    #[arg(long, default_value_t = TpsConfig::default().max_weight)]
+    pub tps_weight: f32,
+    /// Joint speed (metres per frame) at which that weight falls to 1/e of itself.
+    #[arg(long, default_value_t = TpsConfig::default().speed_scale)]
+    pub tps_speed: f32,
+}
+
+impl TpsArgs {
+    fn config(&self) -> anyhow::Result<TpsConfig> {
+        let config = TpsConfig {
+            max_weight: self.tps_weight,
+            speed_scale: self.tps_speed,
+            ..TpsConfig::default()
+        };
+        config.check()?;
+        Ok(config)
+    }
 }
 
 /// The split `run` was trained with, or paper 002's default protocol for runs without
@@ -392,7 +424,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     let options = EvalOptions {
         frames: frames.clone(),
         cameras: split.held_out_cameras.clone(),
-        tps: Some(fewview_human::tps::TpsConfig::default()),
+        tps: Some(args.tps.config()?),
         splat: (args.splat_frames > 0).then(|| {
             let start = split.test_frames.start.max(frames.start);
             let end = (start + args.splat_frames).min(frames.end);
