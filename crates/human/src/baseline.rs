@@ -42,6 +42,21 @@ pub struct SplatBaselineOptions {
     /// Initial Gaussians (see [`splat_per_frame`]). Default: `fewview train`'s random
     /// initialisations' count ([`RunConfig::new`], 20 000).
     pub init_points: usize,
+    /// Where the Gaussians start.
+    pub init: BaselineInit,
+}
+
+/// The 3DGS baseline's start.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BaselineInit {
+    /// What `fewview train` does on the same views ([`InitStrategy::Auto`]: the stereo start
+    /// of the overlapping input pairs, else random points): the baseline as paper 002 and its
+    /// issue define it, plain 3DGS on the frame's input cameras.
+    #[default]
+    Train,
+    /// Points inside this frame's visual hull (a prior the baseline would not otherwise have,
+    /// shared with our method's depth input): a stronger variant.
+    Hull,
 }
 
 impl Default for SplatBaselineOptions {
@@ -50,6 +65,7 @@ impl Default for SplatBaselineOptions {
             iterations: 3000,
             seed: 0,
             init_points: RunConfig::new(TrainConfig::sparse_view(1)).init_points,
+            init: BaselineInit::default(),
         }
     }
 }
@@ -61,13 +77,14 @@ impl Default for SplatBaselineOptions {
 /// Training images are the cropped input images times their cropped masks (a background of
 /// exactly 0) and the Gaussians are trained and rendered over a black background.
 ///
-/// Initialisation: 3DGS starts from an SfM point cloud, which a capture of a person does not
-/// have, and fewview-splat's random starts (a cube around where the cameras look, or the
-/// frustums) spend most points on empty space. So the points are drawn uniformly in
-/// `framing.bounds` and kept only inside the visual hull of this frame's input masks (a point
-/// every input camera sees inside its mask), coloured by the mean of the input images there,
-/// up to `options.init_points` of them; they become Gaussians through fewview-splat's
-/// [`InitStrategy::DatasetPoints`] (kNN scales, opacity 0.1), as SfM points would.
+/// Initialisation ([`BaselineInit`]): by default `fewview train`'s own start on these views.
+/// 3DGS starts from an SfM point cloud, which a capture of a person does not have, and random
+/// starts spend most points on empty space; with [`BaselineInit::Hull`] the points are drawn
+/// uniformly in `framing.bounds` and kept only inside the visual hull of this frame's input
+/// masks (a point every input camera sees inside its mask), coloured by the mean of the input
+/// images there, up to `options.init_points` of them; they become Gaussians through
+/// fewview-splat's [`InitStrategy::DatasetPoints`] (kNN scales, opacity 0.1), as SfM points
+/// would.
 ///
 /// Errors: no input cameras, no targets, a crop or an iteration count of 0, an input mask with
 /// no person in the crop, a visual hull with no point in the box, or training that fails.
@@ -80,13 +97,16 @@ pub fn splat_per_frame(
 ) -> Result<Vec<Image>> {
     check(inputs, framing, targets, options)?;
     let views = input_views(inputs, frame, framing)?;
-    let points = hull_points(&views, frame, framing, options)?;
+    let points = match options.init {
+        BaselineInit::Hull => Some(hull_points(&views, frame, framing, options)?),
+        BaselineInit::Train => None,
+    };
     let mut ds = Dataset {
         name: format!("frame {frame}"),
         views: Vec::new(),
         train: (0..views.len()).collect(),
         test: Vec::new(),
-        points: Some(points),
+        points,
         background: [0.0; 3],
         to_source_world: None,
     };
@@ -100,7 +120,10 @@ pub fn splat_per_frame(
     // whatever the capture's units.
     train.near_plane = train.near_plane.min(0.5 * framing.near);
     let mut run = RunConfig::new(train);
-    run.init = InitStrategy::DatasetPoints;
+    run.init = match options.init {
+        BaselineInit::Hull => InitStrategy::DatasetPoints,
+        BaselineInit::Train => InitStrategy::Auto,
+    };
     run.init_points = options.init_points;
     let model = initial_model(&ds, &run).map_err(failed)?;
 
@@ -396,6 +419,7 @@ mod tests {
             iterations: 150,
             seed: 1,
             init_points: 1000,
+            init: BaselineInit::Hull,
         };
         let targets: Vec<Camera> = held_out.iter().map(|&c| ring.cameras[c].clone()).collect();
         let renders = splat_per_frame(&ring, 0, &framing, &targets, &options).unwrap();

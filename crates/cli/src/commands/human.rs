@@ -41,6 +41,14 @@ pub enum PresetArg {
     Paper,
 }
 
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum SplatInitArg {
+    /// `fewview train`'s own start on the frame's input views.
+    Train,
+    /// Points inside the frame's visual hull.
+    Hull,
+}
+
 /// The capture, its sequence and the output folder, shared by the subcommands.
 #[derive(Debug, ClapArgs)]
 pub struct CaptureArgs {
@@ -231,14 +239,17 @@ pub struct RenderArgs {
     pub no_tps: bool,
     #[command(flatten)]
     pub tps: TpsArgs,
+    /// Source views per target (default: what the run was trained with).
+    #[arg(long)]
+    pub source_views: Option<usize>,
     /// Frames per second of the videos.
     #[arg(long, default_value_t = 30.0)]
     pub fps: f32,
 }
 
 fn render(args: RenderArgs) -> anyhow::Result<()> {
-    use fewview_human::infer::{Model, SequenceRenderer};
-    let model = Model::load(&args.run)?;
+    use fewview_human::infer::SequenceRenderer;
+    let model = load_model(&args.run, args.source_views)?;
     let (_, capture) = fewview_human::capture::open(&args.capture.data, &args.capture.sequence)?;
     let split = run_split(&args.run, &*capture)?;
     let frames = match &args.frames {
@@ -350,8 +361,18 @@ pub struct EvalArgs {
     /// Training iterations of each 3DGS-per-frame model.
     #[arg(long, default_value_t = 3000)]
     pub splat_iterations: usize,
+    /// Where each 3DGS-per-frame model starts: `train` (what `fewview train` does on those
+    /// views: the stereo start, else random points) or `hull` (points in the frame's visual
+    /// hull, a prior plain 3DGS lacks; stronger).
+    #[arg(long, value_enum, default_value = "train")]
+    pub splat_init: SplatInitArg,
     #[command(flatten)]
     pub tps: TpsArgs,
+    /// Source views per target at inference, for the run and its baselines (default: what each
+    /// was trained with). The network sees one view at a time, so more views only add
+    /// Gaussians where the two nearest views miss the person.
+    #[arg(long)]
+    pub source_views: Option<usize>,
 }
 
 /// The Temporal Pose Stabilizer's settings (our design; see `fewview_human::tps`).
@@ -375,6 +396,21 @@ impl TpsArgs {
         config.check()?;
         Ok(config)
     }
+}
+
+/// The run in `dir`, rendering from `source_views` views per target when given.
+fn load_model(
+    dir: &std::path::Path,
+    source_views: Option<usize>,
+) -> anyhow::Result<fewview_human::infer::Model> {
+    let mut model = fewview_human::infer::Model::load(dir)?;
+    if let Some(n) = source_views {
+        if n == 0 {
+            bail!("--source-views must be at least 1");
+        }
+        model.config.source_views = n;
+    }
+    Ok(model)
 }
 
 /// The split `run` was trained with, or paper 002's default protocol for runs without
@@ -402,8 +438,12 @@ fn parse_frames(text: &str) -> anyhow::Result<std::ops::Range<usize>> {
 fn eval(args: EvalArgs) -> anyhow::Result<()> {
     use fewview_human::eval::{EvalOptions, evaluate, side_by_side, table};
     use fewview_human::infer::Model;
-    let model = Model::load(&args.run)?;
-    let per_frame = args.per_frame.as_deref().map(Model::load).transpose()?;
+    let model = load_model(&args.run, args.source_views)?;
+    let per_frame = args
+        .per_frame
+        .as_deref()
+        .map(|run| load_model(run, args.source_views))
+        .transpose()?;
     let (_, dataset) = fewview_human::capture::open(&args.capture.data, &args.capture.sequence)?;
     let split = run_split(&args.run, &*dataset)?;
     let frames = match &args.frames {
@@ -430,6 +470,10 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
             let end = (start + args.splat_frames).min(frames.end);
             let opts = fewview_human::baseline::SplatBaselineOptions {
                 iterations: args.splat_iterations,
+                init: match args.splat_init {
+                    SplatInitArg::Train => fewview_human::baseline::BaselineInit::Train,
+                    SplatInitArg::Hull => fewview_human::baseline::BaselineInit::Hull,
+                },
                 ..Default::default()
             };
             (start..end, opts)
