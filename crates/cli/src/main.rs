@@ -30,46 +30,35 @@ fn main() -> std::process::ExitCode {
         .init();
     match commands::run(cli.command) {
         Ok(()) => std::process::ExitCode::SUCCESS,
+        // The context and every cause, joined by `: ` on one line.
         Err(err) => {
-            eprintln!("error: {}", one_line(&err));
+            eprintln!("error: {err:#}");
             std::process::ExitCode::FAILURE
         }
     }
 }
 
-/// The outermost context and every cause, joined by `: `, leaving out a cause whose text the
-/// message before it already ends with (the project's I/O errors print their source in their
-/// own message and also return it from `source()`, so anyhow's `{:#}` said it twice).
-fn one_line(err: &anyhow::Error) -> String {
-    let mut parts: Vec<String> = Vec::new();
-    for cause in err.chain() {
-        let text = cause.to_string();
-        if parts.last().is_some_and(|prev| prev.ends_with(&text)) {
-            continue;
-        }
-        parts.push(text);
-    }
-    parts.join(": ")
-}
-
 #[cfg(test)]
 mod tests {
-    use super::one_line;
-
+    /// The libraries' errors carry their cause in their message and not also as `source()`,
+    /// so the chain as printed says it once.
     #[test]
-    fn a_cause_already_in_the_message_is_not_repeated() {
+    fn a_file_error_prints_its_cause_once() {
         let io = std::io::Error::new(std::io::ErrorKind::NotFound, "no such dataset folder");
         let err = anyhow::Error::new(fewview_scene::SceneError::io("/nope", io))
             .context("cannot load dataset /nope");
         assert_eq!(
-            one_line(&err),
+            format!("{err:#}"),
             "cannot load dataset /nope: /nope: no such dataset folder"
         );
-    }
-
-    #[test]
-    fn distinct_causes_are_all_kept() {
-        let err = anyhow::anyhow!("inner problem").context("outer step");
-        assert_eq!(one_line(&err), "outer step: inner problem");
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "gone");
+        let err = anyhow::Error::new(fewview_geom::GeomError::from(
+            fewview_scene::SceneError::io("/a.ply", io),
+        ))
+        .context("reading the reference surface /a.ply");
+        assert_eq!(
+            format!("{err:#}"),
+            "reading the reference surface /a.ply: /a.ply: gone"
+        );
     }
 }

@@ -3,16 +3,14 @@
 
 use std::path::PathBuf;
 
+use fewview_scene::FileIoError;
+
 /// An error of a geometry operation or of mesh/point I/O.
 #[derive(Debug, thiserror::Error)]
 pub enum GeomError {
     /// A file could not be opened, read or written.
-    #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(FileIoError),
     /// A file was read but its contents do not follow the format.
     #[error("{path}: {message}")]
     Format { path: PathBuf, message: String },
@@ -26,11 +24,8 @@ pub enum GeomError {
 }
 
 impl GeomError {
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Self::Io {
-            path: path.into(),
-            source,
-        }
+    pub fn io(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
+        Self::Io(FileIoError::new(path, error))
     }
     pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
         Self::Format {
@@ -52,7 +47,7 @@ impl GeomError {
 impl From<fewview_scene::SceneError> for GeomError {
     fn from(e: fewview_scene::SceneError) -> Self {
         match e {
-            fewview_scene::SceneError::Io { path, source } => Self::Io { path, source },
+            fewview_scene::SceneError::Io(e) => Self::Io(e),
             fewview_scene::SceneError::Format { path, message } => Self::Format { path, message },
             fewview_scene::SceneError::Invalid { path, message } => Self::Invalid {
                 what: path.display().to_string(),

@@ -10,12 +10,8 @@ use fewview_scene::SceneError;
 #[derive(Debug, thiserror::Error)]
 pub enum HumanError {
     /// A file could not be opened or read.
-    #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(fewview_scene::FileIoError),
     /// A file was read but its contents do not follow the format.
     #[error("{path}: {message}")]
     Format { path: PathBuf, message: String },
@@ -43,11 +39,8 @@ pub enum HumanError {
 }
 
 impl HumanError {
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Self::Io {
-            path: path.into(),
-            source,
-        }
+    pub fn io(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
+        Self::Io(fewview_scene::FileIoError::new(path, error))
     }
     pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
         Self::Format {

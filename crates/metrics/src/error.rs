@@ -12,12 +12,8 @@ pub enum MetricsError {
     #[error("invalid input: {0}")]
     Invalid(String),
     /// A file could not be opened, read or written.
-    #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(fewview_scene::FileIoError),
     /// A file was read but its contents are not what the format requires.
     #[error("{path}: {message}")]
     Format { path: PathBuf, message: String },
@@ -30,11 +26,8 @@ impl MetricsError {
     pub fn invalid(message: impl Into<String>) -> Self {
         Self::Invalid(message.into())
     }
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Self::Io {
-            path: path.into(),
-            source,
-        }
+    pub fn io(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
+        Self::Io(fewview_scene::FileIoError::new(path, error))
     }
     pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
         Self::Format {

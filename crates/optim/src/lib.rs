@@ -1,10 +1,13 @@
-//! Optimisation shared by the Gaussian and surface trainers: Adam on host parameter arrays and
-//! learning-rate schedules.
+//! Optimisation shared by the Gaussian and surface trainers: Adam on host parameter arrays,
+//! learning-rate schedules, and the read-back of tensors (gradients and the values host steps
+//! need) to those arrays.
 
 pub mod adam;
+pub mod host;
 pub mod schedule;
 
 pub use adam::{AdamConfig, AdamState};
+pub use host::{ReadbackError, f32_values, flex_f32};
 pub use schedule::ExpSchedule;
 
 /// Keeps the rows (of `width` values) whose flag is set.

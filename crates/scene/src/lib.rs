@@ -34,6 +34,6 @@ pub mod video;
 
 pub use camera::{Camera, Intrinsics, Se3, axes_meeting_point, camera_path};
 pub use dataset::{Dataset, PointCloud, View};
-pub use error::SceneError;
+pub use error::{FileIoError, SceneError};
 pub use image::Image;
 pub use load::{DatasetFormat, LoadOptions, detect_format, load_dataset};

@@ -15,6 +15,7 @@ use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Dispatch, Flex, TensorMetadata, backend_extension};
 use burn::tensor::{Shape, Tensor, TensorData};
 use fewview_metrics::ssim::{SsimOptions, SsimWorkspace};
+use fewview_optim::flex_f32;
 use fewview_scene::Image;
 
 /// Mean SSIM of two `[H, W, C]` images as a differentiable op (gradient to the first argument
@@ -55,15 +56,7 @@ thread_local! {
 fn to_image(t: &FlexTensor) -> Image {
     let shape = t.shape();
     let dims = shape.dims::<3>();
-    let data = match t.as_slice::<f32>() {
-        Some(s) if t.is_contiguous() => s.to_vec(),
-        _ => t
-            .to_contiguous()
-            .as_slice::<f32>()
-            .unwrap_or_default()
-            .to_vec(),
-    };
-    Image::from_vec(dims[1], dims[0], dims[2], data)
+    Image::from_vec(dims[1], dims[0], dims[2], flex_f32(t).into_owned())
 }
 
 impl SsimKernels for Flex {
@@ -92,11 +85,9 @@ impl SsimKernels for Flex {
     }
 
     fn ssim_backward(grad: &SsimGrad, upstream: FlexTensor) -> FlexTensor {
-        let u = upstream
-            .to_contiguous()
-            .as_slice::<f32>()
-            .map(|s| s[0])
-            .unwrap_or(0.0);
+        let u = *flex_f32(&upstream)
+            .first()
+            .expect("the upstream gradient of the scalar SSIM has one value");
         let data: Vec<f32> = grad.values.iter().map(|g| g * u).collect();
         FlexTensor::from_data(TensorData::new(data, grad.shape.clone()))
     }

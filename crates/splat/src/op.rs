@@ -7,7 +7,6 @@
 //! `SplatBackend`) for its backend behind the same op.
 
 use std::any::Any;
-use std::borrow::Cow;
 use std::sync::Arc;
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
@@ -20,6 +19,7 @@ use burn::backend::{
     Autodiff, AutodiffBackend, Backend, Dispatch, ExtensionType, Flex, backend_extension,
 };
 use burn::tensor::{Shape, Tensor, TensorData};
+use fewview_optim::flex_f32;
 
 use crate::raster::render::{ForwardContext, OUT_CHANNELS, backward, forward};
 use crate::raster::{GaussianRefs, RenderCamera, RenderSettings};
@@ -114,19 +114,6 @@ impl CpuState {
     }
 }
 
-/// The values of a Flex tensor as contiguous `f32`.
-fn host(t: &FlexTensor) -> Cow<'_, [f32]> {
-    match t.as_slice::<f32>() {
-        Some(s) if t.is_contiguous() => Cow::Borrowed(s),
-        _ => Cow::Owned(
-            t.to_contiguous()
-                .as_slice::<f32>()
-                .unwrap_or_default()
-                .to_vec(),
-        ),
-    }
-}
-
 fn flex(data: Vec<f32>, shape: Shape) -> FlexTensor {
     FlexTensor::from_data(TensorData::new(data, shape))
 }
@@ -151,7 +138,7 @@ impl SplatKernels for Flex {
         } else {
             shapes[4].num_elements() / (n * 3)
         };
-        let params = [0, 1, 2, 3, 4].map(|i| host(tensors[i]).into_owned());
+        let params = [0, 1, 2, 3, 4].map(|i| flex_f32(tensors[i]).into_owned());
         let state = {
             let refs = GaussianRefs {
                 means: &params[0],
@@ -182,7 +169,7 @@ impl SplatKernels for Flex {
             .0
             .downcast_ref::<CpuState>()
             .expect("Flex splat state comes from the Flex forward");
-        let g = backward(&s.refs(), &s.ctx, &host(&grad_image));
+        let g = backward(&s.refs(), &s.ctx, &flex_f32(&grad_image));
         let sh = s.shapes.clone();
         let [s0, s1, s2, s3, s4, s5] = sh;
         [

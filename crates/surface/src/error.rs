@@ -11,11 +11,8 @@ pub enum SurfaceError {
     #[error("{what}: {message}")]
     Invalid { what: String, message: String },
     /// A file that cannot be read or written.
-    #[error("{}: {source}", path.display())]
-    Io {
-        path: PathBuf,
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(fewview_scene::FileIoError),
     /// A file whose contents are not what they should be.
     #[error("{}: {message}", path.display())]
     Format { path: PathBuf, message: String },
@@ -25,6 +22,9 @@ pub enum SurfaceError {
     /// An error of the geometry crate (meshes, registration).
     #[error(transparent)]
     Geom(#[from] fewview_geom::GeomError),
+    /// A tensor whose values could not be read back to the host (a defect, not bad input).
+    #[error(transparent)]
+    Readback(#[from] fewview_optim::ReadbackError),
     /// Training diverged (NaN loss or parameters).
     #[error("training diverged at iteration {iteration}: {message}")]
     Diverged { iteration: usize, message: String },
@@ -38,11 +38,8 @@ impl SurfaceError {
         }
     }
 
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Self::Io {
-            path: path.into(),
-            source,
-        }
+    pub fn io(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
+        Self::Io(fewview_scene::FileIoError::new(path, error))
     }
 
     pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {

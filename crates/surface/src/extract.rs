@@ -6,9 +6,10 @@ use burn::tensor::{Device, Tensor, TensorData};
 use fewview_geom::Mesh;
 use fewview_geom::cleanup::{CullOptions, cull_by_masks};
 use fewview_geom::mcubes::marching_cubes_chunked;
+use fewview_optim::f32_values;
 use fewview_scene::{Camera, Image};
 
-use crate::error::Result;
+use crate::error::{Result, SurfaceError};
 use crate::field::{Field, sdf_and_gradient};
 use crate::render::{SampleConfig, render_rays, sample_rays};
 
@@ -40,10 +41,22 @@ fn host_tensors(params: &[Vec<f32>], device: &Device) -> Vec<Tensor<1>> {
 /// The zero level set of the field inside the unit sphere (`max(s, ‖P‖ − 1)`, so the surface
 /// closes at the sphere), by chunked marching cubes.
 pub fn extract_mesh(field: &Field, params: &[Vec<f32>], opts: &MeshOptions) -> Result<Mesh> {
+    // Marching cubes takes an infallible SDF: the first error is kept here (the remaining
+    // chunks are not evaluated) and returned instead of the mesh.
+    let mut failure: Option<SurfaceError> = None;
     let mesh = marching_cubes_chunked(
         |pos: &[[f64; 3]]| {
+            if failure.is_some() {
+                return vec![f32::NAN; pos.len()];
+            }
             let flat: Vec<f32> = pos.iter().flat_map(|p| p.map(|v| v as f32)).collect();
-            let s = field.sdf_host(params, &flat);
+            let s = match field.sdf_host(params, &flat) {
+                Ok(s) => s,
+                Err(e) => {
+                    failure = Some(e);
+                    return vec![f32::NAN; pos.len()];
+                }
+            };
             pos.iter()
                 .zip(s)
                 .map(|(p, v)| {
@@ -56,12 +69,19 @@ pub fn extract_mesh(field: &Field, params: &[Vec<f32>], opts: &MeshOptions) -> R
         [opts.resolution; 3],
         opts.chunk,
         0.0,
-    )?;
-    Ok(mesh)
+    );
+    match failure {
+        Some(e) => Err(e),
+        None => Ok(mesh?),
+    }
 }
 
 /// Colours of mesh vertices: the colour network seen head-on (view direction `−n`).
-pub fn vertex_colors(field: &Field, params: &[Vec<f32>], vertices: &[[f32; 3]]) -> Vec<[f32; 3]> {
+pub fn vertex_colors(
+    field: &Field,
+    params: &[Vec<f32>],
+    vertices: &[[f32; 3]],
+) -> Result<Vec<[f32; 3]>> {
     let device = Device::flex();
     let t = host_tensors(params, &device);
     let idx = field.index();
@@ -81,10 +101,10 @@ pub fn vertex_colors(field: &Field, params: &[Vec<f32>], vertices: &[[f32; 3]]) 
         let rgb = field
             .color
             .forward(t[idx.color].clone(), pts, grad, dirs, feat);
-        let v = rgb.into_data().try_to_vec::<f32>().unwrap_or_default();
+        let v = f32_values(rgb, "vertex colours")?;
         out.extend(v.chunks(3).map(|c| [c[0], c[1], c[2]]));
     }
-    out
+    Ok(out)
 }
 
 /// Mesh, culled by the masks of `cameras` (a vertex seen on background in any view goes) and
@@ -102,7 +122,7 @@ pub fn final_mesh(
         mesh = cull_by_masks(&mesh, cams, masks, &CullOptions::default())?;
     }
     if !mesh.vertices.is_empty() {
-        mesh.colors = Some(vertex_colors(field, params, &mesh.vertices));
+        mesh.colors = Some(vertex_colors(field, params, &mesh.vertices)?);
     }
     Ok(mesh)
 }
@@ -126,7 +146,7 @@ pub fn render_view(
     sample: &SampleConfig,
     background: [f32; 3],
     chunk: usize,
-) -> ViewRender {
+) -> Result<ViewRender> {
     let (w, h) = (camera.width() as usize, camera.height() as usize);
     let device = Device::flex();
     let t = host_tensors(params, &device);
@@ -144,33 +164,15 @@ pub fn render_view(
             o.push([oo.x as f32, oo.y as f32, oo.z as f32]);
             d.push([dd.x as f32, dd.y as f32, dd.z as f32]);
         }
-        let z = sample_rays(&sdf_fn, &o, &d, sample, None);
+        let z = sample_rays(&sdf_fn, &o, &d, sample, None)?;
         let n = o.len();
         let ot = Tensor::<2>::from_data(TensorData::new(o.concat(), [n, 3]), &device);
         let dt = Tensor::<2>::from_data(TensorData::new(d.concat(), [n, 3]), &device);
-        let out = render_rays(field, &t, ot, dt, &z, 1.0, background);
-        rgb.extend(
-            out.color
-                .into_data()
-                .try_to_vec::<f32>()
-                .unwrap_or_default(),
-        );
-        let ws = out
-            .weight_sum
-            .into_data()
-            .try_to_vec::<f32>()
-            .unwrap_or_default();
-        depth.extend(
-            out.depth
-                .into_data()
-                .try_to_vec::<f32>()
-                .unwrap_or_default(),
-        );
-        let nn = out
-            .normal
-            .into_data()
-            .try_to_vec::<f32>()
-            .unwrap_or_default();
+        let out = render_rays(field, &t, ot, dt, &z, 1.0, background)?;
+        rgb.extend(f32_values(out.color, "rendered colour")?);
+        let ws = f32_values(out.weight_sum, "rendered opacity")?;
+        depth.extend(f32_values(out.depth, "rendered depth")?);
+        let nn = f32_values(out.normal, "rendered normals")?;
         for k in 0..n {
             let v = &nn[3 * k..3 * k + 3];
             let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(1e-8);
@@ -184,10 +186,10 @@ pub fn render_view(
         }
         alpha.extend(ws);
     }
-    ViewRender {
+    Ok(ViewRender {
         rgb: Image::from_vec(w, h, 3, rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect()),
         depth: Image::from_vec(w, h, 1, depth),
         normal: Image::from_vec(w, h, 3, normal),
         alpha: Image::from_vec(w, h, 1, alpha),
-    }
+    })
 }

@@ -503,7 +503,7 @@ impl Field {
     }
 
     /// SDF values only (no gradient), on host parameters, for sampling and mesh extraction.
-    pub fn sdf_host(&self, params: &[Vec<f32>], points: &[f32]) -> Vec<f32> {
+    pub fn sdf_host(&self, params: &[Vec<f32>], points: &[f32]) -> crate::error::Result<Vec<f32>> {
         let device = Device::flex();
         let idx = self.index();
         let tensors: Vec<Tensor<1>> = params[idx.sdf.clone()]
@@ -513,11 +513,10 @@ impl Field {
         let n = points.len() / 3;
         let pts = Tensor::<2>::from_data(TensorData::new(points.to_vec(), [n, 3]), &device);
         let out = self.sdf.forward(&tensors, pts);
-        let width = out.dims()[1];
-        out.slice([0..n, 0..1])
-            .into_data()
-            .try_to_vec::<f32>()
-            .unwrap_or_else(|_| vec![f32::NAN; n * width])
+        Ok(fewview_optim::f32_values(
+            out.slice([0..n, 0..1]),
+            "SDF values",
+        )?)
     }
 }
 
@@ -547,7 +546,7 @@ mod tests {
                     [r * t.cos() * 0.8, r * t.sin() * 0.8, r * 0.6]
                 })
                 .collect();
-            let sdf = field.sdf_host(&params, &pts);
+            let sdf = field.sdf_host(&params, &pts).unwrap();
             for (k, s) in sdf.iter().enumerate() {
                 let p = &pts[k * 3..k * 3 + 3];
                 let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();

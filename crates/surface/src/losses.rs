@@ -6,7 +6,9 @@
 //! distance (NeuralWarp), the L1 norm for Eq. 8 (iSDF).
 
 use burn::tensor::{Int, Tensor, TensorData};
+use fewview_optim::f32_values;
 
+use crate::error::Result;
 use crate::rays::project;
 
 fn constant2(data: Vec<f32>, rows: usize, cols: usize, device: &burn::tensor::Device) -> Tensor<2> {
@@ -58,12 +60,12 @@ pub struct CorrespondenceBatch {
 /// `‖q − π(π⁻¹(p, z_p, P_t), P_s)‖₂`, averaged over the batch with the matcher confidences as
 /// weights (SPARF's weighted mean; the paper's Σ is read as this mean). Points that land
 /// behind a camera are left out.
-pub fn matching_loss(b: &CorrespondenceBatch) -> Tensor<1> {
+pub fn matching_loss(b: &CorrespondenceBatch) -> Result<Tensor<1>> {
     let device = b.x_p.device();
     let n = b.p.len();
     let dir = |rows: &Tensor<2>, k: &Tensor<2>, x: &Tensor<2>, target: &[[f32; 2]]| {
         let (uv, z) = project(rows, k, x);
-        let zh = z.into_data().try_to_vec::<f32>().unwrap_or_default();
+        let zh = f32_values(z, "depths of the reprojected matches")?;
         let w: Vec<f32> = (0..n)
             .map(|i| {
                 if zh.get(i).copied().unwrap_or(0.0) > 1e-3 {
@@ -76,9 +78,9 @@ pub fn matching_loss(b: &CorrespondenceBatch) -> Tensor<1> {
         let t = constant2(target.concat(), n, 2, &device);
         let err = ((uv - t).powi_scalar(2).sum_dim(1) + 1e-12).sqrt();
         let total = w.iter().sum::<f32>().max(1e-6);
-        (err * constant2(w, n, 1, &device)).sum() / total
+        Ok::<_, crate::error::SurfaceError>((err * constant2(w, n, 1, &device)).sum() / total)
     };
-    (dir(&b.rows_t, &b.k_t, &b.x_q, &b.p) + dir(&b.rows_s, &b.k_s, &b.x_p, &b.q)) * 0.5
+    Ok((dir(&b.rows_t, &b.k_t, &b.x_q, &b.p)? + dir(&b.rows_s, &b.k_s, &b.x_p, &b.q)?) * 0.5)
 }
 
 /// `D = ‖π⁻¹(p) − π⁻¹(q)‖²` per correspondence, `[B, 1]` (Eq. 5's distances).
@@ -141,14 +143,10 @@ impl GrayStack {
 
     /// Differentiable bilinear lookup at `uv` (`[N, 2]`, gradients to the coordinates) in the
     /// given views: values `[N, 1]` and validity (inside the image) per point.
-    pub fn sample(&self, views: &[usize], uv: &Tensor<2>) -> (Tensor<2>, Vec<bool>) {
+    pub fn sample(&self, views: &[usize], uv: &Tensor<2>) -> Result<(Tensor<2>, Vec<bool>)> {
         let device = uv.device();
         let n = views.len();
-        let host = uv
-            .clone()
-            .into_data()
-            .try_to_vec::<f32>()
-            .unwrap_or_default();
+        let host = f32_values(uv.clone(), "lookup coordinates")?;
         let mut idx = vec![[0i64; 4]; n];
         let mut base_xy = vec![0.0f32; 2 * n];
         let mut valid = vec![false; n];
@@ -202,7 +200,7 @@ impl GrayStack {
             + gather(1) * fx.clone() * one_fy
             + gather(2) * one_fx * fy.clone()
             + gather(3) * fx * fy;
-        (value, valid)
+        Ok((value, valid))
     }
 }
 
@@ -236,7 +234,7 @@ pub fn ncc_loss(
     normal_p: &Tensor<2>,
     offsets: &[[f32; 2]],
     gamma: &[f32],
-) -> Tensor<1> {
+) -> Result<Tensor<1>> {
     let device = b.x_p.device();
     let nb = b.p.len();
     let np = offsets.len();
@@ -255,12 +253,7 @@ pub fn ncc_loss(
         nn / len
     };
     // Camera-frame directions of the target patch pixels (constants).
-    let k_t_host = b
-        .k_t
-        .clone()
-        .into_data()
-        .try_to_vec::<f32>()
-        .unwrap_or_default();
+    let k_t_host = f32_values(b.k_t.clone(), "intrinsics of the target views")?;
     let mut dcam = Vec::with_capacity(n * 3);
     let mut reference = Vec::with_capacity(n);
     let mut ref_valid = vec![true; nb];
@@ -289,11 +282,7 @@ pub fn ncc_loss(
         + c(&rows_t, 3, 6) * c(&dc, 1, 2)
         + c(&rows_t, 6, 9) * c(&dc, 2, 3);
     let denom = (nrm.clone() * d.clone()).sum_dim(1);
-    let denom_host = denom
-        .clone()
-        .into_data()
-        .try_to_vec::<f32>()
-        .unwrap_or_default();
+    let denom_host = f32_values(denom.clone(), "patch plane denominators")?;
     let safe = denom_host
         .iter()
         .map(|v| if v.abs() < 1e-3 { 1.0 } else { 0.0 })
@@ -302,11 +291,11 @@ pub fn ncc_loss(
     let tstar = (nrm * (x0 - o.clone())).sum_dim(1) / denom;
     let x = o + d * tstar;
     let (uv, z) = project(&rows_s, &k_s, &x);
-    let zh = z.into_data().try_to_vec::<f32>().unwrap_or_default();
+    let zh = f32_values(z, "depths of the warped patches")?;
     let views_rep: Vec<usize> = (0..nb)
         .flat_map(|i| std::iter::repeat_n(views_s[i], np))
         .collect();
-    let (warped, valid) = gray.sample(&views_rep, &uv);
+    let (warped, valid) = gray.sample(&views_rep, &uv)?;
     let mut weight = vec![0.0f32; nb];
     for i in 0..nb {
         let ok = ref_valid[i]
@@ -317,7 +306,7 @@ pub fn ncc_loss(
     }
     let count = weight.iter().filter(|w| **w > 0.0).count();
     if count == 0 {
-        return Tensor::zeros([1], &device);
+        return Ok(Tensor::zeros([1], &device));
     }
     let s = warped.reshape([nb, np]);
     let t = constant2(reference, nb, np, &device);
@@ -327,7 +316,7 @@ pub fn ncc_loss(
     let var_s = sm.powi_scalar(2).mean_dim(1);
     let var_t = tm.powi_scalar(2).mean_dim(1);
     let ncc = cov / (var_s * var_t + 1e-8).sqrt();
-    ((ncc.neg() + 1.0) * constant2(weight, nb, 1, &device)).sum() / nb as f32
+    Ok(((ncc.neg() + 1.0) * constant2(weight, nb, 1, &device)).sum() / nb as f32)
 }
 
 /// The band `b(k) = λ_b cos(A(k) π/2) d` of Eq. 12 for a ray of rendered depth `d`, with
@@ -443,7 +432,7 @@ mod tests {
         let uv =
             Tensor::<2>::from_data(TensorData::new(pts.clone(), [4, 2]), &device).require_grad();
         let views = [0usize, 1, 1, 0];
-        let (vals, valid) = stack.sample(&views, &uv);
+        let (vals, valid) = stack.sample(&views, &uv).unwrap();
         assert_eq!(valid, vec![true, true, true, false]);
         let v = vals.clone().into_data().try_to_vec::<f32>().unwrap();
         for i in 0..3 {

@@ -568,6 +568,9 @@ pub struct RunReport {
     /// Table 1's figures ([`SparfEpsRotation`]).
     pub rotation_at_sparf_eps: SparfEpsRotation,
     pub last_step: StepStats,
+    /// Iterations of this invocation whose pose gradient was not finite, so the poses held
+    /// still while the field stepped ([`StepStats::pose_step_skipped`]).
+    pub pose_steps_skipped: usize,
     /// Pose errors at the checkpoints of this invocation (a resumed run lists only its own).
     pub pose_error_history: Vec<PoseErrorAt>,
     pub test_views: Vec<TestViewMetrics>,
@@ -933,9 +936,11 @@ pub fn run(
     let cpu = crate::cputime::process_cpu_seconds();
     let start_it = trainer.state.iteration;
     let mut last = StepStats::default();
+    let mut pose_steps_skipped = 0;
     let mut history = Vec::new();
     while trainer.state.iteration < train_config.iterations {
         last = trainer.step()?;
+        pose_steps_skipped += usize::from(last.pose_step_skipped);
         on_event(Event::Step(&last));
         let it = trainer.state.iteration;
         if config.checkpoint_every > 0
@@ -1050,7 +1055,7 @@ pub fn run(
             &config.train.sample,
             config.train.background,
             4096,
-        );
+        )?;
         let name = |s: &str| renders.join(format!("{:03}_{s}.png", vi));
         r.rgb.save_png(&name("rgb"))?;
         r.depth.scaled_to_unit_max().save_png(&name("depth"))?;
@@ -1114,6 +1119,7 @@ pub fn run(
         final_pose_error: final_err,
         rotation_at_sparf_eps,
         last_step: last,
+        pose_steps_skipped,
         pose_error_history: history,
         mean_psnr_masked: mean(&|m| m.psnr_masked),
         mean_ssim_masked: mean(&|m| m.ssim_masked),

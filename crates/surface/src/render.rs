@@ -17,6 +17,7 @@
 //! colour left over is `background · (1 − Σ w)` (NeuS "w/ mask" setting: black).
 
 use burn::tensor::{Tensor, TensorData};
+use fewview_optim::f32_values;
 use serde::{Deserialize, Serialize};
 
 use crate::field::{Field, sdf_and_gradient};
@@ -158,12 +159,12 @@ fn merge_sorted(z: &mut Vec<f32>, sdf: &mut Vec<f32>, new_z: &[f32], new_sdf: Op
 /// `sdf` evaluates the field (no gradient) at flat `[N · 3]` points; `jitter` (one value in
 /// `[−0.5, 0.5]` per ray) shifts the coarse samples, as NeuS's `perturb`.
 pub fn sample_rays(
-    sdf: &dyn Fn(&[f32]) -> Vec<f32>,
+    sdf: &dyn Fn(&[f32]) -> crate::error::Result<Vec<f32>>,
     origins: &[[f32; 3]],
     dirs: &[[f32; 3]],
     cfg: &SampleConfig,
     jitter: Option<&[f32]>,
-) -> Vec<f32> {
+) -> crate::error::Result<Vec<f32>> {
     let r = origins.len();
     let nc = cfg.n_coarse.max(2);
     let mut zs: Vec<Vec<f32>> = (0..r)
@@ -187,7 +188,7 @@ pub fn sample_rays(
         p
     };
     let mut sdfs: Vec<Vec<f32>> = {
-        let values = sdf(&points_of(&zs));
+        let values = sdf(&points_of(&zs))?;
         values.chunks(nc).map(|c| c.to_vec()).collect()
     };
     let steps = cfg.up_sample_steps.max(1);
@@ -204,10 +205,12 @@ pub fn sample_rays(
                 .map(|k| up_sample_ray(origins[k], dirs[k], &zs[k], &sdfs[k], n, inv_s))
                 .collect();
             let last = i + 1 == steps;
-            let new_sdf: Option<Vec<Vec<f32>>> = (!last).then(|| {
-                let v = sdf(&points_of(&new));
-                v.chunks(n).map(|c| c.to_vec()).collect()
-            });
+            let new_sdf: Option<Vec<Vec<f32>>> = if last {
+                None
+            } else {
+                let v = sdf(&points_of(&new))?;
+                Some(v.chunks(n).map(|c| c.to_vec()).collect())
+            };
             for k in 0..r {
                 merge_sorted(
                     &mut zs[k],
@@ -218,7 +221,7 @@ pub fn sample_rays(
             }
         }
     }
-    zs.into_iter().flatten().collect()
+    Ok(zs.into_iter().flatten().collect())
 }
 
 /// What a batch of rays renders to.
@@ -256,7 +259,7 @@ pub fn render_rays(
     z: &[f32],
     cos_anneal: f32,
     background: [f32; 3],
-) -> Rendered {
+) -> crate::error::Result<Rendered> {
     let [r, _] = origins.dims();
     let s = z.len() / r.max(1);
     let device = origins.device();
@@ -281,11 +284,7 @@ pub fn render_rays(
     let dirs_s = (d3 + Tensor::<3>::zeros([r, s, 3], &device)).reshape([r * s, 3]);
 
     // Radii for the sphere masks, from host values (no gradient).
-    let pts_host = pts
-        .clone()
-        .into_data()
-        .try_to_vec::<f32>()
-        .unwrap_or_default();
+    let pts_host = f32_values(pts.clone(), "sample points")?;
     let mut inside = vec![0.0f32; r * s];
     let mut relax_inside = vec![0.0f32; r * s];
     for k in 0..r * s {
@@ -343,7 +342,7 @@ pub fn render_rays(
     let normal = (w3 * gradients.clone().reshape([r, s, 3]))
         .sum_dim(1)
         .reshape([r, 3]);
-    Rendered {
+    Ok(Rendered {
         color,
         depth,
         normal,
@@ -355,7 +354,7 @@ pub fn render_rays(
         relax_inside,
         rays: r,
         samples: s,
-    }
+    })
 }
 
 /// NeuS's Eikonal term: mean of `(‖∇s‖ − 1)²` over samples within radius 1.2.
@@ -455,11 +454,11 @@ mod tests {
             n_importance: 64,
             up_sample_steps: 4,
         };
-        let z = sample_rays(&sdf_fn, &origins, &dirs, &cfg, None);
+        let z = sample_rays(&sdf_fn, &origins, &dirs, &cfg, None).unwrap();
         let r = origins.len();
         let o = Tensor::<2>::from_data(TensorData::new(origins.concat(), [r, 3]), &device);
         let d = Tensor::<2>::from_data(TensorData::new(dirs.concat(), [r, 3]), &device);
-        let out = render_rays(&field, &params, o, d, &z, 1.0, [0.0; 3]);
+        let out = render_rays(&field, &params, o, d, &z, 1.0, [0.0; 3]).unwrap();
         let ws = out.weight_sum.into_data().try_to_vec::<f32>().unwrap();
         let depth = out.depth.into_data().try_to_vec::<f32>().unwrap();
         for k in 0..r {

@@ -11,6 +11,7 @@
 //! `(seed, iteration)`, so a run resumed from a checkpoint repeats the uninterrupted run.
 
 use burn::tensor::{Device, Tensor, TensorData};
+use fewview_optim::f32_values;
 use fewview_scene::{Image, Intrinsics, Se3};
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
@@ -236,7 +237,8 @@ pub struct StepStats {
     pub eikonal: f32,
     pub psdf: f32,
     pub inv_s: f32,
-    /// The pose gradient was not finite, so this iteration left the poses alone.
+    /// The pose gradient was not finite, so this iteration left the poses alone (the field
+    /// still stepped). The pipeline counts these in [`crate::pipeline::RunReport`].
     #[serde(default)]
     pub pose_step_skipped: bool,
 }
@@ -259,28 +261,28 @@ pub struct Trainer {
 
 /// The `expected` values of a gradient read back from the device, or an error naming the
 /// parameter: a gradient of another size or type is a defect, never a skipped step.
-fn host_values(data: TensorData, name: &str, expected: usize) -> Result<Vec<f32>> {
-    let values = data.try_to_vec::<f32>().map_err(|e| {
-        SurfaceError::invalid(
-            format!("gradient of {name}"),
-            format!("not f32 values: {e:?}"),
-        )
-    })?;
+fn gradient_values<const D: usize>(
+    gradient: Tensor<D>,
+    name: &str,
+    expected: usize,
+) -> Result<Vec<f32>> {
+    let what = format!("gradient of {name}");
+    let values = f32_values(gradient, &what)?;
     if values.len() != expected {
         return Err(SurfaceError::invalid(
-            format!("gradient of {name}"),
+            what,
             format!("{} values, expected {expected}", values.len()),
         ));
     }
     Ok(values)
 }
 
-fn value(t: &Tensor<1>) -> f32 {
-    t.clone()
-        .into_data()
-        .try_to_vec::<f32>()
-        .map(|v| v[0])
-        .unwrap_or(f32::NAN)
+/// The value of a one-element loss tensor.
+fn value(t: &Tensor<1>, what: &str) -> Result<f32> {
+    f32_values(t.clone(), what)?
+        .first()
+        .copied()
+        .ok_or_else(|| SurfaceError::invalid(what, "no value"))
 }
 
 fn bilinear_rgb(img: &Image, u: f32, v: f32) -> [f32; 3] {
@@ -533,26 +535,18 @@ impl Trainer {
         let (origins, dirs) = world_rays(&sel, &dcam);
 
         // --- Sampling on host values.
-        let o_host: Vec<[f32; 3]> = origins
-            .clone()
-            .into_data()
-            .try_to_vec::<f32>()
-            .unwrap_or_default()
+        let o_host: Vec<[f32; 3]> = f32_values(origins.clone(), "ray origins")?
             .chunks(3)
             .map(|c| [c[0], c[1], c[2]])
             .collect();
-        let d_host: Vec<[f32; 3]> = dirs
-            .clone()
-            .into_data()
-            .try_to_vec::<f32>()
-            .unwrap_or_default()
+        let d_host: Vec<[f32; 3]> = f32_values(dirs.clone(), "ray directions")?
             .chunks(3)
             .map(|c| [c[0], c[1], c[2]])
             .collect();
         let field = &self.field;
         let host_params = &self.state.params;
         let sdf_fn = |p: &[f32]| field.sdf_host(host_params, p);
-        let z = sample_rays(&sdf_fn, &o_host, &d_host, &cfg.sample, Some(&jitter));
+        let z = sample_rays(&sdf_fn, &o_host, &d_host, &cfg.sample, Some(&jitter))?;
 
         // --- Render.
         let out = render_rays(
@@ -563,7 +557,7 @@ impl Trainer {
             &z,
             cos_anneal,
             cfg.background,
-        );
+        )?;
 
         // --- Losses.
         let mut stats = StepStats {
@@ -572,31 +566,21 @@ impl Trainer {
         };
         let color_w: Vec<f32> = if masked { mask.clone() } else { vec![1.0; r] };
         let l_color = losses::color_loss(&out.color, &target, &color_w);
-        stats.color = value(&l_color);
+        stats.color = value(&l_color, "colour loss")?;
         stats.psnr = -10.0 * stats.color.max(1e-10).log10();
         let mut total = l_color;
         if masked && lc.lambda_mask > 0.0 {
             let l = losses::mask_loss(&out.weight_sum, &mask);
-            stats.mask = value(&l);
+            stats.mask = value(&l, "mask loss")?;
             total = total + l * lc.lambda_mask;
         }
-        let depth_host = out
-            .depth
-            .clone()
-            .into_data()
-            .try_to_vec::<f32>()
-            .unwrap_or_default();
-        let wsum_host = out
-            .weight_sum
-            .clone()
-            .into_data()
-            .try_to_vec::<f32>()
-            .unwrap_or_default();
+        let depth_host = f32_values(out.depth.clone(), "rendered depth")?;
+        let wsum_host = f32_values(out.weight_sum.clone(), "rendered opacity")?;
         // Geometry: Eikonal + pSDF.
         let mut l_geo: Option<Tensor<1>> = None;
         if lc.eikonal {
             let l = eikonal_loss(&out);
-            stats.eikonal = value(&l);
+            stats.eikonal = value(&l, "Eikonal loss")?;
             l_geo = Some(l);
         }
         if lc.psdf && lc.lambda_psdf > 0.0 {
@@ -614,7 +598,7 @@ impl Trainer {
                 &ray_ok,
                 &band,
             ) {
-                stats.psdf = value(&l);
+                stats.psdf = value(&l, "pSDF loss")?;
                 let l = l * lc.lambda_psdf;
                 l_geo = Some(match l_geo {
                     Some(g) => g + l,
@@ -655,17 +639,13 @@ impl Trainer {
                 x_q: xq,
             };
             if lc.matching && lc.lambda_mc > 0.0 {
-                let l = losses::matching_loss(&batch);
-                stats.matching = value(&l);
+                let l = losses::matching_loss(&batch)?;
+                stats.matching = value(&l, "matching loss")?;
                 total = total + l * lc.lambda_mc;
             }
             if (lc.ncc || lc.geometric_consistency) && lc.lambda_u > 0.0 {
                 let dist = losses::backprojection_distances(&batch);
-                let dh = dist
-                    .clone()
-                    .into_data()
-                    .try_to_vec::<f32>()
-                    .unwrap_or_default();
+                let dh = f32_values(dist.clone(), "back-projection distances")?;
                 let gamma = if lc.uncertainty {
                     losses::uncertainty_weights(&dh)
                 } else {
@@ -691,13 +671,13 @@ impl Trainer {
                         &take(&out.normal, &idx_p),
                         &self.offsets,
                         &gamma,
-                    );
-                    stats.ncc = value(&l);
+                    )?;
+                    stats.ncc = value(&l, "NCC loss")?;
                     l_u = Some(l);
                 }
                 if lc.geometric_consistency {
                     let l = losses::geometric_consistency_loss(&dist, &gamma);
-                    stats.geometric = value(&l);
+                    stats.geometric = value(&l, "geometric consistency loss")?;
                     let l = l * lc.lambda_gc;
                     l_u = Some(match l_u {
                         Some(a) => a + l,
@@ -709,7 +689,7 @@ impl Trainer {
                 }
             }
         }
-        stats.total = value(&total);
+        stats.total = value(&total, "total loss")?;
         stats.inv_s = (self.state.params[self.field.index().variance][0] * 10.0).exp();
         if !stats.total.is_finite() {
             return Err(SurfaceError::Diverged {
@@ -725,7 +705,7 @@ impl Trainer {
         for (k, p) in params.iter().enumerate() {
             // A parameter the losses did not reach has no gradient: a zero step.
             let g = match p.grad(&grads) {
-                Some(g) => host_values(g.into_data(), names[k].0, self.state.params[k].len())?,
+                Some(g) => gradient_values(g, names[k].0, self.state.params[k].len())?,
                 None => vec![0.0; self.state.params[k].len()],
             };
             let f = if names[k].0 == "hash_table" {
@@ -736,17 +716,8 @@ impl Trainer {
             self.state.adam[k].step(&mut self.state.params[k], &g, lr * f, &cfg.adam);
         }
         if step_poses && let Some(g) = d9.grad(&grads) {
-            let g = host_values(g.into_data(), "poses", self.state.poses.len())?;
-            if g.iter().all(|v| v.is_finite()) {
-                let plr = cfg.pose_lr.at(it, cfg.iterations);
-                self.state
-                    .pose_adam
-                    .step(&mut self.state.poses, &g, plr, &cfg.adam);
-            } else {
-                // Counted, not fatal: one ray batch behind a camera can give a non-finite pose
-                // gradient while the field's stay finite.
-                stats.pose_step_skipped = true;
-            }
+            let g = gradient_values(g, "poses", self.state.poses.len())?;
+            stats.pose_step_skipped = !self.step_poses_with(&g);
         }
         if self
             .state
@@ -763,6 +734,22 @@ impl Trainer {
         Ok(stats)
     }
 
+    /// The Adam step of the poses at the current iteration with gradient `g`, when `g` is
+    /// finite (`true`). A non-finite one leaves the poses and their Adam state alone (`false`):
+    /// counted in [`StepStats::pose_step_skipped`], not fatal, since one ray batch behind a
+    /// camera can give a non-finite pose gradient while the field's stay finite.
+    fn step_poses_with(&mut self, g: &[f32]) -> bool {
+        if !g.iter().all(|v| v.is_finite()) {
+            return false;
+        }
+        let cfg = &self.config;
+        let lr = cfg.pose_lr.at(self.state.iteration, cfg.iterations);
+        self.state
+            .pose_adam
+            .step(&mut self.state.poses, g, lr, &cfg.adam);
+        true
+    }
+
     /// Sets the field's coarse-to-fine state to the current iteration (after a restore).
     pub fn sync_progress(&mut self) {
         let a = self.c2f_alpha();
@@ -772,5 +759,88 @@ impl Trainer {
     /// Shares the field for evaluation.
     pub fn field_params(&self) -> (&Field, &[Vec<f32>]) {
         (&self.field, &self.state.params)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{TrainConfig, TrainView, Trainer};
+    use crate::sdf_scene::{SdfSceneOptions, sdf_dataset};
+
+    /// A small trainer on the analytic scene (three 48 × 36 views at their true poses, no
+    /// matches).
+    fn small_trainer() -> Trainer {
+        let ds = sdf_dataset(&SdfSceneOptions {
+            width: 48,
+            height: 36,
+            views: 3,
+            train: vec![0, 1, 2],
+            supersample: 1,
+            ..Default::default()
+        });
+        let views: Vec<TrainView> = ds
+            .train_views()
+            .map(|v| TrainView {
+                image: v.image.clone(),
+                mask: v.mask.clone(),
+                intrinsics: v.camera.intrinsics,
+            })
+            .collect();
+        let poses: Vec<_> = ds.train_views().map(|v| v.camera.world_to_camera).collect();
+        let mut config = TrainConfig {
+            iterations: 10,
+            rays_per_batch: 64,
+            ..Default::default()
+        };
+        config.sample.n_coarse = 16;
+        config.sample.n_importance = 16;
+        Trainer::new(config, views, &poses, Vec::new()).unwrap()
+    }
+
+    /// A NaN in the field (the bias of the SDF network's distance output, so every SDF value is
+    /// NaN) stops training with an error naming the iteration, and that iteration changes
+    /// nothing: no step of any parameter is taken or skipped in silence.
+    #[test]
+    fn a_nan_in_the_field_is_an_error_naming_the_iteration() {
+        let mut trainer = small_trainer();
+        for _ in 0..2 {
+            trainer.step().unwrap();
+        }
+        let names = trainer.field.param_shapes();
+        let k = names.iter().position(|(n, _)| *n == "sdf_mlp").unwrap();
+        // The output layer's bias is the last `1 + feature_dim` values; the distance is first.
+        let out = 1 + trainer.config.field.feature_dim;
+        let len = trainer.state.params[k].len();
+        trainer.state.params[k][len - out] = f32::NAN;
+        let before = trainer.state.clone();
+        let err = trainer.step().unwrap_err().to_string();
+        assert_eq!(err, "training diverged at iteration 2: loss is NaN");
+        assert!(!err.contains('\n'), "{err}");
+        let bits = |s: &super::TrainState| -> Vec<u32> {
+            s.params
+                .iter()
+                .flatten()
+                .chain(&s.poses)
+                .map(|v| v.to_bits())
+                .collect()
+        };
+        assert_eq!(trainer.state.iteration, 2);
+        assert_eq!(bits(&trainer.state), bits(&before));
+    }
+
+    /// A non-finite pose gradient skips the pose step (poses and their Adam moments untouched)
+    /// and says so; a finite one steps.
+    #[test]
+    fn a_non_finite_pose_gradient_skips_the_pose_step_and_says_so() {
+        let mut trainer = small_trainer();
+        let (poses, adam) = (trainer.state.poses.clone(), trainer.state.pose_adam.clone());
+        let mut g = vec![0.01f32; poses.len()];
+        g[4] = f32::INFINITY;
+        assert!(!trainer.step_poses_with(&g));
+        assert_eq!(trainer.state.poses, poses);
+        assert_eq!(trainer.state.pose_adam, adam);
+        g[4] = 0.01;
+        assert!(trainer.step_poses_with(&g));
+        assert_ne!(trainer.state.poses, poses);
     }
 }

@@ -775,6 +775,12 @@ fn print_report(r: &RunReport, out: &std::path::Path) {
         "training         {} iterations, {:.0} s ({:.2} it/s)",
         r.iterations, r.train_seconds_wall, r.iterations_per_second_wall
     );
+    if r.pose_steps_skipped > 0 {
+        println!(
+            "  pose steps     {} skipped: the pose gradient was not finite (the field still stepped)",
+            r.pose_steps_skipped
+        );
+    }
     if let (Some(p), Some(s)) = (r.mean_psnr_masked, r.mean_ssim_masked) {
         println!(
             "test views       masked PSNR {p:.2} dB, SSIM {s:.3} ({} views)",

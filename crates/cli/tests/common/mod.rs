@@ -29,7 +29,8 @@ pub fn s(p: &Path) -> &str {
     p.to_str().expect("utf-8 path")
 }
 
-/// Asserts a failed run with one line on stderr that contains every needle, and no panic.
+/// Asserts a failed run with one line on stderr that contains every needle, says no cause twice
+/// in a row (`…: gone: gone`), and no panic.
 pub fn assert_clean_error(out: &Output, needles: &[&str]) {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -40,6 +41,12 @@ pub fn assert_clean_error(out: &Output, needles: &[&str]) {
     let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
     let error_lines: Vec<&&str> = lines.iter().filter(|l| l.starts_with("error")).collect();
     assert_eq!(error_lines.len(), 1, "want one error line, got: {err}");
+    let parts: Vec<&str> = error_lines[0].split(": ").collect();
+    assert!(
+        parts.windows(2).all(|w| w[0] != w[1]),
+        "a cause is repeated: {}",
+        error_lines[0]
+    );
     for n in needles {
         assert!(
             error_lines[0].contains(n),

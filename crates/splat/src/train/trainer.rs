@@ -3,6 +3,7 @@
 //! same result.
 
 use burn::tensor::{Device, Tensor, TensorData};
+use fewview_optim::{ReadbackError, f32_values};
 use rand::rngs::StdRng;
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
@@ -165,6 +166,9 @@ pub enum TrainError {
         "densification/pruning at iteration {iteration} removed every Gaussian ({before} before, 0 left); start from more points (e.g. a larger --init-points) or prune less"
     )]
     NoGaussiansLeft { iteration: usize, before: usize },
+    /// A loss, gradient or render output whose values could not be read back (a defect).
+    #[error(transparent)]
+    Readback(#[from] ReadbackError),
 }
 
 /// Everything that changes during training; saved in checkpoints.
@@ -319,11 +323,9 @@ impl Trainer {
                 }
             }
         }
-        let loss_value = loss
-            .clone()
-            .into_data()
-            .try_to_vec::<f32>()
-            .map(|v| v[0])
+        let loss_value = f32_values(loss.clone(), "loss")?
+            .first()
+            .copied()
             .unwrap_or(f32::NAN);
         if !loss_value.is_finite() {
             return Err(TrainError::Diverged {
@@ -332,30 +334,34 @@ impl Trainer {
             });
         }
         let grads = loss.backward();
-        let host = |t: Option<Tensor<2>>, len: usize| -> Vec<f32> {
-            t.and_then(|t| t.into_data().try_to_vec::<f32>().ok())
-                .unwrap_or_else(|| vec![0.0; len])
-        };
-        let g_means = host(gaussians.means.grad(&grads), n * 3);
-        let g_scales = host(gaussians.log_scales.grad(&grads), n * 3);
-        let g_quats = host(gaussians.quats.grad(&grads), n * 4);
-        let g_opacity = gaussians
-            .opacity_logits
-            .grad(&grads)
-            .and_then(|t| t.into_data().try_to_vec::<f32>().ok())
-            .unwrap_or_else(|| vec![0.0; n]);
+        // A parameter the loss did not reach has no gradient: zeros. One that cannot be read
+        // is an error, never a silently zeroed step.
+        fn gradient<const D: usize>(
+            t: Option<Tensor<D>>,
+            len: usize,
+            what: &str,
+        ) -> Result<Vec<f32>, ReadbackError> {
+            match t {
+                Some(t) => f32_values(t, what),
+                None => Ok(vec![0.0; len]),
+            }
+        }
+        let g_means = gradient(gaussians.means.grad(&grads), n * 3, "gradient of means")?;
+        let g_scales = gradient(
+            gaussians.log_scales.grad(&grads),
+            n * 3,
+            "gradient of scales",
+        )?;
+        let g_quats = gradient(gaussians.quats.grad(&grads), n * 4, "gradient of rotations")?;
+        let g_opacity = gradient(
+            gaussians.opacity_logits.grad(&grads),
+            n,
+            "gradient of opacities",
+        )?;
         let k3 = self.state.model.sh_coeffs * 3;
-        let g_sh = gaussians
-            .sh
-            .grad(&grads)
-            .and_then(|t| t.into_data().try_to_vec::<f32>().ok())
-            .unwrap_or_else(|| vec![0.0; n * k3]);
-        let g_probe = host(probe.grad(&grads), n * 2);
-        let radii = out
-            .radii
-            .into_data()
-            .try_to_vec::<f32>()
-            .unwrap_or_else(|_| vec![0.0; n]);
+        let g_sh = gradient(gaussians.sh.grad(&grads), n * k3, "gradient of SH")?;
+        let g_probe = gradient(probe.grad(&grads), n * 2, "screen-space gradient")?;
+        let radii = f32_values(out.radii, "screen radii")?;
         if [&g_means, &g_scales, &g_quats, &g_opacity, &g_sh]
             .iter()
             .any(|g| g.iter().any(|v| !v.is_finite()))

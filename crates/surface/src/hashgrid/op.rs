@@ -3,7 +3,6 @@
 //! gradient reaches both the table and the positions (so camera poses get gradients through
 //! the sample points).
 
-use std::borrow::Cow;
 use std::sync::Arc;
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
@@ -14,6 +13,7 @@ use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Dispatch, Flex, backend_extension};
 use burn::tensor::{Shape, Tensor, TensorData};
+use fewview_optim::flex_f32;
 
 use super::{GridLayout, kernels};
 
@@ -36,26 +36,13 @@ pub trait HashGridBackend: Backend {
     ) -> FloatTensor<Self>;
 }
 
-/// The values of a Flex tensor as contiguous `f32`.
-pub(crate) fn host(t: &FlexTensor) -> Cow<'_, [f32]> {
-    match t.as_slice::<f32>() {
-        Some(s) if t.is_contiguous() => Cow::Borrowed(s),
-        _ => Cow::Owned(
-            t.to_contiguous()
-                .as_slice::<f32>()
-                .unwrap_or_default()
-                .to_vec(),
-        ),
-    }
-}
-
 pub(crate) fn flex(data: Vec<f32>, shape: impl Into<Shape>) -> FlexTensor {
     FlexTensor::from_data(TensorData::new(data, shape.into()))
 }
 
 fn encode_host(positions: &FlexTensor, table: &FlexTensor, enc: &HashEncoding) -> FlexTensor {
-    let pos = host(positions);
-    let tab = host(table);
+    let pos = flex_f32(positions);
+    let tab = flex_f32(table);
     let n = pos.len() / 3;
     let out = kernels::forward(&enc.layout, &tab, &enc.window, &pos);
     flex(out, [n, enc.layout.output_dim()])
@@ -88,7 +75,7 @@ impl Backward<Flex, 2> for HashBackwardStep {
         _checkpointer: &mut Checkpointer,
     ) {
         let grad_out = grads.consume::<Flex>(&ops.node);
-        let go = host(&grad_out);
+        let go = flex_f32(&grad_out);
         let s = &ops.state;
         let [pos_node, table_node] = ops.parents;
         if let Some(node) = table_node {
@@ -127,8 +114,8 @@ impl<C: CheckpointStrategy> HashGridBackend for Autodiff<Flex, C> {
         {
             OpsKind::Tracked(prep) => {
                 let state = HashState {
-                    positions: Arc::new(host(&p).into_owned()),
-                    table: Arc::new(host(&t).into_owned()),
+                    positions: Arc::new(flex_f32(&p).into_owned()),
+                    table: Arc::new(flex_f32(&t).into_owned()),
                     encoding,
                 };
                 prep.finish(state, out)

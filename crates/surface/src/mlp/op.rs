@@ -11,9 +11,10 @@ use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Dispatch, Flex, backend_extension};
 use burn::tensor::Tensor;
+use fewview_optim::flex_f32;
 
 use super::{MlpSpec, kernels};
-use crate::hashgrid::op::{flex, host};
+use crate::hashgrid::op::flex;
 
 /// The network as a Burn backend extension.
 #[backend_extension(Flex, Autodiff)]
@@ -27,8 +28,8 @@ pub trait MlpBackend: Backend {
 }
 
 fn forward_host(input: &FlexTensor, params: &FlexTensor, spec: &MlpSpec) -> FlexTensor {
-    let x = host(input);
-    let p = host(params);
+    let x = flex_f32(input);
+    let p = flex_f32(params);
     let n = x.len() / spec.input_dim();
     flex(kernels::forward(spec, &p, &x), [n, spec.output_dim()])
 }
@@ -60,7 +61,7 @@ impl Backward<Flex, 2> for MlpBackwardStep {
         _checkpointer: &mut Checkpointer,
     ) {
         let grad_out = grads.consume::<Flex>(&ops.node);
-        let go = host(&grad_out);
+        let go = flex_f32(&grad_out);
         let s = &ops.state;
         let [in_node, p_node] = ops.parents;
         let (gx, gp) = kernels::backward(&s.spec, &s.params, &s.input, &go, in_node.is_some());
@@ -91,8 +92,8 @@ impl<C: CheckpointStrategy> MlpBackend for Autodiff<Flex, C> {
         {
             OpsKind::Tracked(prep) => {
                 let state = MlpState {
-                    input: Arc::new(host(&x).into_owned()),
-                    params: Arc::new(host(&p).into_owned()),
+                    input: Arc::new(flex_f32(&x).into_owned()),
+                    params: Arc::new(flex_f32(&p).into_owned()),
                     spec,
                 };
                 prep.finish(state, out)
