@@ -1,6 +1,9 @@
 //! `fewview`: the one binary. Each subcommand parses its flags, calls a library function and
 //! prints; the work itself lives in the library crates.
 
+// The binary is where the project prints.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 mod commands;
 
 /// mimalloc instead of the system allocator: the rasterizer and trainer allocate and free

@@ -2,6 +2,9 @@
 //! the default command a user would type: LLFF fern 3-view, NeRF-synthetic lego 8-view and DTU
 //! scan65 3-view with masks. They need `FEWVIEW_DATA` (CI sets it to `../shared/data`).
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;

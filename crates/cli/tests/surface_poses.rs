@@ -3,6 +3,9 @@
 //! scan65 (wide triplet 22, 25, 28 at 400 × 300, σ = 0.15 noise), stopped after one training
 //! iteration. They need `FEWVIEW_DATA` (CI sets it to `../shared/data`).
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 use std::path::PathBuf;
 use std::process::Command;
 

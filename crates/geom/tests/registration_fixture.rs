@@ -2,6 +2,9 @@
 //! similarity, 1 % Gaussian noise, 70 % overlap, camera pre-alignment), against Open3D's
 //! FPFH + RANSAC + ICP result on the same inputs, recorded in the fixture.
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 use std::path::PathBuf;
 
 use fewview_geom::io::{read_mesh, read_points};

@@ -2,6 +2,9 @@
 //! `tools/make_sgbm_fixtures.py` wrote (synthetic planes always; the rectified fern pair (1, 10)
 //! and a demo-scene pair when the script was run with `--data`).
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 use std::path::{Path, PathBuf};
 
 use fewview_geom::stereo::sgm::{Border, Disparity, GrayOrRgb, Paths, SgmParams, match_left};

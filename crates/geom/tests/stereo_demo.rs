@@ -1,6 +1,9 @@
 //! The stereo start on the demo scene, whose ray tracer gives the exact depth of every pixel:
 //! how close the hierarchical cloud's points lie to the true surface, per confidence tier.
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 use fewview_geom::stereo::hierarchy::{HierarchyOptions, Region, hierarchical_cloud};
 use fewview_geom::stereo::pairs::{OverlapRule, StereoView, stereo_pairs};
 use fewview_geom::stereo::sgm::SgmParams;

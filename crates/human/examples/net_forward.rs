@@ -3,6 +3,9 @@
 //! multiply-adds), and prints the multiply-add count of both presets:
 //! `cargo run --release -p fewview-human --example net_forward [variant 1-4] [repeats]`.
 
+// An example program prints its results.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 use std::time::Instant;
 
 use burn::tensor::{Device, Distribution, Tensor};

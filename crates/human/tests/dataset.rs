@@ -1,6 +1,9 @@
 //! The synthetic capture's loader: conventions against independent references (the README's rig
 //! and projections of the 3D joints), and its one-line errors on a capture the test writes.
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 mod common;
 
 use fewview_human::{HumanDataset, MultiView};

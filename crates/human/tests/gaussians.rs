@@ -3,6 +3,9 @@
 //! View Synthesis for Robust 3D Human Reconstruction"'s rendering, a held-out view rendered from
 //! its two neighbours' pixels at their exact depth.
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 mod common;
 
 use burn::tensor::{Device, Tensor, TensorData};

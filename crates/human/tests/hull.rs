@@ -3,6 +3,9 @@
 //! a ring at distance D reaches R / √(1 − R²/D²) on the axis), and, with `FEWVIEW_DATA`, the
 //! exact depth of seq_a.
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 mod common;
 
 use fewview_human::hull::{Bounds, Footprint, Hull, HullConfig};

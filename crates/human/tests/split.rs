@@ -2,6 +2,9 @@
 //! test frame: every refused pair is an error before any file is touched, and the capture's read
 //! log holds only training cameras and frames after a full training pass.
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 mod common;
 
 use fewview_human::readlog::ReadKind;

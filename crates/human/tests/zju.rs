@@ -2,6 +2,9 @@
 //! capture (cameras against the README's rig and, with `FEWVIEW_DATA`, against seq_a itself),
 //! undistortion against OpenCV, and NumPy object arrays against the values NumPy pickled.
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 mod common;
 
 use std::path::{Path, PathBuf};

@@ -2,6 +2,9 @@
 //! `tools/make_lpips_fixtures.py`, whose header says exactly what is compared with what).
 //! The reference weight files come from `scripts/setup-lpips.sh` (the test command runs it).
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 use std::path::PathBuf;
 
 use fewview_metrics::lpips::{LoadOptions, Lpips, LpipsNet};

@@ -4,6 +4,9 @@
 //!
 //! Run: `FEWVIEW_DATA=/work/shared/data cargo test --release -p fewview-scene -- --include-ignored`
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 use std::path::PathBuf;
 
 use fewview_scene::{Dataset, DatasetFormat, LoadOptions, detect_format, load_dataset};

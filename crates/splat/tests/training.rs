@@ -1,6 +1,9 @@
 //! Training-level tests on the in-process demo scene: determinism and resume, PLY round trips of
 //! trained models, divergence reporting, and that training actually learns the scene.
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 use burn::tensor::Device;
 use fewview_scene::synthetic::{DemoOptions, DemoShading, demo_dataset};
 use fewview_scene::{Dataset, Image};

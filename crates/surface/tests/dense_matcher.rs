@@ -7,6 +7,9 @@
 //! least 200 matches, 90 % of them within 2 px of their epipolar lines. Views 22 and 28 are
 //! 71° apart, beyond what the matcher's search covers: that pair is printed, not asserted.
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 use std::time::Instant;
 
 use fewview_scene::load::{LoadOptions, load_dataset};

@@ -7,6 +7,9 @@
 //! at 200 iterations, R 12.39° → 17.97° and t×100
 //! 58.84 → 69.85; at 800 iterations R 12.39° → 14.91°, t×100 58.84 → 52.40 (crate README).
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 use fewview_scene::load::{LoadOptions, load_dataset};
 use fewview_scene::pose_export::PoseSource;
 use fewview_surface::adam::ExpSchedule;

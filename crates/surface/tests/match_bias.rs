@@ -5,6 +5,9 @@
 //! warp follows it. The true correspondences also check the epipolar warm-up itself: fed them,
 //! it stays on the true poses.
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 use fewview_metrics::pose_error::{PoseErrorOptions, pose_error_pairwise};
 use fewview_scene::{Camera, Se3};
 use fewview_surface::matching::densify::DensifyOptions;

@@ -2,6 +2,9 @@
 //! independent sphere tracer of `sdf_scene`): reconstruction accuracy with noisy poses, and
 //! bit-exact resumption from a checkpoint.
 
+// Tests report what they measured.
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
 use fewview_scene::Dataset;
 use fewview_surface::checkpoint;
 use fewview_surface::pipeline::{
