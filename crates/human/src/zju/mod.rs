@@ -88,9 +88,9 @@ impl ZjuDataset {
             let t = Vector3::from(p.t_mm) / MM_PER_M;
             let name = camera_name(&annots.images[0][c]);
             cameras.push(camera_from_opencv(&k, &r, &t, size, &annots_path, &name)?);
+            distortion.push(distortion_of(&p.d, &annots_path, &name)?);
             names.push(name);
             intrinsics_cv.push(k);
-            distortion.push(Distortion::from_coefficients(&p.d).unwrap_or_default());
         }
         let frame_ids = annots.images.iter().map(|f| frame_id(&f[0])).collect();
         let data = Self {
@@ -369,6 +369,20 @@ fn read_parents(path: &Path) -> Result<Vec<i64>> {
     Ok(parents)
 }
 
+/// A camera's `D`: none (no distortion), or OpenCV's 4 or 5 coefficients.
+fn distortion_of(d: &[f64], annots: &Path, camera: &str) -> Result<Distortion> {
+    if d.is_empty() {
+        return Ok(Distortion::default());
+    }
+    Distortion::from_coefficients(d).ok_or_else(|| {
+        let msg = format!(
+            "camera {camera}: D has {} coefficients, expected 4 or 5 (k1, k2, p1, p2[, k3])",
+            d.len()
+        );
+        HumanError::invalid(annots, msg)
+    })
+}
+
 /// The image size from the file's header (recorded as a header read).
 fn image_size(path: &Path, log: &ReadLog) -> Result<(u32, u32)> {
     if !path.is_file() {
@@ -417,4 +431,24 @@ fn read_smpl(path: &Path) -> Result<SmplParams> {
         th: three(get("Th", Some(3))?),
         shapes: get("shapes", None)?,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn distortion_needs_none_four_or_five_coefficients() {
+        let at = Path::new("annots.npy");
+        assert!(distortion_of(&[], at, "B1").unwrap().is_zero());
+        let d = distortion_of(&[0.1, -0.2, 0.01, 0.02], at, "B1").unwrap();
+        assert_eq!((d.k1, d.p2, d.k3), (0.1, 0.02, 0.0));
+        let err = distortion_of(&[0.1, 0.2, 0.3], at, "B1")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("annots.npy") && err.contains("3 coefficients"),
+            "{err}"
+        );
+    }
 }
