@@ -80,20 +80,7 @@ fn human_train_and_render_run_on_the_zju_layout() {
     let dir = tempfile::tempdir().unwrap();
     let data = zju_fixture();
     let run = dir.path().join("run");
-    fewview_ok(&[
-        "human",
-        "train",
-        "--data",
-        s(&data),
-        "--out",
-        s(&run),
-        "--input-cameras",
-        "3",
-        "--train-frames",
-        "2",
-        "--iterations",
-        "1",
-    ]);
+    train_one_step(&data, &run, "3");
     let split = std::fs::read_to_string(run.join("split.json")).unwrap();
     let split: serde_json::Value = serde_json::from_str(&split).unwrap();
     assert_eq!(split["held_out_cameras"], serde_json::json!([3]));
@@ -133,22 +120,7 @@ fn human_train_and_render_run_on_the_zju_layout() {
 
     // Weights of another configuration (variant 1) in the run are refused.
     let other = dir.path().join("other");
-    fewview_ok(&[
-        "human",
-        "train",
-        "--data",
-        s(&data),
-        "--out",
-        s(&other),
-        "--input-cameras",
-        "3",
-        "--train-frames",
-        "2",
-        "--iterations",
-        "1",
-        "--variant",
-        "1",
-    ]);
+    train_one_step(&data, &other, "1");
     std::fs::copy(other.join("network.fvh"), run.join("network.fvh")).unwrap();
     let refused = dir.path().join("refused");
     assert_clean_error(
@@ -156,4 +128,25 @@ fn human_train_and_render_run_on_the_zju_layout() {
         &["network.fvh", "weights of another network"],
     );
     assert!(!refused.exists(), "an output folder was written");
+}
+
+/// One training step of network configuration `variant` on the fixture's cameras 0–2 and
+/// frames 0–1.
+fn train_one_step(data: &Path, out: &Path, variant: &str) {
+    fewview_ok(&[
+        "human",
+        "train",
+        "--data",
+        s(data),
+        "--out",
+        s(out),
+        "--input-cameras",
+        "3",
+        "--train-frames",
+        "2",
+        "--iterations",
+        "1",
+        "--variant",
+        variant,
+    ]);
 }
