@@ -265,14 +265,7 @@ pub fn prepare_with_matching(
     config: &RunConfig,
 ) -> Result<Prepared> {
     check_view_count(dataset)?;
-    let views: Vec<TrainView> = dataset
-        .train_views()
-        .map(|v| TrainView {
-            image: v.image.clone(),
-            mask: v.mask.clone(),
-            intrinsics: v.camera.intrinsics,
-        })
-        .collect();
+    let views: Vec<TrainView> = dataset.train_views().map(TrainView::of).collect();
     let gt_source = truth.unwrap_or(dataset);
     let ground_truth: Vec<Se3> = dataset
         .train

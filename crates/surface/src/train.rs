@@ -12,7 +12,7 @@
 
 use burn::tensor::{Device, Tensor, TensorData};
 use fewview_optim::f32_values;
-use fewview_scene::{Image, Intrinsics, Se3};
+use fewview_scene::{Image, Intrinsics, Se3, View};
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
@@ -211,6 +211,17 @@ pub struct TrainView {
     pub intrinsics: Intrinsics,
 }
 
+impl TrainView {
+    /// A dataset view's image, mask and intrinsics (its pose is trained separately).
+    pub fn of(view: &View) -> Self {
+        Self {
+            image: view.image.clone(),
+            mask: view.mask.clone(),
+            intrinsics: view.camera.intrinsics,
+        }
+    }
+}
+
 /// Everything that changes during training (what a checkpoint stores).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TrainState {
@@ -221,6 +232,19 @@ pub struct TrainState {
     /// `[V × 9]` pose parameters (SPARF's translation + two rotation rows).
     pub poses: Vec<f32>,
     pub pose_adam: AdamState,
+}
+
+impl TrainState {
+    /// The bit pattern of every parameter and pose value, for exact comparisons (`==` on
+    /// floats takes -0.0 for 0.0).
+    pub fn float_bits(&self) -> Vec<u32> {
+        self.params
+            .iter()
+            .flatten()
+            .chain(&self.poses)
+            .map(|v| v.to_bits())
+            .collect()
+    }
 }
 
 /// Losses of one iteration.
@@ -778,14 +802,7 @@ mod tests {
             supersample: 1,
             ..Default::default()
         });
-        let views: Vec<TrainView> = ds
-            .train_views()
-            .map(|v| TrainView {
-                image: v.image.clone(),
-                mask: v.mask.clone(),
-                intrinsics: v.camera.intrinsics,
-            })
-            .collect();
+        let views: Vec<TrainView> = ds.train_views().map(TrainView::of).collect();
         let poses: Vec<_> = ds.train_views().map(|v| v.camera.world_to_camera).collect();
         let mut config = TrainConfig {
             iterations: 10,
@@ -816,16 +833,8 @@ mod tests {
         let err = trainer.step().unwrap_err().to_string();
         assert_eq!(err, "training diverged at iteration 2: loss is NaN");
         assert!(!err.contains('\n'), "{err}");
-        let bits = |s: &super::TrainState| -> Vec<u32> {
-            s.params
-                .iter()
-                .flatten()
-                .chain(&s.poses)
-                .map(|v| v.to_bits())
-                .collect()
-        };
         assert_eq!(trainer.state.iteration, 2);
-        assert_eq!(bits(&trainer.state), bits(&before));
+        assert_eq!(trainer.state.float_bits(), before.float_bits());
     }
 
     /// A non-finite pose gradient skips the pose step (poses and their Adam moments untouched)
