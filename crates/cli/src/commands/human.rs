@@ -101,7 +101,7 @@ pub struct TrainArgs {
     pub resume: bool,
     /// Input cameras, spread uniformly over the rig (paper 002's protocol: 8; the others are
     /// held out for evaluation).
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = fewview_human::split::PAPER_INPUT_CAMERAS)]
     pub input_cameras: usize,
     /// Training frames, from the first (default: two thirds of the sequence; the rest test
     /// novel poses).
@@ -418,7 +418,7 @@ fn load_model(
 fn run_split(run: &std::path::Path, capture: &dyn MultiView) -> anyhow::Result<Split> {
     let split = match Split::load(run)? {
         Some(split) => split,
-        None => Split::for_capture(capture, 8, None)?,
+        None => Split::for_capture(capture, fewview_human::split::PAPER_INPUT_CAMERAS, None)?,
     };
     split.check_fits(capture)?;
     Ok(split)
