@@ -93,3 +93,31 @@ fn bench_refuses_empty_and_huge_counts() {
         assert!(!json.exists(), "{flag} {value}: nothing written");
     }
 }
+
+/// `bench --only ssim` measures that section alone: the JSON holds its figures and none of the
+/// others; an unknown section is refused before anything is measured.
+#[test]
+fn bench_only_measures_the_named_sections() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("b.json");
+    fewview_ok(&["bench", "--json", s(&json), "--only", "ssim"]);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let ms = report["ssim"]["value_grad_ms"].as_f64().unwrap();
+    assert!(ms.is_finite() && ms > 0.0, "SSIM {ms} ms");
+    for absent in [
+        "raster",
+        "train_demo",
+        "fusion_demo",
+        "human_inference",
+        "blend",
+    ] {
+        assert!(report.get(absent).is_none(), "{absent} was measured");
+    }
+    let other = dir.path().join("c.json");
+    assert_clean_error(
+        &fewview(&["bench", "--json", s(&other), "--only", "rastr"]),
+        &["--only", "rastr"],
+    );
+    assert!(!other.exists());
+}

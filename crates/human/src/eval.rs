@@ -170,6 +170,11 @@ pub struct EvalOptions {
     pub frames: std::ops::Range<usize>,
     /// Target cameras (the split's held-out cameras).
     pub cameras: Vec<usize>,
+    /// Leave each target camera out of its own sources. With the input cameras as targets on
+    /// training frames this is the validation protocol: an input camera predicted from its
+    /// neighbours, as training does, so settings (the stabilizer's strength) can be chosen
+    /// without reading a held-out camera or a test frame.
+    pub leave_target_out: bool,
     /// The stabilizer's settings; `None` scores only the plain renders.
     pub tps: Option<crate::tps::TpsConfig>,
     /// Consecutive frames (inside `frames`) on which to train and score the 3DGS-per-frame
@@ -227,9 +232,14 @@ pub fn evaluate(
             .iter()
             .map(|(n, _)| (n.clone(), vec![Vec::new(); k])),
     );
+    let leave_out: Vec<Option<usize>> = options
+        .cameras
+        .iter()
+        .map(|&c| options.leave_target_out.then_some(c))
+        .collect();
     let mut times = Vec::new();
     for frame in options.frames.clone() {
-        let r = ours.render_frame(frame, &full)?;
+        let r = ours.render_frame_leaving_out(frame, &full, &leave_out)?;
         times.push(r.times);
         let mut per_method = Vec::new();
         if let Some(s) = r.stabilized {
@@ -237,7 +247,11 @@ pub fn evaluate(
         }
         per_method.push(r.plain);
         for other in &mut others {
-            per_method.push(other.render_frame(frame, &full)?.plain);
+            per_method.push(
+                other
+                    .render_frame_leaving_out(frame, &full, &leave_out)?
+                    .plain,
+            );
         }
         for ((_, cams), images) in renders.iter_mut().zip(per_method) {
             for (c, image) in images.into_iter().enumerate() {

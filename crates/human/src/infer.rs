@@ -147,6 +147,28 @@ impl<'a> SequenceRenderer<'a> {
 
     /// The targets `cameras` (full dataset cameras) at `frame`, cropped by the run's framing.
     pub fn render_frame(&mut self, frame: usize, cameras: &[Camera]) -> Result<FrameRenders> {
+        self.render_frame_leaving_out(frame, cameras, &vec![None; cameras.len()])
+    }
+
+    /// As [`Self::render_frame`], with target `i` drawn without the input camera
+    /// `leave_out[i]` among its sources: an input camera predicted from its neighbours, as in
+    /// training (the validation protocol).
+    pub fn render_frame_leaving_out(
+        &mut self,
+        frame: usize,
+        cameras: &[Camera],
+        leave_out: &[Option<usize>],
+    ) -> Result<FrameRenders> {
+        if leave_out.len() != cameras.len() {
+            return Err(HumanError::argument(
+                "inference",
+                format!(
+                    "{} cameras but {} leave-outs",
+                    cameras.len(),
+                    leave_out.len()
+                ),
+            ));
+        }
         let mut times = FrameTimes::default();
         let clock = Instant::now();
         let prepared = self.prepare(frame)?;
@@ -158,7 +180,8 @@ impl<'a> SequenceRenderer<'a> {
             .collect();
         let sources: Vec<Vec<usize>> = targets
             .iter()
-            .map(|t| prepared.nearest(t, k, None))
+            .zip(leave_out)
+            .map(|(t, &except)| prepared.nearest(t, k, except))
             .collect::<Result<_>>()?;
         let mut needed: Vec<usize> = sources.iter().flatten().copied().collect();
         needed.sort_unstable();

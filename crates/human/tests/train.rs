@@ -145,4 +145,21 @@ fn seq_a_held_out_view_renders_from_a_saved_run() {
         "render {ours:.2} dB, black {blank:.2} dB"
     );
     assert!(out.stabilized.is_some() && out.times.total() > 0.0);
+
+    // Input camera 1 drawn with itself among its sources reproduces its own pixels (a pixel
+    // lifted at any depth projects back onto itself); left out, it comes from its neighbours.
+    let input = data.cameras()[1].clone();
+    let truth = fewview_human::eval::truth_frames(&data, &model.framing, 1, 45..46).unwrap();
+    let mut plain = SequenceRenderer::new(&model, &data, &split, None);
+    let with_itself = plain
+        .render_frame(45, std::slice::from_ref(&input))
+        .unwrap();
+    let left_out = plain
+        .render_frame_leaving_out(45, std::slice::from_ref(&input), &[Some(1)])
+        .unwrap();
+    let (a, b) = (
+        psnr(&with_itself.plain[0], &truth[0]).unwrap(),
+        psnr(&left_out.plain[0], &truth[0]).unwrap(),
+    );
+    assert!(a > b + 3.0, "with itself {a:.2} dB, left out {b:.2} dB");
 }

@@ -56,6 +56,36 @@ pub struct Args {
     /// Repetitions of each rasterizer measurement (median reported; at least 1).
     #[arg(long, default_value_t = 5, value_parser = positive_count)]
     pub runs: usize,
+    /// Measure only these sections, e.g. `--only human,ssim` (default: all).
+    #[arg(long, value_enum, value_delimiter = ',', value_name = "SECTION")]
+    pub only: Vec<Section>,
+}
+
+/// A part of the benchmark that `--only` can pick.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Section {
+    /// The rasterizer's forward and backward passes.
+    Raster,
+    /// Training steps on the demo scene and LLFF fern.
+    Train,
+    /// Demo training steps with the gradient-domain fusion term.
+    Fusion,
+    /// Surface training steps on DTU scan65.
+    Surface,
+    /// The SSIM loss.
+    Ssim,
+    /// The Poisson blend.
+    Blend,
+    /// Semi-Global Matching.
+    Stereo,
+    /// PoseGaussian inference per frame, both presets.
+    Human,
+}
+
+impl Args {
+    fn wants(&self, section: Section) -> bool {
+        self.only.is_empty() || self.only.contains(&section)
+    }
 }
 
 /// `--gaussians`: at least one, and no more than training may start from
@@ -64,19 +94,29 @@ fn gaussian_count(s: &str) -> Result<usize, String> {
     count_in(s, 1, MAX_INIT_POINTS)
 }
 
+/// The figures measured; a section left out by `--only` (or lacking its data) is absent.
 #[derive(Serialize)]
 struct Report {
     machine: Machine,
-    raster: fewview_splat::bench::RasterBench,
-    train_demo: fewview_splat::bench::TrainStepBench,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    raster: Option<fewview_splat::bench::RasterBench>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    train_demo: Option<fewview_splat::bench::TrainStepBench>,
     /// Demo training steps with the gradient-domain fusion term on every step.
-    fusion_demo: fewview_fusion::bench::FusionStepBench,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    fusion_demo: Option<fewview_fusion::bench::FusionStepBench>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     train_fern: Option<fewview_splat::bench::TrainStepBench>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     train_surface: Option<fewview_surface::bench::SurfaceStepBench>,
-    ssim: fewview_metrics::bench::SsimBench,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    ssim: Option<fewview_metrics::bench::SsimBench>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     blend: Option<fewview_geom::bench::BlendBench>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     stereo: Option<fewview_geom::bench::StereoBench>,
     /// PoseGaussian inference per frame, both presets (synthetic frame, random weights).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
     human_inference: Vec<fewview_human::bench::InferenceBench>,
     peak_memory_mib: Option<f64>,
 }
@@ -116,69 +156,64 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         threads: rayon::current_num_threads(),
         avx2_fma,
     };
-    eprintln!("rasterizer: {} Gaussians at 504x378 ...", args.gaussians);
-    let raster = fewview_splat::bench::raster_bench(args.gaussians, 504, 378, args.runs.max(1));
-    eprintln!("training steps: demo scene ...");
-    let demo = demo_dataset(&DemoOptions::default());
-    let train_demo = fewview_splat::bench::train_step_bench(&demo, args.train_steps)?;
-    eprintln!("training steps with the fusion term: demo scene ...");
-    let fusion_demo = fewview_fusion::bench::fusion_step_bench(&demo, args.train_steps)?;
-    let fern_dir = args
-        .fern
-        .clone()
-        .or_else(|| std::env::var_os("FEWVIEW_DATA").map(|d| PathBuf::from(d).join("llff/fern")));
-    let train_fern = match fern_dir {
-        Some(dir) if dir.exists() => {
-            eprintln!("training steps: {} ...", dir.display());
-            let ds = load_dataset(&dir, &LoadOptions::default())
-                .with_context(|| format!("cannot load {}", dir.display()))?;
+    let raster = args.wants(Section::Raster).then(|| {
+        eprintln!("rasterizer: {} Gaussians at 504x378 ...", args.gaussians);
+        fewview_splat::bench::raster_bench(args.gaussians, 504, 378, args.runs.max(1))
+    });
+    let demo = (args.wants(Section::Train) || args.wants(Section::Fusion))
+        .then(|| demo_dataset(&DemoOptions::default()));
+    let train_demo = match (&demo, args.wants(Section::Train)) {
+        (Some(demo), true) => {
+            eprintln!("training steps: demo scene ...");
             Some(fewview_splat::bench::train_step_bench(
-                &ds,
+                demo,
                 args.train_steps,
             )?)
         }
-        _ => {
-            eprintln!("training steps: fern skipped (pass --fern or set FEWVIEW_DATA)");
-            None
-        }
+        _ => None,
     };
-    let dtu_dir = args
-        .dtu
-        .clone()
-        .or_else(|| std::env::var_os("FEWVIEW_DATA").map(|d| PathBuf::from(d).join("dtu/scan65")));
-    let train_surface = match dtu_dir {
-        Some(dir) if dir.exists() => {
-            eprintln!("surface training steps: {} ...", dir.display());
-            let opts = LoadOptions {
-                downscale: 2,
-                train_views: Some(vec![22, 25, 28]),
-                ..LoadOptions::default()
-            };
-            let ds = load_dataset(&dir, &opts)
-                .with_context(|| format!("cannot load {}", dir.display()))?;
-            Some(fewview_surface::bench::train_step_bench(
-                &ds,
-                args.surface_steps.max(1),
-                1,
+    let fusion_demo = match (&demo, args.wants(Section::Fusion)) {
+        (Some(demo), true) => {
+            eprintln!("training steps with the fusion term: demo scene ...");
+            Some(fewview_fusion::bench::fusion_step_bench(
+                demo,
+                args.train_steps,
             )?)
         }
-        _ => {
-            eprintln!("surface training steps: skipped (pass --dtu or set FEWVIEW_DATA)");
-            None
-        }
+        _ => None,
     };
-    eprintln!("SSIM loss ...");
-    let ssim = fewview_metrics::bench::ssim_bench(504, 378, 10);
-    eprintln!("Poisson blend 1024x1024x3 ...");
-    let blend = fewview_geom::bench::blend_1024().ok();
-    let stereo = stereo_bench(args.fern.clone(), args.runs)?;
+    let train_fern = match args.wants(Section::Train) {
+        true => fern_train_bench(&args)?,
+        false => None,
+    };
+    let train_surface = match args.wants(Section::Surface) {
+        true => surface_train_bench(&args)?,
+        false => None,
+    };
+    let ssim = args.wants(Section::Ssim).then(|| {
+        eprintln!("SSIM loss ...");
+        fewview_metrics::bench::ssim_bench(504, 378, 10)
+    });
+    let blend = match args.wants(Section::Blend) {
+        true => {
+            eprintln!("Poisson blend 1024x1024x3 ...");
+            fewview_geom::bench::blend_1024().ok()
+        }
+        false => None,
+    };
+    let stereo = match args.wants(Section::Stereo) {
+        true => stereo_bench(args.fern.clone(), args.runs)?,
+        false => None,
+    };
     let mut human_inference = Vec::new();
-    for (preset, frames) in [
-        (fewview_human::train::Preset::Cpu, args.human_frames),
-        (fewview_human::train::Preset::Paper, 1),
-    ] {
-        eprintln!("PoseGaussian inference: {preset:?} preset ...");
-        human_inference.push(fewview_human::bench::inference_bench(preset, frames)?);
+    if args.wants(Section::Human) {
+        for (preset, frames) in [
+            (fewview_human::train::Preset::Cpu, args.human_frames),
+            (fewview_human::train::Preset::Paper, 1),
+        ] {
+            eprintln!("PoseGaussian inference: {preset:?} preset ...");
+            human_inference.push(fewview_human::bench::inference_bench(preset, frames)?);
+        }
     }
     let report = Report {
         machine,
@@ -202,6 +237,60 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Training steps on LLFF fern, when its folder is given or under `FEWVIEW_DATA`.
+fn fern_train_bench(args: &Args) -> anyhow::Result<Option<fewview_splat::bench::TrainStepBench>> {
+    let fern_dir = args
+        .fern
+        .clone()
+        .or_else(|| std::env::var_os("FEWVIEW_DATA").map(|d| PathBuf::from(d).join("llff/fern")));
+    match fern_dir {
+        Some(dir) if dir.exists() => {
+            eprintln!("training steps: {} ...", dir.display());
+            let ds = load_dataset(&dir, &LoadOptions::default())
+                .with_context(|| format!("cannot load {}", dir.display()))?;
+            Ok(Some(fewview_splat::bench::train_step_bench(
+                &ds,
+                args.train_steps,
+            )?))
+        }
+        _ => {
+            eprintln!("training steps: fern skipped (pass --fern or set FEWVIEW_DATA)");
+            Ok(None)
+        }
+    }
+}
+
+/// Surface training steps on DTU scan65 (views 22, 25, 28 at 400×300), when available.
+fn surface_train_bench(
+    args: &Args,
+) -> anyhow::Result<Option<fewview_surface::bench::SurfaceStepBench>> {
+    let dtu_dir = args
+        .dtu
+        .clone()
+        .or_else(|| std::env::var_os("FEWVIEW_DATA").map(|d| PathBuf::from(d).join("dtu/scan65")));
+    match dtu_dir {
+        Some(dir) if dir.exists() => {
+            eprintln!("surface training steps: {} ...", dir.display());
+            let opts = LoadOptions {
+                downscale: 2,
+                train_views: Some(vec![22, 25, 28]),
+                ..LoadOptions::default()
+            };
+            let ds = load_dataset(&dir, &opts)
+                .with_context(|| format!("cannot load {}", dir.display()))?;
+            Ok(Some(fewview_surface::bench::train_step_bench(
+                &ds,
+                args.surface_steps.max(1),
+                1,
+            )?))
+        }
+        _ => {
+            eprintln!("surface training steps: skipped (pass --dtu or set FEWVIEW_DATA)");
+            Ok(None)
+        }
+    }
+}
+
 /// Semi-Global Matching on fern's rectified pair (1, 10), cropped to 504×378, 64 disparities.
 fn stereo_bench(
     fern: Option<PathBuf>,
@@ -222,7 +311,6 @@ fn stereo_bench(
 }
 
 fn print_table(r: &Report) {
-    let g = |v: f64| format!("{:.3e}", v);
     println!("{:<46} {:>14} {:>14}", "figure", "value", "reference");
     for h in &r.human_inference {
         println!(
@@ -252,7 +340,24 @@ fn print_table(r: &Report) {
             "  network GMAC/s vs 1024³ matmul", h.network_gmacs_per_s, h.matmul_gmacs_per_s
         );
     }
-    let rb = &r.raster;
+    if let Some(rb) = &r.raster {
+        print_raster(rb);
+    }
+    print_training(r);
+    if let Some(s) = &r.ssim {
+        println!(
+            "{:<46} {:>14.2} {:>14.2}",
+            "SSIM value+grad ms 504x378 (vs PSNR)", s.value_grad_ms, s.psnr_ms
+        );
+    }
+    print_blend_and_stereo(r);
+    if let Some(m) = r.peak_memory_mib {
+        println!("{:<46} {:>14.0} {:>14}", "peak memory MiB", m, "");
+    }
+}
+
+fn print_raster(rb: &fewview_splat::bench::RasterBench) {
+    let g = |v: f64| format!("{:.3e}", v);
     println!(
         "{:<46} {:>14} {:>14}",
         format!(
@@ -292,7 +397,10 @@ fn print_table(r: &Report) {
         "{:<46} {:>14.2} {:>14}",
         "raster fwd speed-up vs plain loop (per core)", rb.forward_vs_reference, "1"
     );
-    for t in [Some(&r.train_demo), r.train_fern.as_ref()]
+}
+
+fn print_training(r: &Report) {
+    for t in [r.train_demo.as_ref(), r.train_fern.as_ref()]
         .into_iter()
         .flatten()
     {
@@ -310,17 +418,18 @@ fn print_table(r: &Report) {
             "  it per CPU-second", t.iterations_per_cpu_second, ""
         );
     }
-    let f = &r.fusion_demo;
-    println!(
-        "{:<46} {:>14.2} {:>14.2}",
-        "demo it/s with fusion term (vs without)",
-        f.fusion.iterations_per_second,
-        f.plain.iterations_per_second
-    );
-    println!(
-        "{:<46} {:>14.2} {:>14}",
-        "  fusion term's share of a step", f.term_share, ""
-    );
+    if let Some(f) = &r.fusion_demo {
+        println!(
+            "{:<46} {:>14.2} {:>14.2}",
+            "demo it/s with fusion term (vs without)",
+            f.fusion.iterations_per_second,
+            f.plain.iterations_per_second
+        );
+        println!(
+            "{:<46} {:>14.2} {:>14}",
+            "  fusion term's share of a step", f.term_share, ""
+        );
+    }
     if let Some(s) = &r.train_surface {
         println!(
             "{:<46} {:>14.3} {:>14.4}",
@@ -344,10 +453,10 @@ fn print_table(r: &Report) {
             s.hash_grid.iterations_per_cpu_second
         );
     }
-    println!(
-        "{:<46} {:>14.2} {:>14.2}",
-        "SSIM value+grad ms 504x378 (vs PSNR)", r.ssim.value_grad_ms, r.ssim.psnr_ms
-    );
+}
+
+fn print_blend_and_stereo(r: &Report) {
+    let g = |v: f64| format!("{:.3e}", v);
     if let Some(b) = &r.blend {
         println!(
             "{:<46} {:>14.2} {:>14.2}",
@@ -384,8 +493,5 @@ fn print_table(r: &Report) {
             b.pair_seconds,
             ""
         );
-    }
-    if let Some(m) = r.peak_memory_mib {
-        println!("{:<46} {:>14.0} {:>14}", "peak memory MiB", m, "");
     }
 }

@@ -368,6 +368,11 @@ pub struct EvalArgs {
     pub splat_init: SplatInitArg,
     #[command(flatten)]
     pub tps: TpsArgs,
+    /// Score the input cameras on the training frames instead, each predicted from its
+    /// neighbours as in training (validation: choose `--tps-weight`/`--tps-speed` here without
+    /// reading a held-out camera or a test frame).
+    #[arg(long, conflicts_with = "splat_frames")]
+    pub validation: bool,
     /// Source views per target at inference, for the run and its baselines (default: what each
     /// was trained with). The network sees one view at a time, so more views only add
     /// Gaussians where the two nearest views miss the person.
@@ -448,7 +453,24 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     let split = run_split(&args.run, &*dataset)?;
     let frames = match &args.frames {
         Some(t) => parse_frames(t)?,
+        None if args.validation => split.train_frames.clone(),
         None => split.all_frames(),
+    };
+    if args.validation
+        && (frames.start < split.train_frames.start || frames.end > split.train_frames.end)
+    {
+        bail!(
+            "--validation scores training frames only ({}..={}), not --frames {}..={}",
+            split.train_frames.start,
+            split.train_frames.end - 1,
+            frames.start,
+            frames.end - 1
+        );
+    }
+    let cameras = if args.validation {
+        split.input_cameras.clone()
+    } else {
+        split.held_out_cameras.clone()
     };
     std::fs::create_dir_all(&args.capture.out)
         .with_context(|| format!("{}: cannot create", args.capture.out.display()))?;
@@ -463,7 +485,8 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         .collect();
     let options = EvalOptions {
         frames: frames.clone(),
-        cameras: split.held_out_cameras.clone(),
+        cameras,
+        leave_target_out: args.validation,
         tps: Some(args.tps.config()?),
         splat: (args.splat_frames > 0).then(|| {
             let start = split.test_frames.start.max(frames.start);
@@ -493,16 +516,26 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         &mut |_| bar.inc(1),
     )?;
     bar.finish_and_clear();
-    let md = format!(
-        "Novel views (cameras {:?}, frames {}..={})\n\n{}\nNovel poses (frames {}..={})\n\n{}",
-        report.cameras,
-        frames.start,
-        frames.end - 1,
-        table(&report.novel_view),
-        split.test_frames.start,
-        split.test_frames.end - 1,
-        table(&report.novel_pose)
-    );
+    let md = if args.validation {
+        format!(
+            "Validation: input cameras {:?} from their neighbours, frames {}..={}\n\n{}",
+            report.cameras,
+            frames.start,
+            frames.end - 1,
+            table(&report.novel_view)
+        )
+    } else {
+        format!(
+            "Novel views (cameras {:?}, frames {}..={})\n\n{}\nNovel poses (frames {}..={})\n\n{}",
+            report.cameras,
+            frames.start,
+            frames.end - 1,
+            table(&report.novel_view),
+            split.test_frames.start,
+            split.test_frames.end - 1,
+            table(&report.novel_pose)
+        )
+    };
     let md = if report.splat_frames.is_empty() {
         md
     } else {
