@@ -1,3 +1,4 @@
+#![doc = include_str!("../README.md")]
 //! Geometry toolbox (paper 000 §1–2, §4; paper 001 Alg. 3).
 //!
 //! - [`depth`]: depth maps to meshes and point clouds with the depth-edge test of Eq. (1),

@@ -34,8 +34,7 @@ pub struct SplatBaselineOptions {
     /// ([`TrainConfig::sparse_view`]). Default 3000: what `fewview train` runs on a 360° scene
     /// without depth bounds ([`fewview_splat::pipeline::default_iterations`]; 8 views × 50 per
     /// view is less), where geometry forms only after the first opacity reset (at iteration
-    /// 1000) has pruned the floaters, and NeRF-synthetic lego with 8 views still gains ~7 dB
-    /// between iterations 1000 and 3000. A ring of 8 cameras around a person is that setting.
+    /// 1000) has pruned the floaters. A ring of 8 cameras around a person is that setting.
     pub iterations: usize,
     /// Seeds the initial points and the trainer's view order.
     pub seed: u64,

@@ -1,3 +1,4 @@
+#![doc = include_str!("../README.md")]
 //! People filmed by a ring of synchronized, calibrated cameras: the data layer and network of
 //! "PoseGaussian: Pose-Driven Novel View Synthesis for Robust 3D Human Reconstruction"
 //! (paper 002, whose supplement is in `papers/`).

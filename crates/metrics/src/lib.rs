@@ -1,3 +1,4 @@
+#![doc = include_str!("../README.md")]
 //! Metrics the papers report: image quality (PSNR, SSIM), and the errors they share.
 
 pub mod bench;

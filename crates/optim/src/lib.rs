@@ -1,3 +1,4 @@
+#![doc = include_str!("../README.md")]
 //! Optimisation shared by the Gaussian and surface trainers: Adam on host parameter arrays,
 //! learning-rate schedules, and the read-back of tensors (gradients and the values host steps
 //! need) to those arrays.

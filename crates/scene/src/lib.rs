@@ -1,6 +1,7 @@
+#![doc = include_str!("../README.md")]
 //! Cameras, poses, images and datasets in one internal convention.
 //!
-//! **Convention** (see `ARCHITECTURE.md`): OpenCV camera axes (x right, y down, z forward),
+//! **Convention** (see `docs/ARCHITECTURE.md`): OpenCV camera axes (x right, y down, z forward),
 //! world-to-camera `[R|t]`, pinhole intrinsics in pixels. Pixel `(i, j)` covers the continuous
 //! square `[i, i+1) × [j, j+1)`, so its centre is at `(i + 0.5, j + 0.5)` and a principal point of
 //! `(W/2, H/2)` is the exact image centre. Every loader converts to this at the border.

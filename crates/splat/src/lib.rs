@@ -1,3 +1,4 @@
+#![doc = include_str!("../README.md")]
 //! 3D Gaussian splatting (Kerbl et al. 2023) on the CPU: the Gaussian model, a differentiable
 //! tile rasterizer exposed as a Burn custom autodiff op, SH colour, the Inria PLY format and
 //! sparse-view training.

@@ -259,12 +259,11 @@ pub fn look_at_point(cameras: &[&Camera]) -> Vector3<f64> {
 }
 
 /// The default run length of `fewview train` on `ds`: 1000 iterations on forward-facing scenes
-/// whose views have depth bounds (LLFF: initialised in the training frustums; on fern 3-view the
-/// held-out PSNR peaks near iteration 500 and longer runs overfit), otherwise 3000 or 50 per
-/// training view, whichever is more (360° scenes from a random box: geometry forms only after
-/// the first opacity reset prunes the floaters, and lego 8-view gains ~7 dB between iterations
-/// 1000 and 3000; dense captures need each view seen ~50 times: lego with all 100 views gives
-/// 29.5 dB at 3000 iterations and 31.9 dB at 5000).
+/// whose views have depth bounds (LLFF: initialised in the training frustums; with 3 views
+/// longer runs overfit), otherwise 3000 or 50 per training view, whichever is more (360° scenes
+/// from a random box form their geometry only after the first opacity reset has pruned the
+/// floaters; dense captures need each view seen about 50 times). The runs behind these lengths
+/// are in the README's "Schedule for short sparse-view runs".
 pub fn default_iterations(ds: &Dataset) -> usize {
     if ds.train_views().all(|v| v.depth_bounds.is_some()) {
         1000

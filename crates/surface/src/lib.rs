@@ -1,3 +1,4 @@
+#![doc = include_str!("../README.md")]
 //! Neural implicit surfaces from sparse, noisy poses (paper 001): a NeuS renderer over a signed
 //! distance field (hash grid or NeuS MLP), per-camera pose refinement with SPARF's
 //! parameterisation, correspondence-based losses with the paper's uncertainty-aware photometric

@@ -16,7 +16,8 @@ use super::output_paths::{check_file, check_optional_file};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Method {
-    /// Occlusion-aware Poisson blending (paper 000 Eq. 3): pixels valid in one mask keep that
+    /// Occlusion-aware Poisson blending (Eq. 3 of the fusion paper's supplement): pixels valid in
+    /// one mask keep that
     /// image, the overlap follows the weighted gradients of both.
     OcclusionAware,
     /// Standard Poisson blending (Pérez et al. 2003): G's gradients inside MASK_G, F elsewhere.

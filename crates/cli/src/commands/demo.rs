@@ -16,8 +16,8 @@ use super::train_args::TrainArgs;
 ///
 /// Builds a small textured scene with view-dependent shading, ray-traces 24 ground-truth views
 /// of it (an independent renderer), trains 3D Gaussians from 3 of them with the gradient-domain
-/// fusion of paper 000 (as `fusion --demo`), and reports PSNR/SSIM on the other 21 and the
-/// transition's scores against the ray-traced truth along its path.
+/// fusion of "Splat-based Gradient-domain Fusion" (as `fusion --demo`), and reports PSNR/SSIM
+/// on the other 21 and the transition's scores against the ray-traced truth along its path.
 ///
 /// Writes `point_cloud.ply`, `renders/test/*.png`, `metrics.json`, `fusion.json`, the
 /// ground-truth images (`ground_truth/`), the transition through the training views and back

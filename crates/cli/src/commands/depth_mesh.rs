@@ -78,7 +78,7 @@ pub fn load_depth_view(
     Ok((d.depth, cam, img))
 }
 
-/// Mesh a depth map (paper 000 §1).
+/// Mesh a depth map (the fusion paper's supplement §1).
 ///
 /// Back-projects every pixel centre, connects right/down neighbours into triangles and drops
 /// depth-edge pixels with the test of Eq. (1).

@@ -17,7 +17,8 @@ use super::progress;
 use super::train::print_summary;
 use super::train_args::TrainArgs;
 
-/// Train Gaussians whose colours change smoothly between the input views (paper 000).
+/// Train Gaussians whose colours change smoothly between the input views ("Splat-based
+/// Gradient-domain Fusion for Seamless View Transition").
 ///
 /// Trains as `train` does, from the stereo start, and adds the chosen variant's regulariser on
 /// virtual views between adjacent training views: `gf` (ours: the rendered view's gradients
@@ -83,8 +84,8 @@ pub struct Args {
     pub out: Option<PathBuf>,
     /// Instead of training: put the transition videos of these finished runs (same dataset and
     /// views; each folder's name becomes a method's name) into a pairwise study in `--out`
-    /// (`study.toml` with paper 000's two questions, and `videos/`), ready for `fewview study
-    /// serve --config OUT/study.toml`.
+    /// (`study.toml` with the fusion paper's two questions, and `videos/`), ready for
+    /// `fewview study serve --config OUT/study.toml`.
     #[arg(long, num_args = 2.., value_name = "RUN", conflicts_with_all = ["demo", "data", "table"])]
     pub study: Vec<PathBuf>,
     /// Instead of training: print the comparison table (Markdown) of these finished runs.

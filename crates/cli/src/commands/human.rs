@@ -13,13 +13,13 @@ use fewview_human::{MultiView, Split, TrainingView};
 
 use super::progress;
 
-/// Pose-guided Gaussians of moving people from synchronized multi-view video (paper 002,
-/// PoseGaussian).
+/// Pose-guided Gaussians of moving people from synchronized multi-view video (PoseGaussian:
+/// Pose-Driven Novel View Synthesis for Robust 3D Human Reconstruction).
 ///
-/// `train` fits the network on the input cameras of the training frames (the split of paper
-/// 002's protocol: on `seq_a`, cameras 2, 5, 8, 11 and frames 40–59 are never read); `render`
-/// draws any camera of the rig, or a path circling it, from the input cameras of each frame;
-/// `eval` scores the held-out cameras against the baselines.
+/// `train` fits the network on the input cameras of the training frames (the split of
+/// PoseGaussian's protocol: on `seq_a`, cameras 2, 5, 8, 11 and frames 40–59 are never read);
+/// `render` draws any camera of the rig, or a path circling it, from the input cameras of each
+/// frame; `eval` scores the held-out cameras against the baselines.
 #[derive(Debug, ClapArgs)]
 pub struct Args {
     #[command(subcommand)]
@@ -90,7 +90,7 @@ pub struct TrainArgs {
     /// Source views per target.
     #[arg(long, default_value_t = 2)]
     pub source_views: usize,
-    /// Feed the pose encoder zeros (the per-frame baseline of paper 002's comparison).
+    /// Feed the pose encoder zeros (the per-frame baseline of PoseGaussian's comparison).
     #[arg(long)]
     pub no_pose: bool,
     /// Write a checkpoint every N iterations (and at the end).
@@ -99,7 +99,7 @@ pub struct TrainArgs {
     /// Continue the run in `--out` from its checkpoint (same settings; `--iterations` may grow).
     #[arg(long)]
     pub resume: bool,
-    /// Input cameras, spread uniformly over the rig (paper 002's protocol: 8; the others are
+    /// Input cameras, spread uniformly over the rig (PoseGaussian's protocol: 8; the others are
     /// held out for evaluation).
     #[arg(long, default_value_t = fewview_human::split::PAPER_INPUT_CAMERAS)]
     pub input_cameras: usize,
@@ -418,7 +418,7 @@ fn load_model(
     Ok(model)
 }
 
-/// The split `run` was trained with, or paper 002's default protocol for runs without
+/// The split `run` was trained with, or PoseGaussian's default protocol for runs without
 /// `split.json`.
 fn run_split(run: &std::path::Path, capture: &dyn MultiView) -> anyhow::Result<Split> {
     let split = match Split::load(run)? {

@@ -50,7 +50,7 @@ pub enum Command {
     EvalVideo(eval_video::Args),
     /// Pairwise 2AFC user study: serve the page, analyse the answers.
     Study(study::Args),
-    /// Pose-guided Gaussians of moving people (paper 002).
+    /// Pose-guided Gaussians of moving people (PoseGaussian).
     Human(human::Args),
 }
 

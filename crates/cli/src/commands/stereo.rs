@@ -16,7 +16,7 @@ use super::output_paths::check_folder;
 use super::progress;
 
 /// Rectify two views, match them with Semi-Global Matching both ways, and build their
-/// hierarchical point cloud (paper 000 §2).
+/// hierarchical point cloud (the fusion paper's supplement §2).
 ///
 /// Writes to `--out`: the rectified pair (`rectified_left.png`, `rectified_right.png`), the
 /// disparity maps of both rectified images (`disparity_left.npy`/`.png`, `disparity_right…`;

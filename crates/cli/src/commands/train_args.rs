@@ -29,15 +29,15 @@ pub struct TrainArgs {
     pub sh_degree: usize,
     /// Initial Gaussians: `auto` (dataset points; else `stereo` when at least two training views
     /// overlap; else random in the training frustums when the views have depth bounds, else
-    /// random in a box), `stereo` (paper 000 §2: the hierarchical
+    /// random in a box), `stereo` (the fusion paper's supplement §2: the hierarchical
     /// point cloud of the training views' stereo pairs, by Semi-Global Matching), `depth:DIR`
     /// (the same from your own depth maps, `DIR/<view>.npy` float z-depth or 16-bit `.png` in
     /// millimetres), `points`, `frustum`, `box`, `box:HALF_SIZE`, or `ply:FILE`.
     #[arg(long, default_value = "auto", value_name = "HOW")]
     pub init: String,
-    /// Fraction of the stereo point cloud that becomes Gaussians (paper 000: 0.1; its sparse
-    /// alternative (a): 0.01), whenever the stereo start runs (`stereo`, `depth:DIR`, or `auto`
-    /// choosing it).
+    /// Fraction of the stereo point cloud that becomes Gaussians (the fusion paper: 0.1; its
+    /// sparse alternative (a): 0.01), whenever the stereo start runs (`stereo`, `depth:DIR`, or
+    /// `auto` choosing it).
     #[arg(long, default_value_t = 0.1, value_parser = super::number_args::fraction)]
     pub stereo_fraction: f64,
     /// Number of random initial points.
@@ -48,9 +48,9 @@ pub struct TrainArgs {
     pub lambda_dssim: f32,
     /// Background behind the Gaussians while training on images with alpha (NeRF-synthetic
     /// RGBA): `random` (a random colour each iteration, the target re-composited over it, as
-    /// nerfstudio's splatfacto; a deviation from paper 000, it removes floaters that a fixed
-    /// background hides: lego 8-view 20.3 → 23.5 dB) or `fixed` (the dataset's background, as
-    /// paper 000 and Inria 3DGS). Opaque photos always train over the fixed background.
+    /// nerfstudio's splatfacto; a deviation from the fusion paper, it removes floaters that a
+    /// fixed background hides) or `fixed` (the dataset's background, as the fusion paper and
+    /// Inria 3DGS). Opaque photos always train over the fixed background.
     #[arg(long, value_enum, default_value_t = TrainBackground::Random)]
     pub train_background: TrainBackground,
     /// Save a checkpoint every N iterations (0: never).
