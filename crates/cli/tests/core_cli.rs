@@ -530,7 +530,7 @@ fn surface_runs_on_the_built_in_analytic_scene_without_a_dataset() {
     );
     assert_clean_error(
         &fewview(&["surface", "--synthetic", "--match-refine", "lk"]),
-        &["--match-refine", "affine, quadratic or none"],
+        &["--match-refine", "'lk'"],
     );
     // The default run refined its matches, and says so in its configuration.
     let config: serde_json::Value =

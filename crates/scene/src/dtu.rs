@@ -20,9 +20,10 @@ use rayon::prelude::*;
 use crate::camera::{Camera, Intrinsics, Se3};
 use crate::dataset::{Dataset, View};
 use crate::error::{Result, SceneError};
-use crate::load::{self, LoadOptions};
+use crate::load_options::LoadOptions;
 use crate::numpy::{self, Array};
 use crate::split;
+use crate::view_files;
 
 /// Largest skew effect tolerated, in pixels at the image border (see the module docs).
 const MAX_SKEW_PIXELS: f64 = 0.01;
@@ -215,10 +216,10 @@ pub(crate) fn cameras_path(root: &Path, opts: &LoadOptions) -> PathBuf {
 /// default split is the pixelNeRF/RegNeRF/SPARF protocol: training views 25, 22, 28 (first
 /// `n_train` of [`split::DTU_TRAIN_ORDER`]), the 25 [`split::DTU_TEST_VIEWS`].
 pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
-    let images = load::list_images(&root.join("image"))?;
+    let images = view_files::list_images(&root.join("image"))?;
     let mask_dir = root.join("mask");
     let masks = if mask_dir.is_dir() {
-        let m = load::list_images(&mask_dir)?;
+        let m = view_files::list_images(&mask_dir)?;
         if m.len() != images.len() {
             return Err(SceneError::invalid(
                 &mask_dir,
@@ -234,32 +235,33 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let background = opts.background.unwrap_or([0.0; 3]);
     let k = opts.downscale;
 
-    let views = load::first_error_in_order(images.par_iter().enumerate().map(|(i, file)| {
-        let photo = load::load_photo(file, background)?;
-        let camera =
-            camera_from_projection(&cameras.projections[i], photo.rgb.width, photo.rgb.height)
-                .map_err(|m| SceneError::invalid(&cam_path, format!("view {i}: {m}")))?;
-        load::check_camera(&camera, &cam_path, &format!("view {i}"))?;
-        let mask = match &masks {
-            Some(m) => {
-                let mask = load::load_binary_mask(&m[i])?;
-                load::check_size(&mask, &camera, &m[i], "mask")?;
-                Some(load::downscale_mask(&mask, k, true, &m[i])?)
-            }
-            None => None,
-        };
-        Ok(View {
-            name: load::stem(file),
-            camera: load::downscale_camera(&camera, k),
-            image: load::downscale_image(&photo.rgb, k, file)?,
-            mask,
-            depth_bounds: None,
-            mask_is_alpha: false,
-            source_index: i,
-        })
-    }))?;
+    let views =
+        view_files::first_error_in_order(images.par_iter().enumerate().map(|(i, file)| {
+            let photo = view_files::load_photo(file, background)?;
+            let camera =
+                camera_from_projection(&cameras.projections[i], photo.rgb.width, photo.rgb.height)
+                    .map_err(|m| SceneError::invalid(&cam_path, format!("view {i}: {m}")))?;
+            view_files::check_camera(&camera, &cam_path, &format!("view {i}"))?;
+            let mask = match &masks {
+                Some(m) => {
+                    let mask = view_files::load_binary_mask(&m[i])?;
+                    view_files::check_size(&mask, &camera, &m[i], "mask")?;
+                    Some(view_files::downscale_mask(&mask, k, true, &m[i])?)
+                }
+                None => None,
+            };
+            Ok(View {
+                name: view_files::stem(file),
+                camera: view_files::downscale_camera(&camera, k),
+                image: view_files::downscale_image(&photo.rgb, k, file)?,
+                mask,
+                depth_bounds: None,
+                mask_is_alpha: false,
+                source_index: i,
+            })
+        }))?;
 
-    let (train, test) = load::choose_split(
+    let (train, test) = view_files::choose_split(
         opts,
         views.len(),
         root,
@@ -267,7 +269,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
         || split::DTU_TEST_VIEWS.to_vec(),
     )?;
     Ok(Dataset {
-        name: load::scene_name(root),
+        name: view_files::scene_name(root),
         views,
         train,
         test,
@@ -387,7 +389,7 @@ pub(crate) mod tests {
     fn synthetic_scene_reprojects_like_world_mat() {
         let dir = tempfile::tempdir().unwrap();
         let (k, scale) = write_scene(dir.path(), 49, 1.0);
-        let d = load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
+        let d = crate::load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
         assert_eq!(d.views.len(), 49);
         assert_eq!(d.train, vec![25, 22, 28]);
         assert_eq!(d.test.len(), 25);
@@ -419,7 +421,7 @@ pub(crate) mod tests {
             assert_eq!((m.channels, m.get(6, 4, 0), m.get(5, 4, 0)), (1, 1.0, 0.0));
         }
         // Downscale by 2: 12×9, masks stay binary.
-        let d2 = load::load_dataset(
+        let d2 = crate::load::load_dataset(
             dir.path(),
             &LoadOptions {
                 downscale: 2,
@@ -452,7 +454,7 @@ pub(crate) mod tests {
             ..Default::default()
         };
         assert_eq!(
-            load::load_dataset(dir.path(), &opts).unwrap().train,
+            crate::load::load_dataset(dir.path(), &opts).unwrap().train,
             vec![22, 23, 24]
         );
     }
@@ -462,7 +464,7 @@ pub(crate) mod tests {
         let dir = tempfile::tempdir().unwrap();
         write_scene(dir.path(), 30, 1.0);
         // The standard test split needs views up to 47.
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(
@@ -474,10 +476,12 @@ pub(crate) mod tests {
             test_views: Some(vec![1]),
             ..Default::default()
         };
-        load::load_dataset(dir.path(), &ok).unwrap();
+        crate::load::load_dataset(dir.path(), &ok).unwrap();
         // Cameras made for images twice as large.
         write_scene(dir.path(), 30, 2.0);
-        let e = load::load_dataset(dir.path(), &ok).unwrap_err().to_string();
+        let e = crate::load::load_dataset(dir.path(), &ok)
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("cameras_sphere.npz") && e.contains("principal point"),
             "{e}"
@@ -490,20 +494,26 @@ pub(crate) mod tests {
         Image::filled(24, 18, &[0.0; 3])
             .save_png(&dir.path().join("mask/030.png"))
             .unwrap();
-        let e = load::load_dataset(dir.path(), &ok).unwrap_err().to_string();
+        let e = crate::load::load_dataset(dir.path(), &ok)
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("no world_mat_30 (the scene has 31 images)"),
             "{e}"
         );
         std::fs::remove_file(dir.path().join("image/000030.png")).unwrap();
-        let e = load::load_dataset(dir.path(), &ok).unwrap_err().to_string();
+        let e = crate::load::load_dataset(dir.path(), &ok)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("31 masks but image/ has 30 images"), "{e}");
         std::fs::remove_file(dir.path().join("mask/030.png")).unwrap();
         // Mask of the wrong size.
         Image::filled(12, 9, &[0.0; 3])
             .save_png(&dir.path().join("mask/003.png"))
             .unwrap();
-        let e = load::load_dataset(dir.path(), &ok).unwrap_err().to_string();
+        let e = crate::load::load_dataset(dir.path(), &ok)
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("003.png") && e.contains("mask is 12×9 but its camera is 24×18"),
             "{e}"
@@ -513,7 +523,7 @@ pub(crate) mod tests {
             cameras_file: Some("cameras_linear_init.npz".into()),
             ..ok.clone()
         };
-        let e = load::load_dataset(dir.path(), &opts)
+        let e = crate::load::load_dataset(dir.path(), &opts)
             .unwrap_err()
             .to_string();
         assert!(e.contains("cameras_linear_init.npz"), "{e}");
@@ -524,7 +534,7 @@ pub(crate) mod tests {
             &dir.path().join("cameras_linear_init.npz"),
             &[("world_mat_0", vec![4, 4], nan)],
         );
-        let e = load::load_dataset(dir.path(), &opts)
+        let e = crate::load::load_dataset(dir.path(), &opts)
             .unwrap_err()
             .to_string();
         assert!(e.contains("world_mat_0 contains NaN or Inf"), "{e}");

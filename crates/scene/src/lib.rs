@@ -24,6 +24,7 @@ pub mod error;
 pub mod image;
 pub mod llff;
 pub mod load;
+mod load_options;
 pub mod numpy;
 pub mod ply_scalar;
 pub mod pose_export;
@@ -32,6 +33,7 @@ pub mod split;
 pub mod synthetic;
 pub mod transforms;
 pub mod video;
+mod view_files;
 
 pub use camera::{Camera, Intrinsics, Se3, axes_meeting_point, camera_path};
 pub use dataset::{Dataset, PointCloud, View};

@@ -18,9 +18,10 @@ use crate::axes::opengl_to_opencv;
 use crate::camera::{Camera, Intrinsics, Se3};
 use crate::dataset::{Dataset, PointCloud, View};
 use crate::error::{Result, SceneError};
-use crate::load::{self, LoadOptions, MAX_CAMERA_MAGNITUDE};
+use crate::load_options::LoadOptions;
 use crate::numpy;
 use crate::split;
+use crate::view_files::{self, MAX_CAMERA_MAGNITUDE};
 
 /// NeRF's `bd_factor`: after rescaling, the smallest near bound is `1 / BD_FACTOR`.
 pub const BD_FACTOR: f64 = 0.75;
@@ -213,7 +214,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let poses_path = root.join("poses_bounds.npy");
     let rows = read_poses_bounds(&poses_path)?;
     let (dir, folder_factor) = image_folder(root, opts.llff_factor)?;
-    let files = load::list_images(&dir)?;
+    let files = view_files::list_images(&dir)?;
     if files.len() != rows.len() {
         return Err(SceneError::invalid(
             &dir,
@@ -236,13 +237,13 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
 
     let background = opts.background.unwrap_or([0.0; 3]);
     let extra = (opts.llff_factor / folder_factor).saturating_mul(opts.downscale);
-    let views = load::first_error_in_order(
+    let views = view_files::first_error_in_order(
         files
             .par_iter()
             .enumerate()
             .map(|(i, file)| {
                 let [h_full, w_full, f_full] = rows[i].hwf;
-                let photo = load::load_photo(file, background)?;
+                let photo = view_files::load_photo(file, background)?;
                 let (w, h) = (photo.rgb.width, photo.rgb.height);
                 // The stored images are the full resolution divided by the folder's factor (rounded
                 // either way by the resizer that made them).
@@ -261,15 +262,15 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
                 // the image centre.
                 let intrinsics = Intrinsics::centered(f_full / g, w as u32, h as u32);
                 let camera = Camera::from_camera_to_world(intrinsics, opengl_to_opencv(&gl[i]));
-                load::check_camera(&camera, &poses_path, &format!("row {i}"))?;
-                let camera = load::downscale_camera(&camera, extra);
-                let image = load::downscale_image(&photo.rgb, extra, file)?;
+                view_files::check_camera(&camera, &poses_path, &format!("row {i}"))?;
+                let camera = view_files::downscale_camera(&camera, extra);
+                let image = view_files::downscale_image(&photo.rgb, extra, file)?;
                 let mask = match photo.alpha {
-                    Some(a) => Some(load::downscale_mask(&a, extra, false, file)?),
+                    Some(a) => Some(view_files::downscale_mask(&a, extra, false, file)?),
                     None => None,
                 };
                 Ok(View {
-                    name: load::stem(file),
+                    name: view_files::stem(file),
                     camera,
                     image,
                     mask_is_alpha: mask.is_some(),
@@ -281,7 +282,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     )?;
 
     let n_views = views.len();
-    let (train, test) = load::choose_split(
+    let (train, test) = view_files::choose_split(
         opts,
         n_views,
         root,
@@ -292,7 +293,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
         || split::holdout_test_views(n_views, opts.holdout_every),
     )?;
     Ok(Dataset {
-        name: load::scene_name(root),
+        name: view_files::scene_name(root),
         views,
         train,
         test,
@@ -372,7 +373,7 @@ pub(crate) mod tests {
             n_train: Some(2),
             ..Default::default()
         };
-        let d = load::load_dataset(dir.path(), &opts).unwrap();
+        let d = crate::load::load_dataset(dir.path(), &opts).unwrap();
         assert_eq!(d.views.len(), 4);
         assert_eq!(d.test, vec![0]);
         assert_eq!(d.train, vec![1, 3]);
@@ -398,7 +399,7 @@ pub(crate) mod tests {
     fn normalisation_scales_bounds_and_maps_back() {
         let dir = tempfile::tempdir().unwrap();
         write_scene(dir.path(), &eyes(5), "images_8", (8, 6));
-        let raw = load::load_dataset(
+        let raw = crate::load::load_dataset(
             dir.path(),
             &LoadOptions {
                 llff_normalize: false,
@@ -406,7 +407,7 @@ pub(crate) mod tests {
             },
         )
         .unwrap();
-        let norm = load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
+        let norm = crate::load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
         let m = norm.to_source_world.unwrap();
         let s = 1.0 / (2.0 * BD_FACTOR);
         for (a, b) in raw.views.iter().zip(&norm.views) {
@@ -436,7 +437,7 @@ pub(crate) mod tests {
             "# id x y z r g b error track\n1 0.2 -0.1 0.3 255 0 51 0.5 1 0\n",
         )
         .unwrap();
-        let with_points = load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
+        let with_points = crate::load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
         let cloud = with_points.points.unwrap();
         let p = Vector3::new(0.2, -0.1, 0.3);
         let want = m.try_inverse().unwrap().transform_point(&p.into());
@@ -476,7 +477,7 @@ pub(crate) mod tests {
             n_train: Some(1),
             ..Default::default()
         };
-        let d = load::load_dataset(dir.path(), &opts).unwrap();
+        let d = crate::load::load_dataset(dir.path(), &opts).unwrap();
         let k = &d.views[0].camera.intrinsics;
         assert_eq!((k.width, k.height), (4, 3));
         assert!((k.fx - 80.0 / 16.0).abs() < 1e-12 && (k.cx - 2.0).abs() < 1e-12);
@@ -493,7 +494,7 @@ pub(crate) mod tests {
         };
         // Image count differs from pose count.
         std::fs::remove_file(dir.path().join("images_8/image002.png")).unwrap();
-        let e = load::load_dataset(dir.path(), &opts)
+        let e = crate::load::load_dataset(dir.path(), &opts)
             .unwrap_err()
             .to_string();
         assert!(
@@ -502,7 +503,7 @@ pub(crate) mod tests {
         );
         // Image size disagrees with hwf.
         write_scene(dir.path(), &eyes(3), "images_8", (9, 6));
-        let e = load::load_dataset(dir.path(), &opts)
+        let e = crate::load::load_dataset(dir.path(), &opts)
             .unwrap_err()
             .to_string();
         assert!(e.contains("image000.png") && e.contains("9×6"), "{e}");
@@ -514,7 +515,7 @@ pub(crate) mod tests {
             .collect();
         data[17 + 3] = f64::NAN;
         write_npy(&dir.path().join("poses_bounds.npy"), &[3, 17], &data);
-        let e = load::load_dataset(dir.path(), &opts)
+        let e = crate::load::load_dataset(dir.path(), &opts)
             .unwrap_err()
             .to_string();
         assert!(
@@ -528,7 +529,7 @@ pub(crate) mod tests {
             huge[17 + 3] = 0.0;
             huge[index] = 1e300;
             write_npy(&dir.path().join("poses_bounds.npy"), &[3, 17], &huge);
-            let e = load::load_dataset(dir.path(), &opts)
+            let e = crate::load::load_dataset(dir.path(), &opts)
                 .unwrap_err()
                 .to_string();
             assert!(
@@ -540,14 +541,14 @@ pub(crate) mod tests {
         }
         // Wrong shape.
         write_npy(&dir.path().join("poses_bounds.npy"), &[3, 15], &data[..45]);
-        let e = load::load_dataset(dir.path(), &opts)
+        let e = crate::load::load_dataset(dir.path(), &opts)
             .unwrap_err()
             .to_string();
         assert!(e.contains("expected (N, 17)"), "{e}");
         // Missing image folder.
         write_scene(dir.path(), &eyes(3), "images_8", (8, 6));
         std::fs::rename(dir.path().join("images_8"), dir.path().join("images_3")).unwrap();
-        let e = load::load_dataset(dir.path(), &opts)
+        let e = crate::load::load_dataset(dir.path(), &opts)
             .unwrap_err()
             .to_string();
         assert!(e.contains("no images_8/ folder"), "{e}");
@@ -557,7 +558,7 @@ pub(crate) mod tests {
             train_views: Some(vec![1, 5]),
             ..Default::default()
         };
-        let e = load::load_dataset(dir.path(), &bad)
+        let e = crate::load::load_dataset(dir.path(), &bad)
             .unwrap_err()
             .to_string();
         assert!(
@@ -569,13 +570,13 @@ pub(crate) mod tests {
             n_train: Some(1),
             ..Default::default()
         };
-        let e = load::load_dataset(dir.path(), &empty)
+        let e = crate::load::load_dataset(dir.path(), &empty)
             .unwrap_err()
             .to_string();
         assert!(e.contains("the test split is empty"), "{e}");
         // Corrupt image.
         std::fs::write(dir.path().join("images_8/image001.png"), b"garbage").unwrap();
-        let e = load::load_dataset(dir.path(), &opts)
+        let e = crate::load::load_dataset(dir.path(), &opts)
             .unwrap_err()
             .to_string();
         assert!(

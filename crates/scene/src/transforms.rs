@@ -30,8 +30,9 @@ use crate::axes::opengl_to_opencv;
 use crate::camera::{Camera, Intrinsics, Se3};
 use crate::dataset::{Dataset, View};
 use crate::error::{Result, SceneError};
-use crate::load::{self, LoadOptions};
+use crate::load_options::LoadOptions;
 use crate::split;
+use crate::view_files;
 
 /// Intrinsics and distortion fields, at file or frame level.
 #[derive(Clone, Debug, Default, Deserialize)]
@@ -239,7 +240,7 @@ pub(crate) fn parse_transforms(text: &str, path: &Path) -> Result<Vec<Frame>> {
 /// Loads one frame as a view: image (RGBA composited over `background`, alpha kept as the
 /// mask), camera from the frame's intrinsics at the image's size, then downscaled by `k`.
 fn load_frame(frame: &Frame, background: [f32; 3], k: u32) -> Result<View> {
-    let photo = load::load_photo(&frame.image, background)?;
+    let photo = view_files::load_photo(&frame.image, background)?;
     let (w, h) = (photo.rgb.width, photo.rgb.height);
     let intrinsics = frame.camera.intrinsics(w, h).map_err(|m| {
         SceneError::invalid(
@@ -248,24 +249,24 @@ fn load_frame(frame: &Frame, background: [f32; 3], k: u32) -> Result<View> {
         )
     })?;
     let camera = Camera::from_camera_to_world(intrinsics, frame.camera_to_world);
-    load::check_camera(&camera, &frame.source, &format!("frame {}", frame.index))?;
+    view_files::check_camera(&camera, &frame.source, &format!("frame {}", frame.index))?;
     let (mask, binary) = match (&frame.mask, photo.alpha) {
         (Some(p), _) => {
-            let m = load::load_binary_mask(p)?;
-            load::check_size(&m, &camera, p, "mask")?;
+            let m = view_files::load_binary_mask(p)?;
+            view_files::check_size(&m, &camera, p, "mask")?;
             (Some(m), true)
         }
         (None, alpha) => (alpha, false),
     };
     let mask = match mask {
-        Some(m) => Some(load::downscale_mask(&m, k, binary, &frame.image)?),
+        Some(m) => Some(view_files::downscale_mask(&m, k, binary, &frame.image)?),
         None => None,
     };
     let mask_is_alpha = mask.is_some() && !binary;
     Ok(View {
-        name: load::stem(&frame.image),
-        camera: load::downscale_camera(&camera, k),
-        image: load::downscale_image(&photo.rgb, k, &frame.image)?,
+        name: view_files::stem(&frame.image),
+        camera: view_files::downscale_camera(&camera, k),
+        image: view_files::downscale_image(&photo.rgb, k, &frame.image)?,
         mask,
         mask_is_alpha,
         depth_bounds: None,
@@ -274,7 +275,7 @@ fn load_frame(frame: &Frame, background: [f32; 3], k: u32) -> Result<View> {
 }
 
 fn load_frames(frames: &[&Frame], background: [f32; 3], k: u32) -> Result<Vec<View>> {
-    load::first_error_in_order(frames.par_iter().map(|f| load_frame(f, background, k)))
+    view_files::first_error_in_order(frames.par_iter().map(|f| load_frame(f, background, k)))
 }
 
 /// Loads NeRF-synthetic data. Training views are the first `n_train` (default 8) entries of the
@@ -311,7 +312,7 @@ pub fn load_blender(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let views = load_frames(&chosen, background, opts.downscale)?;
     let n_train = train_ids.len();
     Ok(Dataset {
-        name: load::scene_name(root),
+        name: view_files::scene_name(root),
         views,
         train: (0..n_train).collect(),
         test: (n_train..n_train + test_ids.len()).collect(),
@@ -337,7 +338,7 @@ pub fn load_nerfstudio(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
         opts.downscale,
     )?;
     let n_views = views.len();
-    let (train, test) = load::choose_split(
+    let (train, test) = view_files::choose_split(
         opts,
         n_views,
         &path,
@@ -345,7 +346,7 @@ pub fn load_nerfstudio(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
         || split::holdout_test_views(n_views, opts.holdout_every),
     )?;
     Ok(Dataset {
-        name: load::scene_name(root),
+        name: view_files::scene_name(root),
         views,
         train,
         test,
@@ -444,7 +445,7 @@ pub(crate) mod tests {
             test_views: Some(vec![0]),
             ..Default::default()
         };
-        let d = load::load_dataset(dir.path(), &opts).unwrap();
+        let d = crate::load::load_dataset(dir.path(), &opts).unwrap();
         let cam = &d.views[0].camera;
         let (u, v, z) = cam.project(&Vector3::new(1.0, 1.0, 0.0)).unwrap();
         assert!((u - (10.0 + 50.0 / 5.0)).abs() < 1e-12, "{u}");
@@ -458,7 +459,7 @@ pub(crate) mod tests {
     fn blender_split_composite_and_focal() {
         let dir = tempfile::tempdir().unwrap();
         write_blender(dir.path(), 100, 3, json!({}));
-        let d = load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
+        let d = crate::load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
         assert_eq!(d.views.len(), 11);
         let names: Vec<&str> = d.train_views().map(|v| v.name.as_str()).collect();
         assert_eq!(
@@ -492,7 +493,7 @@ pub(crate) mod tests {
             downscale: 2,
             ..Default::default()
         };
-        let d = load::load_dataset(dir.path(), &opts).unwrap();
+        let d = crate::load::load_dataset(dir.path(), &opts).unwrap();
         assert_eq!(d.views[0].name, "r_5");
         assert!((d.views[0].image.pixel(1, 1)[0] - a).abs() < 1e-6);
         assert_eq!((d.views[1].image.width, d.views[1].image.height), (10, 8));
@@ -503,7 +504,7 @@ pub(crate) mod tests {
     fn bad_transforms_are_one_line_errors() {
         let dir = tempfile::tempdir().unwrap();
         write_blender(dir.path(), 100, 2, json!({ "k1": 0.01 }));
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(
@@ -516,12 +517,12 @@ pub(crate) mod tests {
             2,
             json!({ "camera_model": "OPENCV_FISHEYE" }),
         );
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("not a pinhole model"), "{e}");
         write_blender(dir.path(), 100, 2, json!({ "w": 30, "fl_x": 20.0 }));
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("image is 20×16 but the file says w=30"), "{e}");
@@ -530,7 +531,7 @@ pub(crate) mod tests {
             test_views: Some(vec![2]),
             ..Default::default()
         };
-        let e = load::load_dataset(dir.path(), &opts)
+        let e = crate::load::load_dataset(dir.path(), &opts)
             .unwrap_err()
             .to_string();
         assert!(
@@ -541,12 +542,12 @@ pub(crate) mod tests {
             n_train: Some(101),
             ..Default::default()
         };
-        let e = load::load_dataset(dir.path(), &opts)
+        let e = crate::load::load_dataset(dir.path(), &opts)
             .unwrap_err()
             .to_string();
         assert!(e.contains("asked for 101 training views"), "{e}");
         std::fs::remove_file(dir.path().join("train/r_86.png")).unwrap();
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("r_86.png"), "{e}");
@@ -557,7 +558,7 @@ pub(crate) mod tests {
             text.replacen("1.0", "NaN", 1),
         )
         .unwrap();
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(
@@ -569,28 +570,28 @@ pub(crate) mod tests {
             &text[..text.len() / 2],
         )
         .unwrap();
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("invalid transforms JSON"), "{e}");
         // A non-rotation matrix.
         let doc = json!({ "camera_angle_x": 0.5, "frames": [{ "file_path": "a", "transform_matrix": [[2.0,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]] }] });
         std::fs::write(dir.path().join("transforms_test.json"), doc.to_string()).unwrap();
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("not orthonormal"), "{e}");
         // A mirror: orthonormal, determinant −1.
         let doc = json!({ "camera_angle_x": 0.5, "frames": [{ "file_path": "a", "transform_matrix": [[-1.0,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]] }] });
         std::fs::write(dir.path().join("transforms_test.json"), doc.to_string()).unwrap();
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("is a reflection"), "{e}");
         // An empty image path.
         let doc = json!({ "camera_angle_x": 0.5, "frames": [{ "file_path": "", "transform_matrix": [[1.0,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]] }] });
         std::fs::write(dir.path().join("transforms_test.json"), doc.to_string()).unwrap();
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(
@@ -612,7 +613,7 @@ pub(crate) mod tests {
         ] {
             let doc = json!({ "camera_angle_x": 0.5, "frames": [frame] });
             std::fs::write(dir.path().join("transforms_test.json"), doc.to_string()).unwrap();
-            let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
                 .unwrap_err()
                 .to_string();
             assert!(
@@ -659,7 +660,7 @@ pub(crate) mod tests {
     fn nerfstudio_masks_sorting_and_split() {
         let dir = tempfile::tempdir().unwrap();
         write_nerfstudio(dir.path());
-        let d = load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
+        let d = crate::load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
         let names: Vec<&str> = d.views.iter().map(|v| v.name.as_str()).collect();
         assert_eq!(names[..3], ["f_00", "f_01", "f_02"]);
         assert_eq!(d.test, vec![0, 8]);
@@ -667,7 +668,7 @@ pub(crate) mod tests {
         let m = d.views[4].mask.as_ref().unwrap();
         assert_eq!((m.get(2, 3, 0), m.get(3, 3, 0), m.channels), (1.0, 0.0, 1));
         assert!((d.views[4].camera.center() - Vector3::new(3.0, 0.8, 1.0)).norm() < 1e-9);
-        let d = load::load_dataset(
+        let d = crate::load::load_dataset(
             dir.path(),
             &LoadOptions {
                 n_train: Some(3),

@@ -8,10 +8,11 @@
 use fewview_scene::Dataset;
 use serde::Serialize;
 
+use crate::config::RunConfig;
 use crate::cputime::measure;
 use crate::error::Result;
 use crate::field::EncoderKind;
-use crate::pipeline::{RunConfig, prepare};
+use crate::pipeline::prepare;
 use crate::train::Trainer;
 
 /// Iterations per second of one configuration.

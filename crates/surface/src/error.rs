@@ -25,6 +25,13 @@ pub enum SurfaceError {
     /// A tensor whose values could not be read back to the host (a defect, not bad input).
     #[error(transparent)]
     Readback(#[from] fewview_optim::ReadbackError),
+    /// An input that could not be loaded: `what` says which, `source` why.
+    #[error("{what}")]
+    Input {
+        what: String,
+        #[source]
+        source: Box<SurfaceError>,
+    },
     /// Training diverged (NaN loss or parameters).
     #[error("training diverged at iteration {iteration}: {message}")]
     Diverged { iteration: usize, message: String },
@@ -40,6 +47,13 @@ impl SurfaceError {
 
     pub fn io(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
         Self::Io(fewview_scene::FileIoError::new(path, error))
+    }
+
+    pub fn input(what: impl Into<String>, source: SurfaceError) -> Self {
+        Self::Input {
+            what: what.into(),
+            source: Box::new(source),
+        }
     }
 
     pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {

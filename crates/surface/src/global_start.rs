@@ -5,10 +5,9 @@
 //! baseline directions with each baseline's length taken from the initial poses where the
 //! directions leave it free, and the whole set moved onto the initial poses by a similarity.
 //!
-//! Why: the warm-up's Levenberg–Marquardt is local. From σ = 0.15 noise (12° of rotation) on
-//! DTU scan37's wide triplet it settled where the matches still sat 0.28 px off their epipolar
-//! lines (the true poses: 0.03 px) and the rotations were 12.8° off. The relative poses need
-//! no initial poses at all, so they cannot inherit that basin.
+//! Why: the warm-up's Levenberg–Marquardt is local: from noisy poses it can settle in a basin
+//! where the matches still sit well off their epipolar lines and the rotations stay far off.
+//! The relative poses need no initial poses at all, so they cannot inherit that basin.
 
 use fewview_geom::epipolar::{
     Baseline, RelativePoseOptions, RelativeRotation, average_rotations, centres_from_baselines,
@@ -175,7 +174,7 @@ pub fn global_start(
         .map(|(r, c)| Se3::new(*r, -(r * c)))
         .collect();
     Ok(GlobalStart {
-        poses: crate::warmup::into_frame_of(&poses, initial),
+        poses: crate::pose::into_frame_of(&poses, initial),
         pairs,
     })
 }

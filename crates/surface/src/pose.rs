@@ -10,7 +10,8 @@
 //! start at the initial (noisy) pose and are optimised directly with their own Adam.
 
 use burn::tensor::Tensor;
-use fewview_scene::Se3;
+use fewview_geom::similarity::umeyama;
+use fewview_scene::{Se3, axes_meeting_point};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
@@ -124,6 +125,31 @@ pub fn cross_rows(a: Tensor<2>, b: Tensor<2>) -> Tensor<2> {
         ],
         1,
     )
+}
+
+/// `refined` moved, as a rigid set, by the similarity that lays it best onto `reference`:
+/// Umeyama's least-squares fit of the camera centres and of the points where each camera's
+/// axis passes nearest the set's common look-at point. The epipolar constraints fix the
+/// cameras relative to each other but not where the set sits in the world, and
+/// Levenberg–Marquardt drifts along that similarity, which can move the object partly outside
+/// the unit sphere the field lives in, where the joint training cannot fit it. The initial
+/// poses, however noisy, look at the object on average; this puts the refined set back where
+/// they were. (Anchoring on one view instead, as Alg. 1 does for evaluation, carries that
+/// view's own noise to all the others.)
+pub(crate) fn into_frame_of(refined: &[Se3], reference: &[Se3]) -> Vec<Se3> {
+    let landmarks = |poses: &[Se3]| -> Vec<Vector3<f64>> {
+        let target = axes_meeting_point(poses);
+        let centres: Vec<Vector3<f64>> = poses.iter().map(|p| p.inverse().translation).collect();
+        let on_axes = poses.iter().zip(&centres).map(|(p, c)| {
+            let forward: Vector3<f64> = p.rotation.row(2).transpose();
+            c + forward * (target - c).dot(&forward)
+        });
+        centres.iter().copied().chain(on_axes).collect()
+    };
+    let Ok(sim) = umeyama(&landmarks(refined), &landmarks(reference), true) else {
+        return refined.to_vec();
+    };
+    refined.iter().map(|p| sim.apply_to_pose(p)).collect()
 }
 
 #[cfg(test)]

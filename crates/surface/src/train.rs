@@ -23,7 +23,7 @@ use crate::losses::{self, CorrespondenceBatch, GrayStack};
 use crate::matching::Match;
 use crate::pose::{d9_to_pose, d9_to_rows, pose_to_d9};
 use crate::rays::{camera_dirs, intrinsics_rows, select_rows, world_rays};
-use crate::render::{SampleConfig, eikonal_loss, render_rays, sample_rays};
+use crate::render::{Rendered, SampleConfig, eikonal_loss, render_rays, sample_rays};
 
 /// Loss weights and switches (defaults: paper 001 §B.1).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -46,7 +46,7 @@ pub struct LossConfig {
     /// thousands), which is ~10–100 × NeuS's Eikonal weight 0.1 on the *mean*. We take the
     /// mean (NeuS's code, independent of the batch size) with NeuS's weight 0.1 as the
     /// default; with the paper's 10⁻³ on the mean the hash-grid SDF loses its distance
-    /// property within a few dozen iterations (measured: mean Eikonal residual 0.02 → 3.1).
+    /// property within a few dozen iterations.
     pub lambda_geo: f32,
     pub eikonal: bool,
     /// `λ_pSDF` (0.1).
@@ -267,8 +267,129 @@ pub struct StepStats {
     pub pose_step_skipped: bool,
 }
 
-/// A correspondence in a chosen direction: `(view t, p, view s, q, confidence)`.
-type Directed = (usize, [f32; 2], usize, [f32; 2], f32);
+/// A correspondence in the direction the losses read it: pixel `p` of the target view and
+/// pixel `q` of the source view.
+#[derive(Clone, Copy, Debug)]
+struct Directed {
+    target_view: usize,
+    p: [f32; 2],
+    source_view: usize,
+    q: [f32; 2],
+    confidence: f32,
+}
+
+impl Directed {
+    /// From view `a` to view `b` of the match.
+    fn from_to(m: &Match) -> Self {
+        Self {
+            target_view: m.view_a,
+            p: m.a,
+            source_view: m.view_b,
+            q: m.b,
+            confidence: m.confidence,
+        }
+    }
+
+    /// From view `b` to view `a` of the match.
+    fn to_from(m: &Match) -> Self {
+        Self {
+            target_view: m.view_b,
+            p: m.b,
+            source_view: m.view_a,
+            q: m.a,
+            confidence: m.confidence,
+        }
+    }
+}
+
+/// One step's rays: `n_random` random pixels, then the target ends of the correspondences,
+/// then their source ends (`views` and `uv` per ray, pixel centres at half-integers).
+struct Batch {
+    views: Vec<usize>,
+    uv: Vec<[f32; 2]>,
+    n_random: usize,
+    correspondences: Vec<Directed>,
+    /// The sampler's jitter of each ray.
+    jitter: Vec<f32>,
+}
+
+/// What a batch's rays should render.
+struct Targets {
+    /// RGB per ray.
+    colour: Vec<f32>,
+    /// The object mask per ray (1 without masks).
+    mask: Vec<f32>,
+    /// Whether the colour loss is masked: masks asked for and every view has one.
+    masked: bool,
+}
+
+/// A rendered batch with what its loss terms read.
+struct BatchRays<'a> {
+    batch: &'a Batch,
+    targets: &'a Targets,
+    /// The poses' rows (tracked when the poses step).
+    rows: &'a Tensor<2>,
+    intrinsics: &'a [Intrinsics],
+    origins: &'a Tensor<2>,
+    dirs: &'a Tensor<2>,
+    out: &'a Rendered,
+    device: &'a Device,
+}
+
+/// The rays of a batch's correspondences: indices of their target (`p`) and source (`q`) ends
+/// among the batch's rays, and each end's view.
+struct CorrespondenceEnds {
+    p: Vec<usize>,
+    q: Vec<usize>,
+    views_t: Vec<usize>,
+    views_s: Vec<usize>,
+}
+
+impl CorrespondenceEnds {
+    fn of(rays: &BatchRays) -> Self {
+        let (n, nb) = (rays.batch.n_random, rays.batch.correspondences.len());
+        let corr = &rays.batch.correspondences;
+        Self {
+            p: (n..n + nb).collect(),
+            q: (n + nb..n + 2 * nb).collect(),
+            views_t: corr.iter().map(|c| c.target_view).collect(),
+            views_s: corr.iter().map(|c| c.source_view).collect(),
+        }
+    }
+
+    /// The rows `idx` of `t`.
+    fn take(&self, t: &Tensor<2>, idx: &[usize], device: &Device) -> Tensor<2> {
+        let ids: Vec<i64> = idx.iter().map(|v| *v as i64).collect();
+        t.clone().select(
+            0,
+            Tensor::<1, burn::tensor::Int>::from_data(TensorData::new(ids, [idx.len()]), device),
+        )
+    }
+
+    /// The losses' view of the correspondences: both ends' cameras, pixels and surface points
+    /// at the rendered depth.
+    fn batch(&self, rays: &BatchRays) -> CorrespondenceBatch {
+        let (o, d, depth, device) = (rays.origins, rays.dirs, &rays.out.depth, rays.device);
+        let point = |idx: &[usize]| {
+            self.take(o, idx, device) + self.take(d, idx, device) * self.take(depth, idx, device)
+        };
+        // The points first, then the cameras: the order the autodiff graph has always been
+        // built in.
+        let (x_p, x_q) = (point(&self.p), point(&self.q));
+        let corr = &rays.batch.correspondences;
+        CorrespondenceBatch {
+            rows_t: select_rows(rays.rows, &self.views_t),
+            rows_s: select_rows(rays.rows, &self.views_s),
+            k_t: intrinsics_rows(rays.intrinsics, &self.views_t, device),
+            k_s: intrinsics_rows(rays.intrinsics, &self.views_s, device),
+            p: corr.iter().map(|c| c.p).collect(),
+            q: corr.iter().map(|c| c.q).collect(),
+            confidence: corr.iter().map(|c| c.confidence).collect(),
+            x_p,
+            x_q,
+        }
+    }
+}
 
 /// The trainer.
 pub struct Trainer {
@@ -459,11 +580,12 @@ impl Trainer {
             && (it as f64) >= self.config.pose_start * self.config.iterations as f64
     }
 
-    /// One optimisation step.
+    /// One optimisation step: a batch of random rays and correspondences
+    /// ([`Self::sample_batch`]), rendered through the current poses, the loss terms on it
+    /// ([`Self::loss_terms`]), then the Adam updates ([`Self::update`]).
     pub fn step(&mut self) -> Result<StepStats> {
         let it = self.state.iteration;
         let cfg = self.config.clone();
-        let lc = &cfg.losses;
         let mut rng = rand::rngs::StdRng::seed_from_u64(
             cfg.seed ^ (it as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
         );
@@ -476,62 +598,8 @@ impl Trainer {
             1.0
         };
         let nv = self.views.len();
-        let (w, h) = (self.width, self.height);
-
-        // --- Batch: random pixels, then correspondence pairs (p in t, q in s).
-        let mut views_idx = Vec::new();
-        let mut uv = Vec::new();
-        for _ in 0..cfg.rays_per_batch {
-            let v = rng.random_range(0..nv);
-            let x = rng.random_range(0..w);
-            let y = rng.random_range(0..h);
-            views_idx.push(v);
-            uv.push([x as f32 + 0.5, y as f32 + 0.5]);
-        }
-        let use_corr = !self.matches.is_empty()
-            && cfg.matches_per_batch > 0
-            && (lc.matching || lc.ncc || lc.geometric_consistency);
-        let mut corr: Vec<Directed> = Vec::new();
-        if use_corr {
-            for _ in 0..cfg.matches_per_batch {
-                let m = self.matches[rng.random_range(0..self.matches.len())];
-                // Either direction, so every view is a target as often as a source.
-                if rng.random_bool(0.5) {
-                    corr.push((m.view_a, m.a, m.view_b, m.b, m.confidence));
-                } else {
-                    corr.push((m.view_b, m.b, m.view_a, m.a, m.confidence));
-                }
-            }
-        }
-        let n_rand = views_idx.len();
-        let nb = corr.len();
-        for c in &corr {
-            views_idx.push(c.0);
-            uv.push(c.1);
-        }
-        for c in &corr {
-            views_idx.push(c.2);
-            uv.push(c.3);
-        }
-        let r = views_idx.len();
-        let jitter: Vec<f32> = (0..r).map(|_| rng.random_range(-0.5f32..0.5)).collect();
-
-        // --- Targets.
-        let mut target = Vec::with_capacity(r * 3);
-        let mut mask = Vec::with_capacity(r);
-        for (&v, p) in views_idx.iter().zip(&uv) {
-            target.extend(bilinear_rgb(&self.views[v].image, p[0], p[1]));
-            let m = match &self.views[v].mask {
-                Some(m) if cfg.use_masks => {
-                    let x = ((p[0] - 0.5).round().max(0.0) as usize).min(w - 1);
-                    let y = ((p[1] - 0.5).round().max(0.0) as usize).min(h - 1);
-                    (m.get(x, y, 0) > 0.5) as u8 as f32
-                }
-                _ => 1.0,
-            };
-            mask.push(m);
-        }
-        let masked = cfg.use_masks && self.views.iter().all(|v| v.mask.is_some());
+        let batch = self.sample_batch(&mut rng);
+        let targets = self.targets(&batch);
 
         // --- Tensors with gradients.
         let device = Device::flex().autodiff();
@@ -546,16 +614,15 @@ impl Trainer {
             .collect();
         let d9 =
             Tensor::<2>::from_data(TensorData::new(self.state.poses.clone(), [nv, 9]), &device);
-        // Poses are tracked only in the iterations that step them: while they are held (the
-        // CPU schedule holds them for 75 % of the run, or all of it after a patch adjustment)
-        // the rays are constants, and the hash grid's backward skips the gradient with respect
-        // to the sample positions (a quarter of a step's time), which nothing else reads.
+        // Poses are tracked only in the iterations that step them: while they are held the
+        // rays are constants, and the hash grid's backward skips the gradient with respect to
+        // the sample positions, which nothing else reads.
         let step_poses = self.steps_poses(it);
         let d9 = if step_poses { d9.require_grad() } else { d9 };
         let rows = d9_to_rows(d9.clone());
         let intr: Vec<Intrinsics> = self.views.iter().map(|v| v.intrinsics).collect();
-        let sel = select_rows(&rows, &views_idx);
-        let dcam = camera_dirs(&intr, &views_idx, &uv);
+        let sel = select_rows(&rows, &batch.views);
+        let dcam = camera_dirs(&intr, &batch.views, &batch.uv);
         let (origins, dirs) = world_rays(&sel, &dcam);
 
         // --- Sampling on host values.
@@ -570,7 +637,7 @@ impl Trainer {
         let field = &self.field;
         let host_params = &self.state.params;
         let sdf_fn = |p: &[f32]| field.sdf_host(host_params, p);
-        let z = sample_rays(&sdf_fn, &o_host, &d_host, &cfg.sample, Some(&jitter))?;
+        let z = sample_rays(&sdf_fn, &o_host, &d_host, &cfg.sample, Some(&batch.jitter))?;
 
         // --- Render.
         let out = render_rays(
@@ -582,34 +649,170 @@ impl Trainer {
             cos_anneal,
             cfg.background,
         )?;
-
-        // --- Losses.
+        let rays = BatchRays {
+            batch: &batch,
+            targets: &targets,
+            rows: &rows,
+            intrinsics: &intr,
+            origins: &origins,
+            dirs: &dirs,
+            out: &out,
+            device: &device,
+        };
         let mut stats = StepStats {
             iteration: it,
             ..Default::default()
         };
-        let color_w: Vec<f32> = if masked { mask.clone() } else { vec![1.0; r] };
-        let l_color = losses::color_loss(&out.color, &target, &color_w);
+        let total = self.loss_terms(&rays, progress, &mut stats)?;
+        stats.total = value(&total, "total loss")?;
+        stats.inv_s = (self.state.params[self.field.index().variance][0] * 10.0).exp();
+        if !stats.total.is_finite() {
+            return Err(SurfaceError::Diverged {
+                iteration: it,
+                message: format!("loss is {}", stats.total),
+            });
+        }
+        let tracked_poses = step_poses.then_some(&d9);
+        stats.pose_step_skipped = self.update(total, &params, tracked_poses)?;
+        self.state.iteration += 1;
+        Ok(stats)
+    }
+
+    /// Random pixels of random views, then correspondences (each in a random direction), then
+    /// one sampling jitter per ray, all drawn from `rng` in that order.
+    fn sample_batch(&self, rng: &mut rand::rngs::StdRng) -> Batch {
+        let cfg = &self.config;
+        let lc = &cfg.losses;
+        let nv = self.views.len();
+        let (w, h) = (self.width, self.height);
+        let mut views = Vec::new();
+        let mut uv = Vec::new();
+        for _ in 0..cfg.rays_per_batch {
+            let v = rng.random_range(0..nv);
+            let x = rng.random_range(0..w);
+            let y = rng.random_range(0..h);
+            views.push(v);
+            uv.push([x as f32 + 0.5, y as f32 + 0.5]);
+        }
+        let use_corr = !self.matches.is_empty()
+            && cfg.matches_per_batch > 0
+            && (lc.matching || lc.ncc || lc.geometric_consistency);
+        let mut correspondences: Vec<Directed> = Vec::new();
+        if use_corr {
+            for _ in 0..cfg.matches_per_batch {
+                let m = self.matches[rng.random_range(0..self.matches.len())];
+                // Either direction, so every view is a target as often as a source.
+                correspondences.push(if rng.random_bool(0.5) {
+                    Directed::from_to(&m)
+                } else {
+                    Directed::to_from(&m)
+                });
+            }
+        }
+        let n_random = views.len();
+        for c in &correspondences {
+            views.push(c.target_view);
+            uv.push(c.p);
+        }
+        for c in &correspondences {
+            views.push(c.source_view);
+            uv.push(c.q);
+        }
+        let jitter: Vec<f32> = (0..views.len())
+            .map(|_| rng.random_range(-0.5f32..0.5))
+            .collect();
+        Batch {
+            views,
+            uv,
+            n_random,
+            correspondences,
+            jitter,
+        }
+    }
+
+    /// The colours the batch's rays should render and their mask values (1 without a mask).
+    fn targets(&self, batch: &Batch) -> Targets {
+        let use_masks = self.config.use_masks;
+        let (w, h) = (self.width, self.height);
+        let r = batch.views.len();
+        let mut colour = Vec::with_capacity(r * 3);
+        let mut mask = Vec::with_capacity(r);
+        for (&v, p) in batch.views.iter().zip(&batch.uv) {
+            colour.extend(bilinear_rgb(&self.views[v].image, p[0], p[1]));
+            let m = match &self.views[v].mask {
+                Some(m) if use_masks => {
+                    let x = ((p[0] - 0.5).round().max(0.0) as usize).min(w - 1);
+                    let y = ((p[1] - 0.5).round().max(0.0) as usize).min(h - 1);
+                    (m.get(x, y, 0) > 0.5) as u8 as f32
+                }
+                _ => 1.0,
+            };
+            mask.push(m);
+        }
+        let masked = use_masks && self.views.iter().all(|v| v.mask.is_some());
+        Targets {
+            colour,
+            mask,
+            masked,
+        }
+    }
+
+    /// The total loss of a rendered batch: colour and mask, then the geometry terms, then the
+    /// correspondence terms, each weighted and recorded in `stats`.
+    fn loss_terms(
+        &self,
+        rays: &BatchRays,
+        progress: f64,
+        stats: &mut StepStats,
+    ) -> Result<Tensor<1>> {
+        let lc = &self.config.losses;
+        let (out, targets) = (rays.out, rays.targets);
+        let r = rays.batch.views.len();
+        let color_w: Vec<f32> = if targets.masked {
+            targets.mask.clone()
+        } else {
+            vec![1.0; r]
+        };
+        let l_color = losses::color_loss(&out.color, &targets.colour, &color_w);
         stats.color = value(&l_color, "colour loss")?;
         stats.psnr = -10.0 * stats.color.max(1e-10).log10();
         let mut total = l_color;
-        if masked && lc.lambda_mask > 0.0 {
-            let l = losses::mask_loss(&out.weight_sum, &mask);
+        if targets.masked && lc.lambda_mask > 0.0 {
+            let l = losses::mask_loss(&out.weight_sum, &targets.mask);
             stats.mask = value(&l, "mask loss")?;
             total = total + l * lc.lambda_mask;
         }
+        if let Some(g) = self.geometry_loss(rays, progress, stats)? {
+            total = total + g * lc.lambda_geo;
+        }
+        if !rays.batch.correspondences.is_empty() {
+            total = self.correspondence_losses(rays, total, stats)?;
+        }
+        Ok(total)
+    }
+
+    /// The Eikonal term and the progressive SDF term (weighted by `lambda_psdf`), unweighted
+    /// by `lambda_geo`; `None` when both are off.
+    fn geometry_loss(
+        &self,
+        rays: &BatchRays,
+        progress: f64,
+        stats: &mut StepStats,
+    ) -> Result<Option<Tensor<1>>> {
+        let cfg = &self.config;
+        let lc = &cfg.losses;
+        let (out, targets) = (rays.out, rays.targets);
         let depth_host = f32_values(out.depth.clone(), "rendered depth")?;
         let wsum_host = f32_values(out.weight_sum.clone(), "rendered opacity")?;
-        // Geometry: Eikonal + pSDF.
         let mut l_geo: Option<Tensor<1>> = None;
         if lc.eikonal {
-            let l = eikonal_loss(&out);
+            let l = eikonal_loss(out);
             stats.eikonal = value(&l, "Eikonal loss")?;
             l_geo = Some(l);
         }
         if lc.psdf && lc.lambda_psdf > 0.0 {
-            let ray_ok: Vec<bool> = (0..r)
-                .map(|i| if masked { mask[i] > 0.5 } else { true } && wsum_host[i] > 0.5)
+            let ray_ok: Vec<bool> = (0..rays.batch.views.len())
+                .map(|i| (!targets.masked || targets.mask[i] > 0.5) && wsum_host[i] > 0.5)
                 .collect();
             let lb = lc.lambda_b as f64;
             let window = cfg.c2f;
@@ -630,99 +833,85 @@ impl Trainer {
                 });
             }
         }
-        if let Some(g) = l_geo {
-            total = total + g * lc.lambda_geo;
+        Ok(l_geo)
+    }
+
+    /// `total` plus the matching term and the uncertainty-weighted NCC and geometric
+    /// consistency terms of the batch's correspondences.
+    fn correspondence_losses(
+        &self,
+        rays: &BatchRays,
+        mut total: Tensor<1>,
+        stats: &mut StepStats,
+    ) -> Result<Tensor<1>> {
+        let lc = &self.config.losses;
+        let ends = CorrespondenceEnds::of(rays);
+        let batch = ends.batch(rays);
+        if lc.matching && lc.lambda_mc > 0.0 {
+            let l = losses::matching_loss(&batch)?;
+            stats.matching = value(&l, "matching loss")?;
+            total = total + l * lc.lambda_mc;
         }
-        // Correspondences.
-        if nb > 0 {
-            let idx_p: Vec<usize> = (n_rand..n_rand + nb).collect();
-            let idx_q: Vec<usize> = (n_rand + nb..n_rand + 2 * nb).collect();
-            let take = |t: &Tensor<2>, idx: &[usize]| {
-                let ids: Vec<i64> = idx.iter().map(|v| *v as i64).collect();
-                t.clone().select(
-                    0,
-                    Tensor::<1, burn::tensor::Int>::from_data(
-                        TensorData::new(ids, [idx.len()]),
-                        &device,
-                    ),
-                )
-            };
-            let xp = take(&origins, &idx_p) + take(&dirs, &idx_p) * take(&out.depth, &idx_p);
-            let xq = take(&origins, &idx_q) + take(&dirs, &idx_q) * take(&out.depth, &idx_q);
-            let views_t: Vec<usize> = corr.iter().map(|c| c.0).collect();
-            let views_s: Vec<usize> = corr.iter().map(|c| c.2).collect();
-            let batch = CorrespondenceBatch {
-                rows_t: select_rows(&rows, &views_t),
-                rows_s: select_rows(&rows, &views_s),
-                k_t: intrinsics_rows(&intr, &views_t, &device),
-                k_s: intrinsics_rows(&intr, &views_s, &device),
-                p: corr.iter().map(|c| c.1).collect(),
-                q: corr.iter().map(|c| c.3).collect(),
-                confidence: corr.iter().map(|c| c.4).collect(),
-                x_p: xp,
-                x_q: xq,
-            };
-            if lc.matching && lc.lambda_mc > 0.0 {
-                let l = losses::matching_loss(&batch)?;
-                stats.matching = value(&l, "matching loss")?;
-                total = total + l * lc.lambda_mc;
-            }
-            if (lc.ncc || lc.geometric_consistency) && lc.lambda_u > 0.0 {
-                let dist = losses::backprojection_distances(&batch);
-                let dh = f32_values(dist.clone(), "back-projection distances")?;
-                let gamma = if lc.uncertainty {
-                    losses::uncertainty_weights(&dh)
-                } else {
-                    vec![1.0; nb]
-                };
-                let mut l_u: Option<Tensor<1>> = None;
-                if lc.ncc {
-                    let gray = GrayStack {
-                        values: Tensor::from_data(
-                            TensorData::new(self.gray.clone(), [self.gray.len()]),
-                            &device,
-                        ),
-                        host: self.gray.clone(),
-                        width: w,
-                        height: h,
-                    };
-                    let l = losses::ncc_loss(
-                        &gray,
-                        &batch,
-                        &views_t,
-                        &views_s,
-                        &take(&origins, &idx_p),
-                        &take(&out.normal, &idx_p),
-                        &self.offsets,
-                        &gamma,
-                    )?;
-                    stats.ncc = value(&l, "NCC loss")?;
-                    l_u = Some(l);
-                }
-                if lc.geometric_consistency {
-                    let l = losses::geometric_consistency_loss(&dist, &gamma);
-                    stats.geometric = value(&l, "geometric consistency loss")?;
-                    let l = l * lc.lambda_gc;
-                    l_u = Some(match l_u {
-                        Some(a) => a + l,
-                        None => l,
-                    });
-                }
-                if let Some(l) = l_u {
-                    total = total + l * lc.lambda_u;
-                }
-            }
+        if !((lc.ncc || lc.geometric_consistency) && lc.lambda_u > 0.0) {
+            return Ok(total);
         }
-        stats.total = value(&total, "total loss")?;
-        stats.inv_s = (self.state.params[self.field.index().variance][0] * 10.0).exp();
-        if !stats.total.is_finite() {
-            return Err(SurfaceError::Diverged {
-                iteration: it,
-                message: format!("loss is {}", stats.total),
+        let dist = losses::backprojection_distances(&batch);
+        let dh = f32_values(dist.clone(), "back-projection distances")?;
+        let gamma = if lc.uncertainty {
+            losses::uncertainty_weights(&dh)
+        } else {
+            vec![1.0; ends.p.len()]
+        };
+        let mut l_u: Option<Tensor<1>> = None;
+        if lc.ncc {
+            let gray = GrayStack {
+                values: Tensor::from_data(
+                    TensorData::new(self.gray.clone(), [self.gray.len()]),
+                    rays.device,
+                ),
+                host: self.gray.clone(),
+                width: self.width,
+                height: self.height,
+            };
+            let l = losses::ncc_loss(
+                &gray,
+                &batch,
+                &ends.views_t,
+                &ends.views_s,
+                &ends.take(rays.origins, &ends.p, rays.device),
+                &ends.take(&rays.out.normal, &ends.p, rays.device),
+                &self.offsets,
+                &gamma,
+            )?;
+            stats.ncc = value(&l, "NCC loss")?;
+            l_u = Some(l);
+        }
+        if lc.geometric_consistency {
+            let l = losses::geometric_consistency_loss(&dist, &gamma);
+            stats.geometric = value(&l, "geometric consistency loss")?;
+            let l = l * lc.lambda_gc;
+            l_u = Some(match l_u {
+                Some(a) => a + l,
+                None => l,
             });
         }
+        if let Some(l) = l_u {
+            total = total + l * lc.lambda_u;
+        }
+        Ok(total)
+    }
 
-        // --- Backward and Adam steps.
+    /// Back-propagates `total` and takes the Adam steps of the field's parameters and, when
+    /// `poses` is tracked, of the poses. Returns whether the pose step was skipped for a
+    /// non-finite gradient.
+    fn update(
+        &mut self,
+        total: Tensor<1>,
+        params: &[Tensor<1>],
+        poses: Option<&Tensor<2>>,
+    ) -> Result<bool> {
+        let cfg = &self.config;
+        let it = self.state.iteration;
         let grads = total.backward();
         let lr = cfg.lr.at(it, cfg.iterations);
         let names = self.field.param_shapes();
@@ -739,9 +928,10 @@ impl Trainer {
             };
             self.state.adam[k].step(&mut self.state.params[k], &g, lr * f, &cfg.adam);
         }
-        if step_poses && let Some(g) = d9.grad(&grads) {
+        let mut pose_step_skipped = false;
+        if let Some(g) = poses.and_then(|d9| d9.grad(&grads)) {
             let g = gradient_values(g, "poses", self.state.poses.len())?;
-            stats.pose_step_skipped = !self.step_poses_with(&g);
+            pose_step_skipped = !self.step_poses_with(&g);
         }
         if self
             .state
@@ -754,8 +944,7 @@ impl Trainer {
                 message: "a parameter became NaN or Inf".into(),
             });
         }
-        self.state.iteration += 1;
-        Ok(stats)
+        Ok(pose_step_skipped)
     }
 
     /// The Adam step of the poses at the current iteration with gradient `g`, when `g` is

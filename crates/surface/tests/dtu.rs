@@ -13,8 +13,7 @@
 use fewview_scene::load::{LoadOptions, load_dataset};
 use fewview_scene::pose_export::PoseSource;
 use fewview_surface::adam::ExpSchedule;
-use fewview_surface::pipeline::{InitialPoses, RunConfig, RunInputs, run};
-use fewview_surface::schedule::Schedule;
+use fewview_surface::{InitialPoses, Overrides, RunConfig, RunInputs, Schedule, run};
 
 fn scan65() -> std::path::PathBuf {
     let root = std::env::var("FEWVIEW_DATA")
@@ -344,16 +343,15 @@ fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
     let narrow = load(vec![22, 23, 24], 2);
     let narrow_fine = load(vec![22, 23, 24], 1);
     for seed in 0..3 {
-        // The CLI's default schedule: it would densify if the sparse matches fell short.
-        let mut config = RunConfig::default();
-        Schedule::Cpu.apply(&mut config);
-        config.train.seed = seed;
-        config.initial_poses = InitialPoses::NoisyGroundTruth { sigma: 0.15 };
-        // As the CLI: the matcher's RANSAC takes the run's seed too.
-        config.matcher = Some(fewview_surface::matching::sift::SiftOptions {
-            seed,
-            ..Default::default()
-        });
+        // The CLI's defaults: it would densify if the sparse matches fell short.
+        let config = RunConfig::resolve(
+            Schedule::Cpu,
+            &Overrides {
+                seed,
+                ..Overrides::default()
+            },
+        )
+        .unwrap();
         let prep = prepare_with_matching(&narrow, None, Some(&narrow_fine), &config).unwrap();
         let before = error(&prep.initial, &prep.ground_truth);
         // The warm-up's poses (the schedule's bundle adjustment follows them).
@@ -432,20 +430,15 @@ fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
     // polish 0.163° / 0.159° / 0.186°, t×100 0.64 / 0.63 / 0.86). The patch adjustment then
     // lands under 0.1° (its measured figures in crates/surface/README.md).
     for seed in 0..3 {
-        let mut cpu = RunConfig::default();
-        Schedule::Cpu.apply(&mut cpu);
-        let dense = RunConfig {
-            max_pair_angle_deg: 180.0,
-            matcher: Some(fewview_surface::matching::sift::SiftOptions {
+        let dense = RunConfig::resolve(
+            Schedule::Cpu,
+            &Overrides {
                 seed,
-                ..Default::default()
-            }),
-            train: fewview_surface::train::TrainConfig {
-                seed,
-                ..cpu.train.clone()
+                max_pair_angle_deg: 180.0,
+                ..Overrides::default()
             },
-            ..cpu
-        };
+        )
+        .unwrap();
         let prep = prepare_with_matching(&wide, None, Some(&wide_fine), &dense).unwrap();
         let why = prep.densified_because.as_deref().unwrap_or_default();
         assert!(why.contains("too few matches"), "seed {seed}: {why:?}");

@@ -13,9 +13,10 @@ use fewview_scene::{Camera, Se3};
 use fewview_surface::matching::densify::DensifyOptions;
 use fewview_surface::matching::refine::WarpModel;
 use fewview_surface::matching::{Match, fundamental_from_cameras};
-use fewview_surface::pipeline::{InitialPoses, Prepared, RunConfig, prepare};
+use fewview_surface::pipeline::{Prepared, prepare};
 use fewview_surface::sdf_scene::{SdfSceneOptions, sdf_dataset, sees, trace};
 use fewview_surface::warmup::{WarmupOptions, epipolar_warmup};
+use fewview_surface::{InitialPoses, RunConfig};
 use nalgebra::{Vector2, Vector3};
 
 fn warmup_options() -> WarmupOptions {

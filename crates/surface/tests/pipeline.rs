@@ -7,12 +7,10 @@
 
 use fewview_scene::Dataset;
 use fewview_surface::checkpoint;
-use fewview_surface::pipeline::{
-    InitialPoses, RunConfig, RunInputs, RunReport, prepare, prepare_with_matching, run,
-    run_identity,
-};
+use fewview_surface::pipeline::{prepare, prepare_with_matching, run_identity};
 use fewview_surface::sdf_scene::{SdfSceneOptions, observed_faces, sdf_dataset, surface_mesh};
 use fewview_surface::train::Trainer;
+use fewview_surface::{InitialPoses, RunConfig, RunInputs, RunReport, run};
 
 /// The analytic scene with six views at `width × height`, these ones for training.
 fn six_view_scene(width: usize, height: usize, train: Vec<usize>) -> Dataset {

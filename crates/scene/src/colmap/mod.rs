@@ -20,8 +20,9 @@ use rayon::prelude::*;
 use crate::camera::{Camera, Intrinsics, Se3};
 use crate::dataset::{Dataset, PointCloud, View};
 use crate::error::{Result, SceneError};
-use crate::load::{self, LoadOptions};
+use crate::load_options::LoadOptions;
 use crate::split;
+use crate::view_files;
 
 /// COLMAP's camera models, with their numeric ids (binary files) and parameter counts.
 pub const CAMERA_MODELS: [(&str, usize); 18] = [
@@ -155,17 +156,17 @@ pub struct ColmapPoint {
 
 impl ColmapPoint {
     /// Why the point cannot be used, if it cannot: a position that is NaN, infinite or beyond
-    /// [`load::MAX_CAMERA_MAGNITUDE`] (training computes in single precision, where such a value
+    /// [`view_files::MAX_CAMERA_MAGNITUDE`] (training computes in single precision, where such a value
     /// overflows). The message names the point id; the readers add the file. Colours are bytes,
     /// so every stored colour is valid.
     pub fn problem(&self) -> Option<String> {
         const AXES: [&str; 3] = ["x", "y", "z"];
         AXES.iter().zip(&self.xyz).find_map(|(axis, &v)| {
-            (!v.is_finite() || v.abs() > load::MAX_CAMERA_MAGNITUDE).then(|| {
+            (!v.is_finite() || v.abs() > view_files::MAX_CAMERA_MAGNITUDE).then(|| {
                 format!(
                     "point {}: coordinate {axis} = {v:.3e} is not a finite value within {:.0e}",
                     self.id,
-                    load::MAX_CAMERA_MAGNITUDE
+                    view_files::MAX_CAMERA_MAGNITUDE
                 )
             })
         })
@@ -339,7 +340,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let background = opts.background.unwrap_or([0.0; 3]);
     let image_dir = root.join("images");
     let k = opts.downscale;
-    let views = load::first_error_in_order(images.par_iter().map(|img| {
+    let views = view_files::first_error_in_order(images.par_iter().map(|img| {
         let cam = &model.cameras[&img.camera_id];
         let intrinsics = cam
             .intrinsics()
@@ -348,18 +349,18 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
             .world_to_camera()
             .map_err(|m| SceneError::invalid(&dir, m))?;
         let camera = Camera::new(intrinsics, pose);
-        load::check_camera(&camera, &dir, &format!("image {} ({})", img.id, img.name))?;
+        view_files::check_camera(&camera, &dir, &format!("image {} ({})", img.id, img.name))?;
         let file = image_dir.join(&img.name);
-        let photo = load::load_photo(&file, background)?;
-        load::check_size(&photo.rgb, &camera, &file, "image")?;
+        let photo = view_files::load_photo(&file, background)?;
+        view_files::check_size(&photo.rgb, &camera, &file, "image")?;
         let mask = match photo.alpha {
-            Some(a) => Some(load::downscale_mask(&a, k, false, &file)?),
+            Some(a) => Some(view_files::downscale_mask(&a, k, false, &file)?),
             None => None,
         };
         Ok(View {
-            name: load::stem(Path::new(&img.name)),
-            camera: load::downscale_camera(&camera, k),
-            image: load::downscale_image(&photo.rgb, k, &file)?,
+            name: view_files::stem(Path::new(&img.name)),
+            camera: view_files::downscale_camera(&camera, k),
+            image: view_files::downscale_image(&photo.rgb, k, &file)?,
             mask_is_alpha: mask.is_some(),
             mask,
             depth_bounds: None,
@@ -367,7 +368,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
         })
     }))?;
     let n_views = views.len();
-    let (train, test) = load::choose_split(
+    let (train, test) = view_files::choose_split(
         opts,
         n_views,
         root,
@@ -375,7 +376,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
         || split::holdout_test_views(n_views, opts.holdout_every),
     )?;
     Ok(Dataset {
-        name: load::scene_name(root),
+        name: view_files::scene_name(root),
         views,
         train,
         test,
@@ -435,7 +436,7 @@ pub(crate) mod tests {
             let model = read_model(&fixtures().join(sub)).unwrap();
             models.push(model.clone());
             let dir = scene(sub);
-            let d = load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
+            let d = crate::load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
             let names: Vec<&str> = d.views.iter().map(|v| v.name.as_str()).collect();
             assert_eq!(names, ["a", "b", "c", "d"], "{sub}");
             assert_eq!((d.test.clone(), d.train.clone()), (vec![0], vec![1, 2, 3]));
@@ -498,7 +499,7 @@ pub(crate) mod tests {
         ] {
             assert!(original.contains(from));
             std::fs::write(&images, original.replace(from, to)).unwrap();
-            let e = load::load_dataset(dir.path(), &LoadOptions::default())
+            let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
                 .unwrap_err()
                 .to_string();
             assert!(e.contains("images.txt") && e.contains(expected), "{e}");
@@ -511,7 +512,7 @@ pub(crate) mod tests {
         let cams = dir.path().join("sparse/0/cameras.txt");
         let original = std::fs::read_to_string(&cams).unwrap();
         std::fs::write(&cams, original.replace("16.25 11.75 0", "16.25 11.75 0.01")).unwrap();
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(
@@ -526,7 +527,7 @@ pub(crate) mod tests {
             ),
         )
         .unwrap();
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("OPENCV_FISHEYE is not a pinhole model"), "{e}");
@@ -535,7 +536,7 @@ pub(crate) mod tests {
             original.replace("PINHOLE 40 30 35 33", "PINHOLE 40 30 nan 33"),
         )
         .unwrap();
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("intrinsics are not finite"), "{e}");
@@ -544,7 +545,7 @@ pub(crate) mod tests {
             original.replace("PINHOLE 40 30 35 33 19.5", "PINHOLE 40 30 35 33"),
         )
         .unwrap();
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(
@@ -558,7 +559,7 @@ pub(crate) mod tests {
         Image::filled(10, 10, &[0.0; 3])
             .save_png(&dir.path().join("images/b.png"))
             .unwrap();
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(
@@ -566,12 +567,12 @@ pub(crate) mod tests {
             "{e}"
         );
         std::fs::remove_file(dir.path().join("images/b.png")).unwrap();
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("b.png"), "{e}");
         std::fs::remove_file(dir.path().join("sparse/0/points3D.txt")).unwrap();
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(
@@ -586,7 +587,7 @@ pub(crate) mod tests {
             let bytes = std::fs::read(&p).unwrap();
             for cut in [0, 7, 8, 20, bytes.len() / 2, bytes.len() - 1] {
                 std::fs::write(&p, &bytes[..cut]).unwrap();
-                let e = load::load_dataset(dir.path(), &LoadOptions::default())
+                let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
                     .unwrap_err()
                     .to_string();
                 assert!(
@@ -601,7 +602,7 @@ pub(crate) mod tests {
         let mut bytes = std::fs::read(&p).unwrap();
         bytes.extend_from_slice(&[1, 2, 3]);
         std::fs::write(&p, &bytes).unwrap();
-        let e = load::load_dataset(dir.path(), &LoadOptions::default())
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
         assert!(

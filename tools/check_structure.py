@@ -1,0 +1,323 @@
+#!/usr/bin/env python3
+"""Structure checks of the workspace's library code (stdlib only).
+
+1. Import cycles between the files of each crate: every `use crate::a::b`, `use super::x`,
+   `crate::a::f(...)` path in a file is an edge from that file's module to the module the path
+   names; strongly connected components with more than one module are cycles.
+2. Functions longer than MAX_LINES lines in `crates/*/src/**.rs`, found by brace matching.
+
+Test code does not count: `#[cfg(test)]` items (the `mod tests` blocks) are cut out before both
+checks, and `tests/`, `benches/` and `examples/` folders are not read.
+
+Exits 1 and lists the findings when there are any.
+"""
+
+import re
+import sys
+from pathlib import Path
+
+MAX_LINES = 200
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def strip_comments_and_strings(text):
+    """The source with comments, string and char literals blanked (newlines kept), so that
+    braces and paths are only counted in code."""
+    out = []
+    i, n = 0, len(text)
+    while i < n:
+        c = text[i]
+        nxt = text[i + 1] if i + 1 < n else ""
+        if c == "/" and nxt == "/":
+            j = text.find("\n", i)
+            j = n if j < 0 else j
+            out.append(" " * (j - i))
+            i = j
+        elif c == "/" and nxt == "*":
+            depth, j = 1, i + 2
+            while j < n and depth:
+                if text.startswith("/*", j):
+                    depth, j = depth + 1, j + 2
+                elif text.startswith("*/", j):
+                    depth, j = depth - 1, j + 2
+                else:
+                    j += 1
+            out.append(blank(text[i:j]))
+            i = j
+        elif c == "r" and re.match(r'r#*"', text[i:]) and not is_ident(text, i - 1):
+            m = re.match(r'r(#*)"', text[i:])
+            end = text.find('"' + m.group(1), i + len(m.group(0)))
+            j = n if end < 0 else end + 1 + len(m.group(1))
+            out.append(blank(text[i:j]))
+            i = j
+        elif c == '"':
+            j = i + 1
+            while j < n and text[j] != '"':
+                j += 2 if text[j] == "\\" else 1
+            out.append(blank(text[i : j + 1]))
+            i = j + 1
+        elif c == "'":
+            m = re.match(r"'(\\.[^']*|[^\\'])'", text[i:])
+            if m:  # a char literal; otherwise a lifetime
+                out.append(" " * len(m.group(0)))
+                i += len(m.group(0))
+            else:
+                out.append(c)
+                i += 1
+        else:
+            out.append(c)
+            i += 1
+    return "".join(out)
+
+
+def is_ident(text, i):
+    return i >= 0 and (text[i].isalnum() or text[i] == "_")
+
+
+def blank(s):
+    return "".join("\n" if ch == "\n" else " " for ch in s)
+
+
+def matching_brace(code, open_at):
+    depth = 0
+    for j in range(open_at, len(code)):
+        if code[j] == "{":
+            depth += 1
+        elif code[j] == "}":
+            depth -= 1
+            if depth == 0:
+                return j
+    return len(code) - 1
+
+
+def without_test_items(code):
+    """`code` with every item under `#[cfg(test)]` blanked."""
+    for m in reversed(list(re.finditer(r"#\[cfg\(test\)\]", code))):
+        brace = code.find("{", m.end())
+        semi = code.find(";", m.end())
+        if brace < 0 or (0 <= semi < brace):
+            end = semi
+        else:
+            end = matching_brace(code, brace)
+        code = code[: m.start()] + blank(code[m.start() : end + 1]) + code[end + 1 :]
+    return code
+
+
+def source_files(crate):
+    src = crate / "src"
+    return sorted(p for p in src.rglob("*.rs")) if src.is_dir() else []
+
+
+def module_of(crate, path):
+    """The module path of a file, e.g. `['matching', 'refine']`; `[]` for the crate root."""
+    rel = path.relative_to(crate / "src").with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] in ("lib", "main", "mod") and len(parts) >= 1:
+        parts = parts[:-1]
+    if path.parent == crate / "src" / "bin":
+        return None  # each binary is its own crate
+    return parts
+
+
+def inline_modules(code):
+    """Inline `mod name { ... }` blocks: (name, start, end) in the code."""
+    found = []
+    for m in re.finditer(r"\bmod\s+([A-Za-z_]\w*)\s*\{", code):
+        end = matching_brace(code, m.end() - 1)
+        found.append((m.group(1), m.start(), end))
+    return found
+
+
+PATH_RE = re.compile(r"\b(crate|super|self)((?:\s*::\s*[A-Za-z_]\w*)+)")
+USE_RE = re.compile(r"\buse\s+(crate|super|self)\s*::([^;]*);")
+
+
+def use_paths(use_tail):
+    """The paths of one `use` tree after its root, e.g. `a::{b, c::d}` → a::b, a::c::d."""
+    tail = re.sub(r"\s+", "", re.sub(r"\s+as\s+\w+", "", use_tail))
+    out = []
+
+    def walk(prefix, s):
+        if s.startswith("{") and s.endswith("}"):
+            depth, start = 0, 1
+            for k, ch in enumerate(s):
+                if ch == "{":
+                    depth += 1
+                elif ch == "}":
+                    depth -= 1
+                if (ch == "," and depth == 1) or (ch == "}" and depth == 0):
+                    part = s[start:k]
+                    if part:
+                        walk(prefix, part)
+                    start = k + 1
+            return
+        head, sep, rest = s.partition("::")
+        if sep:
+            walk(prefix + [head], rest)
+        else:
+            out.append(prefix + [s])
+
+    walk([], tail)
+    return out
+
+
+def resolve(root, current, parts, modules):
+    """The longest known module that a path starting at `root` names."""
+    if root == "crate":
+        base = []
+    elif root == "self":
+        base = list(current)
+    else:
+        base = list(current)
+        parts = list(parts)
+        if base:
+            base = base[:-1]
+        while parts and parts[0] == "super":
+            parts = parts[1:]
+            if base:
+                base = base[:-1]
+    full = base + [p for p in parts if p not in ("self", "*")]
+    for k in range(len(full), -1, -1):
+        if tuple(full[:k]) in modules:
+            return tuple(full[:k])
+    return None
+
+
+def crate_graph(crate):
+    files = {}
+    for path in source_files(crate):
+        mod = module_of(crate, path)
+        if mod is None:
+            continue
+        files[tuple(mod)] = without_test_items(strip_comments_and_strings(path.read_text()))
+    modules = set(files)
+    # Inline modules (other than the cut-out tests) are modules of their own file.
+    for mod, code in list(files.items()):
+        for name, _, _ in inline_modules(code):
+            modules.add(mod + (name,))
+    edges = {m: set() for m in modules}
+    for mod, code in files.items():
+        spans = inline_modules(code)
+
+        def owner(pos):
+            for name, s, e in spans:
+                if s <= pos <= e:
+                    return mod + (name,)
+            return mod
+
+        for m in USE_RE.finditer(code):
+            here = owner(m.start())
+            for parts in use_paths(m.group(2)):
+                target = resolve(m.group(1), here, parts, modules)
+                add_edge(edges, here, target)
+        for m in PATH_RE.finditer(code):
+            here = owner(m.start())
+            parts = [p.strip() for p in m.group(2).split("::") if p.strip()]
+            target = resolve(m.group(1), here, parts, modules)
+            add_edge(edges, here, target)
+    return edges
+
+
+def add_edge(edges, source, target):
+    """An edge between two files' modules; a module's own children and parents are the tree,
+    not an import."""
+    if target is None or target == source:
+        return
+    if target == source[: len(target)] or source == target[: len(source)]:
+        return
+    edges[source].add(target)
+
+
+def cycles(edges):
+    """Tarjan's strongly connected components of more than one node."""
+    index, low, stack, on_stack, out = {}, {}, [], set(), []
+    counter = [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on_stack.add(v)
+        for w in edges.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    sys.setrecursionlimit(10000)
+    for v in sorted(edges):
+        if v not in index:
+            visit(v)
+    return out
+
+
+FN_RE = re.compile(r"\bfn\s+([A-Za-z_]\w*)")
+
+
+def long_functions(path):
+    code = without_test_items(strip_comments_and_strings(path.read_text()))
+    found = []
+    for m in FN_RE.finditer(code):
+        # The body is the first `{` after the signature, unless a `;` ends it first (a trait
+        # method without a body).
+        brace = code.find("{", m.end())
+        semi = code.find(";", m.end())
+        if brace < 0 or (0 <= semi < brace and not inside_parens(code, m.end(), semi)):
+            continue
+        end = matching_brace(code, brace)
+        first = code.count("\n", 0, m.start()) + 1
+        last = code.count("\n", 0, end) + 1
+        if last - first + 1 > MAX_LINES:
+            found.append((m.group(1), first, last - first + 1))
+    return found
+
+
+def inside_parens(code, start, pos):
+    """Whether `pos` is inside brackets opened after `start` (a `;` in an array type)."""
+    depth = 0
+    for ch in code[start:pos]:
+        if ch in "([<":
+            depth += 1
+        elif ch in ")]>":
+            depth -= 1
+    return depth > 0
+
+
+def name(mod):
+    return "::".join(mod) or "(root)"
+
+
+def main():
+    crates = sorted(p for p in (ROOT / "crates").iterdir() if (p / "Cargo.toml").is_file())
+    problems = 0
+    for crate in crates:
+        for comp in cycles(crate_graph(crate)):
+            problems += 1
+            print(f"import cycle in crates/{crate.name}: " + " <-> ".join(map(name, comp)))
+    for crate in crates:
+        for path in source_files(crate):
+            for fn, line, length in long_functions(path):
+                problems += 1
+                rel = path.relative_to(ROOT)
+                print(f"{rel}:{line}: fn {fn} is {length} lines (limit {MAX_LINES})")
+    if problems:
+        print(f"{problems} structure problem(s)")
+        return 1
+    print("structure: no import cycles, no function over", MAX_LINES, "lines")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
