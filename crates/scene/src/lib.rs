@@ -30,7 +30,6 @@ pub mod sealed;
 pub mod split;
 pub mod synthetic;
 pub mod transforms;
-pub mod video;
 
 pub use camera::{Camera, Intrinsics, Se3, axes_meeting_point, camera_path};
 pub use dataset::{Dataset, PointCloud, View};
