@@ -7,7 +7,6 @@ pub mod lpips;
 pub mod pose_error;
 pub mod psnr;
 pub mod ssim;
-pub mod study;
 pub mod temporal;
 
 pub use error::MetricsError;
