@@ -2,7 +2,7 @@
 # Makes the video fixtures of `fewview_video`'s tests with FFmpeg (an independent
 # encoder/decoder), into crates/video/tests/fixtures/video/.
 #
-# Rerun:   bash tools/make-video-fixtures.sh        (needs ffmpeg: bash scripts/setup-ffmpeg.sh)
+# Rerun:   bash tools/make-video-fixtures.sh        (needs ffmpeg: bash scripts/setup.sh)
 # Made with: ffmpeg 5.1.9-0+deb12u1 (Debian 12), libx264, libx265.
 #
 #   testsrc_x264.mp4            10 frames of lavfi testsrc, 160x90 (not a multiple of 16, so the
