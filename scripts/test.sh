@@ -1,14 +1,13 @@
 #!/usr/bin/env bash
 # The project's one test command (README quick start; `.ci/run` calls it).
-# Installs what the tests need, then runs every test of the workspace in the release profile
-# (the same profile as the binary, so the dependency tree compiles once).
+# Installs what the tests need (scripts/setup.sh, a quick no-op when everything is there), then
+# runs every test of the workspace in the release profile (the same profile as the binary, so
+# the dependency tree compiles once). `cargo test` alone installs nothing.
 # With FEWVIEW_DATA set (CI sets it to ../shared/data), the data tests run too.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-for setup in scripts/setup-*.sh; do
-  [ -e "$setup" ] && bash "$setup"
-done
+bash scripts/setup.sh
 
 extra=()
 if [ -n "${FEWVIEW_DATA:-}" ]; then

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Makes the video fixtures of `fewview_scene::video`'s tests with FFmpeg (an independent
-# encoder/decoder), into crates/scene/tests/fixtures/video/.
+# Makes the video fixtures of `fewview_video`'s tests with FFmpeg (an independent
+# encoder/decoder), into crates/video/tests/fixtures/video/.
 #
-# Rerun:   bash tools/make-video-fixtures.sh        (needs ffmpeg: bash scripts/setup-ffmpeg.sh)
+# Rerun:   bash tools/make-video-fixtures.sh        (needs ffmpeg: bash scripts/setup.sh)
 # Made with: ffmpeg 5.1.9-0+deb12u1 (Debian 12), libx264, libx265.
 #
 #   testsrc_x264.mp4            10 frames of lavfi testsrc, 160x90 (not a multiple of 16, so the
@@ -17,7 +17,7 @@
 #   testsrc_ffmpeg_gif_rgb.png  FFmpeg's decode of that GIF, frames stacked vertically
 set -euo pipefail
 cd "$(dirname "$0")/.."
-out=crates/scene/tests/fixtures/video
+out=crates/video/tests/fixtures/video
 mkdir -p "$out"
 ff=(ffmpeg -hide_banner -loglevel error -y)
 

@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
-"""Reference R-hat / ESS values for `crates/metrics/tests/study.rs` from ArviZ.
+"""Reference R-hat / ESS values for `crates/study/tests/study.rs` from ArviZ.
 
 Rerun (from the repository root):
     python3 -m pip install arviz==0.23.4 numpy
-    python3 tools/make_mcmc_diagnostics_fixtures.py crates/metrics/tests/fixtures/study/diagnostics.json
+    python3 tools/make_mcmc_diagnostics_fixtures.py crates/study/tests/fixtures/study/diagnostics.json
 
 Makes a few sets of 4 chains (AR(1) series of different autocorrelation, one set with a shifted
 chain that has not mixed, one with heavy ties), stores the draws, and ArviZ's

@@ -3,7 +3,7 @@
 // (browser binary), SIMULATED (number of concurrent API participants), MEDIA (`img`, the
 // default, or `video`: what each side must show), MIN_TOTAL (fewest comparisons expected, 3 by
 // default). Needs playwright-core
-// (scripts/setup-browser.sh installs it into .cache/browser; run with NODE_PATH pointing there).
+// (scripts/setup.sh installs it into .cache/browser; run with NODE_PATH pointing there).
 "use strict";
 const fs = require("fs");
 const os = require("os");

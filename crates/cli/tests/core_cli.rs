@@ -134,7 +134,7 @@ fn train_then_eval_and_render_agree_with_the_run() {
         let b = fewview_scene::Image::load(&renders.join(p.file_name().unwrap())).unwrap();
         assert_eq!(a, b, "{}", p.display());
     }
-    let (frames, _) = fewview_scene::video::read_video(&video).unwrap();
+    let (frames, _) = fewview_video::read_video(&video).unwrap();
     assert_eq!(frames.len(), 2 * 3 + 1);
 }
 
@@ -707,7 +707,7 @@ fn eval_reports_in_a_missing_folder_are_refused_first() {
         .map(|k| fewview_scene::Image::filled(16, 12, &[0.1 * k as f32, 0.5, 0.5]))
         .collect();
     let video = dir.path().join("frames");
-    fewview_scene::video::write_video(&video, &frames, 10.0, &Default::default()).unwrap();
+    fewview_video::write_video(&video, &frames, 10.0, &Default::default()).unwrap();
     let out = fewview(&[
         "eval-video",
         "--lpips",

@@ -1,4 +1,4 @@
-//! `fewview eval-video` on a GIF against a frame folder (both read by `fewview_scene::video`):
+//! `fewview eval-video` on a GIF against a frame folder (both read by `fewview_video`):
 //! a sequence with one flickering frame gives zero Δ between the steady frames and the same
 //! per-frame values as the library on the decoded frames.
 
@@ -7,7 +7,7 @@ use std::process::Command;
 use fewview_metrics::SsimOptions;
 use fewview_metrics::temporal::{evaluate_sequence, frame_deltas};
 use fewview_scene::Image;
-use fewview_scene::video::{ReadOptions, VideoOptions, read_video_with, write_video};
+use fewview_video::{ReadOptions, VideoOptions, read_video_with, write_video};
 
 fn frame(shift: f32) -> Image {
     let mut img = Image::new(48, 40, 3);

@@ -2,7 +2,7 @@
 //! Chromium (answers half, reloads, finishes), 24 concurrent simulated participants through the
 //! API, then the server is killed (SIGKILL) and `fewview study analyze` must find every answer
 //! and count the wins right. A second test builds a study from `fewview fusion` runs and walks a
-//! participant through its videos. Needs `scripts/setup-browser.sh` (the test command runs it).
+//! participant through its videos. Needs `scripts/setup.sh` (the test command runs it).
 
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
@@ -18,7 +18,7 @@ fn browser() -> PathBuf {
     let node_modules = repo().join(".cache/browser/node_modules");
     assert!(
         node_modules.join("playwright-core").exists() && Path::new("/usr/bin/chromium").exists(),
-        "headless browser missing: run scripts/setup-browser.sh (scripts/test.sh does)"
+        "headless browser missing: run scripts/setup.sh (scripts/test.sh does)"
     );
     node_modules
 }

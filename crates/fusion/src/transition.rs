@@ -20,12 +20,12 @@ use fewview_metrics::temporal::{MetricSeries, evaluate_sequence, warping_errors}
 use std::path::Path;
 
 use fewview_geom::stereo::pairs::order_along_baseline;
-use fewview_scene::video::{VideoOptions, write_video};
 use fewview_scene::{Camera, Dataset, Image};
 use fewview_splat::eval::render_model;
 use fewview_splat::model::GaussianModel;
 use fewview_splat::ply::read_ply;
 use fewview_splat::raster::{RenderCamera, RenderSettings};
+use fewview_video::{VideoOptions, write_video};
 use rayon::prelude::*;
 use serde::Serialize;
 

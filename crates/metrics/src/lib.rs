@@ -1,14 +1,15 @@
 #![doc = include_str!("../README.md")]
-//! Metrics the papers report: image quality (PSNR, SSIM), and the errors they share.
+//! Metrics the papers report: image quality (PSNR, SSIM, and LPIPS with the default `lpips`
+//! feature), temporal and transition metrics, and camera pose error.
 
 pub mod bench;
 pub mod error;
 pub mod flow;
+#[cfg(feature = "lpips")]
 pub mod lpips;
 pub mod pose_error;
 pub mod psnr;
 pub mod ssim;
-pub mod study;
 pub mod temporal;
 
 pub use error::MetricsError;

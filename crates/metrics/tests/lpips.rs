@@ -1,6 +1,6 @@
 //! LPIPS against the reference Python packages on committed fixtures (made by
 //! `tools/make_lpips_fixtures.py`, whose header says exactly what is compared with what).
-//! The reference weight files come from `scripts/setup-lpips.sh` (the test command runs it).
+//! The reference weight files come from `scripts/setup.sh` (the test command runs it).
 
 // Tests report what they measured.
 #![allow(clippy::print_stdout, clippy::print_stderr)]
@@ -22,7 +22,7 @@ fn weights_dir() -> PathBuf {
         });
     assert!(
         dir.join("stlpips/vgg_shift_tolerant.pth").exists(),
-        "reference LPIPS weights missing in {}: run scripts/setup-lpips.sh (scripts/test.sh does)",
+        "reference LPIPS weights missing in {}: run scripts/setup.sh (scripts/test.sh does)",
         dir.display()
     );
     dir

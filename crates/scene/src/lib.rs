@@ -32,7 +32,6 @@ pub mod sealed;
 pub mod split;
 pub mod synthetic;
 pub mod transforms;
-pub mod video;
 mod view_files;
 
 pub use camera::{Camera, Intrinsics, Se3, axes_meeting_point, camera_path};

@@ -1,7 +1,7 @@
 //! `fewview eval-video`: temporal-coherence metrics of a rendered sequence against ground truth
 //! (per-frame PSNR/SSIM/LPIPS, their frame-to-frame Δ as in paper 002's tables, TecoGAN's tLP,
 //! and the warping error with a caller-supplied flow). Inputs are videos (`.mp4`, `.gif`) or
-//! folders of PNG/JPEG frames, read by `fewview_scene::video`.
+//! folders of PNG/JPEG frames, read by `fewview_video`.
 
 use std::path::PathBuf;
 
@@ -9,7 +9,7 @@ use anyhow::{Context, bail};
 use fewview_metrics::lpips::{LoadOptions, Lpips, LpipsNet};
 use fewview_metrics::temporal::{self, Flow, MetricSeries, PerceptualDistance};
 use fewview_metrics::{SsimBorder, SsimOptions};
-use fewview_scene::video;
+use fewview_video as video;
 
 use super::output_paths::check_optional_file;
 

@@ -241,7 +241,7 @@ fn print_table(runs: &[PathBuf]) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The study configuration `fewview study serve` reads (see `study::config`).
+/// The study configuration `fewview study serve` reads (see `fewview_study::config`).
 #[derive(serde::Serialize)]
 struct StudyFile {
     title: String,
@@ -249,7 +249,7 @@ struct StudyFile {
     database: String,
     methods: Vec<String>,
     scenes: Vec<String>,
-    questions: Vec<super::study::config::Question>,
+    questions: Vec<fewview_study::config::Question>,
     videos: std::collections::BTreeMap<String, std::collections::BTreeMap<String, String>>,
 }
 
@@ -272,7 +272,7 @@ fn write_study(runs: &[PathBuf], out: &Path) -> anyhow::Result<()> {
         database: "responses.sqlite".into(),
         methods: plan.videos.iter().map(|(m, _)| m.clone()).collect(),
         scenes: vec![plan.scene.clone()],
-        questions: super::study::config::paper_questions(),
+        questions: fewview_study::config::paper_questions(),
         videos: [(plan.scene.clone(), videos)].into_iter().collect(),
     };
     let config = out.join("study.toml");

@@ -320,10 +320,10 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    let opts = fewview_scene::video::VideoOptions::default();
+    let opts = fewview_video::VideoOptions::default();
     for ((name, _), video) in outputs.iter().zip(&videos) {
         let path = out.join(format!("{name}.mp4"));
-        fewview_scene::video::write_video(&path, video, args.fps, &opts)?;
+        fewview_video::write_video(&path, video, args.fps, &opts)?;
     }
     eprintln!(
         "rendered {} view(s) × {} frames of {} into {}",
@@ -570,8 +570,8 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         })
         .collect();
     let path = args.capture.out.join("side_by_side.mp4");
-    let opts = fewview_scene::video::VideoOptions::default();
-    fewview_scene::video::write_video(&path, &video, 30.0, &opts)?;
+    let opts = fewview_video::VideoOptions::default();
+    fewview_video::write_video(&path, &video, 30.0, &opts)?;
     let t = &report.times;
     eprintln!(
         "per frame: {:.3} s (hull and crops {:.3}, image encoder {:.3}, pose encoder {:.3}, depth encoder {:.3}, decoder and heads {:.3}, TPS {:.3}, rendering {:.3}); written to {}",

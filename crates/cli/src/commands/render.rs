@@ -4,11 +4,11 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::{Args as ClapArgs, ValueEnum};
-use fewview_scene::video::{Container, MAX_GIF_FPS, MAX_MP4_FPS, VideoOptions, write_video};
 use fewview_splat::eval::render_model;
 use fewview_splat::pipeline::render_path;
 use fewview_splat::ply::read_ply;
 use fewview_splat::raster::{RenderCamera, RenderSettings};
+use fewview_video::{Container, MAX_GIF_FPS, MAX_MP4_FPS, VideoOptions, write_video};
 
 use super::dataset_args::DatasetArgs;
 use super::number_args::positive_f32;

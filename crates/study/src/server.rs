@@ -15,7 +15,6 @@
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 
-use anyhow::Context;
 use axum::extract::{Path, Request, State};
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
@@ -24,12 +23,13 @@ use axum::{Json, Router};
 use tower::ServiceExt;
 use tower_http::services::ServeFile;
 
-use super::config::StudyConfig;
-use super::store::{Store, SubmitError, Trial};
+use crate::config::StudyConfig;
+use crate::error::{Result, StudyError};
+use crate::store::{Store, SubmitError, Trial};
 
-const INDEX_HTML: &str = include_str!("../../../../../web/study/index.html");
-const STUDY_JS: &str = include_str!("../../../../../web/study/study.js");
-const STUDY_CSS: &str = include_str!("../../../../../web/study/study.css");
+const INDEX_HTML: &str = include_str!("../../../web/study/index.html");
+const STUDY_JS: &str = include_str!("../../../web/study/study.js");
+const STUDY_CSS: &str = include_str!("../../../web/study/study.css");
 
 struct AppState {
     config: StudyConfig,
@@ -318,27 +318,32 @@ pub fn serve(
     config: StudyConfig,
     addr: SocketAddr,
     on_listen: impl FnOnce(SocketAddr),
-) -> anyhow::Result<()> {
+) -> Result<()> {
     let store = Store::open(&config.database)?;
     let app = Arc::new(AppState {
         config,
         store: Mutex::new(store),
         counter: Default::default(),
     });
+    let failed = |what: String| move |e: std::io::Error| StudyError::Server(format!("{what}: {e}"));
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
-        .context("tokio runtime")?;
+        .map_err(failed("tokio runtime".into()))?;
     runtime.block_on(async move {
         let listener = tokio::net::TcpListener::bind(addr)
             .await
-            .with_context(|| format!("cannot listen on {addr}"))?;
-        on_listen(listener.local_addr()?);
+            .map_err(failed(format!("cannot listen on {addr}")))?;
+        on_listen(
+            listener
+                .local_addr()
+                .map_err(|e| StudyError::Server(e.to_string()))?,
+        );
         axum::serve(listener, router(app))
             .with_graceful_shutdown(async {
                 let _ = tokio::signal::ctrl_c().await;
             })
             .await
-            .context("server")
+            .map_err(failed("server".into()))
     })
 }

@@ -4,11 +4,11 @@
 
 use std::path::Path;
 
-use anyhow::Context;
-use fewview_metrics::study::Response;
+use crate::analysis::Response;
 use rusqlite::{Connection, OptionalExtension, params};
 
-use super::config::StudyConfig;
+use crate::config::StudyConfig;
+use crate::error::StudyError;
 
 /// One comparison shown to a participant.
 #[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
@@ -93,21 +93,27 @@ pub fn plan(config: &StudyConfig, participant: &str) -> Vec<Trial> {
 }
 
 impl Store {
-    pub fn open(path: &Path) -> anyhow::Result<Self> {
+    pub fn open(path: &Path) -> crate::error::Result<Self> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).with_context(|| format!("{}", dir.display()))?;
+            std::fs::create_dir_all(dir).map_err(|e| StudyError::io(dir, e))?;
         }
-        let conn = Connection::open(path)
-            .with_context(|| format!("{}: cannot open database", path.display()))?;
+        let failed = |what: &'static str| {
+            move |error| StudyError::Database {
+                path: path.to_path_buf(),
+                what,
+                error,
+            }
+        };
+        let conn = Connection::open(path).map_err(failed("cannot open database"))?;
         // SQLite opens any file lazily; a file that is not a database fails at the first
         // statement, here, and the error must name it.
-        let not_a_database = || format!("{}: not a usable SQLite database", path.display());
+        let not_a_database = failed("not a usable SQLite database");
         conn.busy_timeout(std::time::Duration::from_secs(10))
-            .with_context(not_a_database)?;
+            .map_err(not_a_database)?;
         conn.pragma_update(None, "journal_mode", "WAL")
-            .with_context(not_a_database)?;
+            .map_err(not_a_database)?;
         conn.pragma_update(None, "synchronous", "FULL")
-            .with_context(not_a_database)?;
+            .map_err(not_a_database)?;
         conn.execute_batch(
             "CREATE TABLE IF NOT EXISTS participants (
                  id TEXT PRIMARY KEY, created_at TEXT NOT NULL DEFAULT CURRENT_TIMESTAMP);
@@ -122,7 +128,7 @@ impl Store {
                  PRIMARY KEY (participant, idx, question),
                  FOREIGN KEY (participant, idx) REFERENCES trials(participant, idx));",
         )
-        .with_context(|| format!("{}: cannot create the study tables", path.display()))?;
+        .map_err(failed("cannot create the study tables"))?;
         Ok(Self { conn })
     }
 

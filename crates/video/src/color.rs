@@ -10,7 +10,7 @@
 
 use rayon::prelude::*;
 
-use crate::image::Image;
+use fewview_scene::Image;
 
 /// Which Y'CbCr matrix converts R'G'B' to luma/chroma (ITU-T H.264 Table E-5).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

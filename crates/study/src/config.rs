@@ -21,7 +21,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
+use crate::error::{Result, StudyError};
 
 #[derive(Clone, Debug, serde::Deserialize, serde::Serialize)]
 pub struct Question {
@@ -85,37 +85,40 @@ fn valid_name(s: &str) -> bool {
 }
 
 impl StudyConfig {
-    pub fn load(path: &Path) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
-        let raw: RawConfig = toml::from_str(&text)
-            .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.to_string().trim()))?;
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| StudyError::io(path, e))?;
+        let raw: RawConfig =
+            toml::from_str(&text).map_err(|e| StudyError::format(path, e.to_string().trim()))?;
         let base = path.parent().unwrap_or(Path::new("."));
-        Self::from_raw(raw, base).with_context(|| format!("{}", path.display()))
+        Self::from_raw(raw, base).map_err(|message| StudyError::format(path, message))
     }
 
-    fn from_raw(raw: RawConfig, base: &Path) -> anyhow::Result<Self> {
+    /// The validated configuration, or what is wrong with it.
+    fn from_raw(raw: RawConfig, base: &Path) -> Result<Self, String> {
         if raw.methods.len() < 2 {
-            bail!("a pairwise study needs at least two methods");
+            return Err("a pairwise study needs at least two methods".into());
         }
         if raw.scenes.is_empty() {
-            bail!("no scenes");
+            return Err("no scenes".into());
         }
         for list in [&raw.methods, &raw.scenes] {
             let mut seen = std::collections::BTreeSet::new();
             for n in list {
                 if !valid_name(n) || !seen.insert(n) {
-                    bail!("method and scene names must be unique, non-empty and printable: {n:?}");
+                    return Err(format!(
+                        "method and scene names must be unique, non-empty and printable: {n:?}"
+                    ));
                 }
             }
         }
         let questions = raw.questions.unwrap_or_else(paper_questions);
         if questions.is_empty() {
-            bail!("no questions");
+            return Err("no questions".into());
         }
         let mut ids = std::collections::BTreeSet::new();
         for q in &questions {
             if !valid_name(&q.id) || !ids.insert(&q.id) || q.text.trim().is_empty() {
-                bail!("questions need unique ids and a text: {:?}", q.id);
+                return Err(format!("questions need unique ids and a text: {:?}", q.id));
             }
         }
         let mut videos = BTreeMap::new();
@@ -123,18 +126,18 @@ impl StudyConfig {
             let per = raw
                 .videos
                 .get(scene)
-                .with_context(|| format!("no [videos.{scene}] table"))?;
+                .ok_or_else(|| format!("no [videos.{scene}] table"))?;
             let mut out = BTreeMap::new();
             for method in &raw.methods {
                 let rel = per
                     .get(method)
-                    .with_context(|| format!("no video for scene {scene:?}, method {method:?}"))?;
+                    .ok_or_else(|| format!("no video for scene {scene:?}, method {method:?}"))?;
                 let path = base.join(rel);
                 if !path.is_file() {
-                    bail!(
+                    return Err(format!(
                         "video for scene {scene:?}, method {method:?} not found: {}",
                         path.display()
-                    );
+                    ));
                 }
                 out.insert(method.clone(), path);
             }
@@ -142,7 +145,9 @@ impl StudyConfig {
         }
         for scene in raw.videos.keys() {
             if !raw.scenes.contains(scene) {
-                bail!("[videos.{scene}] names a scene that is not in `scenes`");
+                return Err(format!(
+                    "[videos.{scene}] names a scene that is not in `scenes`"
+                ));
             }
         }
         Ok(Self {

@@ -4,17 +4,17 @@
 //! reports these p-values for each method pair's win count against the null of no preference
 //! (`p = 0.5`).
 
-use crate::error::{MetricsError, Result};
+use crate::error::{Result, StudyError};
 
 /// Two-sided exact binomial p-value of `k` successes in `n` trials with success probability `p`.
 pub fn binom_test_two_sided(k: u64, n: u64, p: f64) -> Result<f64> {
     if k > n {
-        return Err(MetricsError::invalid(format!(
+        return Err(StudyError::invalid(format!(
             "binomial test: {k} successes in {n} trials"
         )));
     }
     if !(0.0..=1.0).contains(&p) {
-        return Err(MetricsError::invalid(format!(
+        return Err(StudyError::invalid(format!(
             "binomial test: probability {p} outside [0, 1]"
         )));
     }

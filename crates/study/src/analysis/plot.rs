@@ -10,7 +10,7 @@ use std::sync::Once;
 use plotters::prelude::*;
 
 use super::QuestionAnalysis;
-use crate::error::{MetricsError, Result};
+use crate::error::{Result, StudyError};
 
 const FONT: &[u8] = include_bytes!("../../assets/DejaVuSansMono.ttf");
 const FAMILY: &str = "fewview-mono";
@@ -24,7 +24,7 @@ fn register_font() -> Result<()> {
     if ok {
         Ok(())
     } else {
-        Err(MetricsError::invalid("embedded plot font failed to load"))
+        Err(StudyError::invalid("embedded plot font failed to load"))
     }
 }
 
@@ -47,7 +47,7 @@ pub fn ranking_plot(q: &QuestionAnalysis, path: &Path) -> Result<()> {
         .map(|s| s.relative_upper)
         .fold(f64::NEG_INFINITY, f64::max);
     let pad = 0.1 * (hi - lo).max(1e-3);
-    let draw_err = |e: &dyn std::fmt::Display| MetricsError::invalid(format!("plot: {e}"));
+    let draw_err = |e: &dyn std::fmt::Display| StudyError::invalid(format!("plot: {e}"));
     {
         let root = BitMapBackend::with_buffer(&mut buffer, (width, height)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| draw_err(&e))?;

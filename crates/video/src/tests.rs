@@ -1,6 +1,6 @@
 //! Round trips through our own reader, and cross-checks against FFmpeg (an independent
 //! encoder, decoder and prober): `ffprobe`/`ffmpeg` at test time (installed by
-//! `scripts/setup-ffmpeg.sh`) and FFmpeg-made fixtures (`tools/make-video-fixtures.sh`).
+//! `scripts/setup.sh`) and FFmpeg-made fixtures (`tools/make-video-fixtures.sh`).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -89,7 +89,7 @@ fn ffmpeg_tool(name: &str) -> Command {
         .is_ok_and(|o| o.status.success());
     assert!(
         found,
-        "`{name}` not found: run `bash scripts/setup-ffmpeg.sh` (scripts/test.sh does)"
+        "`{name}` not found: run `bash scripts/setup.sh` (scripts/test.sh does)"
     );
     let mut cmd = Command::new(name);
     cmd.args(["-hide_banner", "-v", "error"]);

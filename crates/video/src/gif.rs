@@ -16,8 +16,8 @@ use image::AnimationDecoder;
 use image::codecs::gif::GifDecoder;
 use rayon::prelude::*;
 
-use crate::error::{Result, SceneError};
-use crate::image::Image;
+use fewview_scene::Image;
+use fewview_scene::error::{Result, SceneError};
 
 /// Fastest GIF frame rate browsers honour (a 2 cs delay).
 pub const MAX_GIF_FPS: f32 = 50.0;
@@ -57,7 +57,7 @@ pub(crate) fn write_gif(path: &Path, frames: &[Image], fps: f32, speed: i32) -> 
             f
         })
         .collect();
-    crate::atomic::write_with(path, |file| {
+    fewview_scene::atomic::write_with(path, |file| {
         let to_io = |e: ::gif::EncodingError| std::io::Error::other(e);
         let mut encoder = ::gif::Encoder::new(file, w16, h16, &[]).map_err(to_io)?;
         encoder.set_repeat(::gif::Repeat::Infinite).map_err(to_io)?;

@@ -26,8 +26,8 @@ use openh264::formats::{YUVBuffer, YUVSource};
 
 use super::color::{Matrix, Yuv420, YuvFormat, rgb_to_yuv420, yuv420_to_rgb};
 use super::{H264Quality, OddSizePolicy, VideoOptions};
-use crate::error::{Result, SceneError};
-use crate::image::Image;
+use fewview_scene::Image;
+use fewview_scene::error::{Result, SceneError};
 
 /// NAL unit types (ITU-T H.264 Table 7-1) we treat specially.
 const NAL_SPS: u8 = 7;
@@ -333,7 +333,7 @@ pub(crate) fn write_mp4(
     let stream = encode(path, frames, fps, opts)?;
     let bytes = mux(&stream, fps)
         .map_err(|e| SceneError::format(path, format!("cannot write MP4 container: {e}")))?;
-    crate::atomic::write_bytes(path, &bytes)
+    fewview_scene::atomic::write_bytes(path, &bytes)
 }
 
 /// The video track of an MP4, demuxed: parameter sets, samples as length-prefixed NAL units.

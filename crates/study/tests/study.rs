@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use fewview_metrics::study::{self, BtSettings, Response, diagnostics};
+use fewview_study::analysis::{self as study, BtSettings, Response, diagnostics};
 
 #[test]
 fn diagnostics_match_arviz() {

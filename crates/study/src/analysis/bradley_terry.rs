@@ -14,7 +14,7 @@ use nuts_rs::{Chain, CpuLogpFunc, CpuMath, DiagNutsSettings, HasDims, LogpError,
 use rayon::prelude::*;
 
 use super::diagnostics::{ess_bulk, ess_tail, rhat_rank};
-use crate::error::{MetricsError, Result};
+use crate::error::{Result, StudyError};
 
 /// The fewest post-tuning draws per chain the convergence diagnostics can use: R̂ and the ESS
 /// split every chain in halves, and Geyer's initial positive sequence
@@ -222,7 +222,7 @@ pub fn fit_bradley_terry(
 ) -> Result<BtPosterior> {
     let k = methods.len();
     if k < 2 {
-        return Err(MetricsError::invalid(
+        return Err(StudyError::invalid(
             "Bradley–Terry needs at least two methods",
         ));
     }
@@ -230,28 +230,28 @@ pub fn fit_bradley_terry(
         .iter()
         .find(|t| t.winner >= k || t.loser >= k || t.winner == t.loser)
     {
-        return Err(MetricsError::invalid(format!(
+        return Err(StudyError::invalid(format!(
             "Bradley–Terry: bad comparison {t:?} for {k} methods"
         )));
     }
     if !(settings.prior_sigma > 0.0 && settings.prior_sigma.is_finite()) {
-        return Err(MetricsError::invalid(
+        return Err(StudyError::invalid(
             "Bradley–Terry: prior sigma must be positive",
         ));
     }
     if settings.chains < 1 || !(0.0 < settings.target_accept && settings.target_accept < 1.0) {
-        return Err(MetricsError::invalid(
+        return Err(StudyError::invalid(
             "Bradley–Terry: need ≥ 1 chain and a target acceptance in (0, 1)",
         ));
     }
     if !(MIN_DRAWS..=MAX_DRAWS).contains(&settings.draws) {
-        return Err(MetricsError::invalid(format!(
+        return Err(StudyError::invalid(format!(
             "Bradley–Terry: {} draws per chain; expected {MIN_DRAWS} to {MAX_DRAWS}",
             settings.draws
         )));
     }
     if !(0.0 < settings.credible_mass && settings.credible_mass < 1.0) {
-        return Err(MetricsError::invalid(
+        return Err(StudyError::invalid(
             "Bradley–Terry: credible mass must be in (0, 1)",
         ));
     }
@@ -282,7 +282,7 @@ pub fn fit_bradley_terry(
                 );
             let mut sampler = nuts
                 .new_chain(chain as u64, CpuMath::new(logp), &mut rng)
-                .map_err(|e| MetricsError::invalid(format!("NUTS setup: {e}")))?;
+                .map_err(|e| StudyError::invalid(format!("NUTS setup: {e}")))?;
             // PyMC's default initialisation: uniform jitter in (−1, 1) around zero.
             let mut state = settings
                 .seed
@@ -293,13 +293,13 @@ pub fn fit_bradley_terry(
                 .collect();
             sampler
                 .set_position(&init)
-                .map_err(|e| MetricsError::invalid(format!("NUTS init: {e}")))?;
+                .map_err(|e| StudyError::invalid(format!("NUTS init: {e}")))?;
             let mut draws = vec![Vec::with_capacity(settings.draws as usize); k];
             let mut divergences = 0;
             for _ in 0..settings.tune + settings.draws {
                 let (pos, info) = sampler
                     .draw()
-                    .map_err(|e| MetricsError::invalid(format!("NUTS draw: {e}")))?;
+                    .map_err(|e| StudyError::invalid(format!("NUTS draw: {e}")))?;
                 if info.tuning {
                     continue;
                 }
@@ -313,7 +313,7 @@ pub fn fit_bradley_terry(
         .collect();
     let chains: Vec<(Vec<Vec<f64>>, u64)> = chains.into_iter().collect::<Result<_>>()?;
     if chains.iter().any(|(d, _)| (d[0].len() as u64) < MIN_DRAWS) {
-        return Err(MetricsError::invalid(
+        return Err(StudyError::invalid(
             "NUTS returned fewer post-tuning draws than asked for",
         ));
     }

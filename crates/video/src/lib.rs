@@ -30,8 +30,8 @@ mod tests;
 
 use std::path::Path;
 
-use crate::error::{Result, SceneError};
-use crate::image::Image;
+use fewview_scene::Image;
+use fewview_scene::error::{Result, SceneError};
 
 pub use frames::DEFAULT_FOLDER_FPS;
 pub use gif::MAX_GIF_FPS;

@@ -13,7 +13,7 @@ use std::path::Path;
 pub use binomial::binom_test_two_sided;
 pub use bradley_terry::{BtPosterior, BtSettings, SkillSummary, WinCount, fit_bradley_terry};
 
-use crate::error::{MetricsError, Result};
+use crate::error::{Result, StudyError};
 
 /// One answer: a participant saw `left` and `right` (method names) for `scene` and chose
 /// `winner` (one of the two) for `question`.
@@ -38,19 +38,19 @@ impl Response {
 
     fn validate(&self, at: &str) -> Result<()> {
         if self.left == self.right {
-            return Err(MetricsError::invalid(format!(
+            return Err(StudyError::invalid(format!(
                 "{at}: a method cannot be compared with itself ({})",
                 self.left
             )));
         }
         if self.winner != self.left && self.winner != self.right {
-            return Err(MetricsError::invalid(format!(
+            return Err(StudyError::invalid(format!(
                 "{at}: winner {:?} is neither {:?} nor {:?}",
                 self.winner, self.left, self.right
             )));
         }
         if self.question.is_empty() {
-            return Err(MetricsError::invalid(format!("{at}: empty question")));
+            return Err(StudyError::invalid(format!("{at}: empty question")));
         }
         Ok(())
     }
@@ -62,14 +62,14 @@ pub fn read_responses_csv(path: &Path) -> Result<Vec<Response>> {
     let mut reader = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .from_path(path)
-        .map_err(|e| MetricsError::format(path, e.to_string()))?;
+        .map_err(|e| StudyError::format(path, e.to_string()))?;
     let headers = reader
         .headers()
-        .map_err(|e| MetricsError::format(path, e.to_string()))?
+        .map_err(|e| StudyError::format(path, e.to_string()))?
         .clone();
     let column = |name: &str| {
         headers.iter().position(|h| h.eq_ignore_ascii_case(name)).ok_or_else(|| {
-            MetricsError::format(path, format!("missing column {name:?} (need participant,question,scene,left,right,winner)"))
+            StudyError::format(path, format!("missing column {name:?} (need participant,question,scene,left,right,winner)"))
         })
     };
     let cols = [
@@ -83,7 +83,7 @@ pub fn read_responses_csv(path: &Path) -> Result<Vec<Response>> {
     let mut out = Vec::new();
     for (i, record) in reader.records().enumerate() {
         let line = i + 2;
-        let record = record.map_err(|e| MetricsError::format(path, format!("line {line}: {e}")))?;
+        let record = record.map_err(|e| StudyError::format(path, format!("line {line}: {e}")))?;
         let get = |c: usize| record.get(cols[c]).unwrap_or("").to_string();
         let mut r = Response {
             participant: get(0),
@@ -98,8 +98,8 @@ pub fn read_responses_csv(path: &Path) -> Result<Vec<Response>> {
         } else if r.winner.eq_ignore_ascii_case("right") {
             r.winner = r.right.clone();
         }
-        if let Err(MetricsError::Invalid(message)) = r.validate(&format!("line {line}")) {
-            return Err(MetricsError::format(path, message));
+        if let Err(StudyError::Invalid(message)) = r.validate(&format!("line {line}")) {
+            return Err(StudyError::format(path, message));
         }
         out.push(r);
     }
@@ -111,11 +111,11 @@ pub fn write_responses_csv(path: &Path, responses: &[Response]) -> Result<()> {
     let mut w = csv::Writer::from_writer(Vec::new());
     for r in responses {
         w.serialize(r)
-            .map_err(|e| MetricsError::invalid(e.to_string()))?;
+            .map_err(|e| StudyError::invalid(e.to_string()))?;
     }
     let bytes = w
         .into_inner()
-        .map_err(|e| MetricsError::invalid(e.to_string()))?;
+        .map_err(|e| StudyError::invalid(e.to_string()))?;
     fewview_scene::atomic::write_bytes(path, &bytes)?;
     Ok(())
 }
@@ -157,7 +157,7 @@ pub fn analyze(
     settings: &BtSettings,
 ) -> Result<StudyAnalysis> {
     if responses.is_empty() {
-        return Err(MetricsError::invalid("no responses to analyse"));
+        return Err(StudyError::invalid("no responses to analyse"));
     }
     for (i, r) in responses.iter().enumerate() {
         r.validate(&format!("response {}", i + 1))?;
@@ -171,7 +171,7 @@ pub fn analyze(
         for m in [&r.left, &r.right] {
             if !methods.contains(m) {
                 if method_order.is_some() {
-                    return Err(MetricsError::invalid(format!(
+                    return Err(StudyError::invalid(format!(
                         "method {m:?} is not in the configured method list"
                     )));
                 }
@@ -384,10 +384,10 @@ impl StudyAnalysis {
     /// question (`ranking_<question>.png`, [`ranking_file_names`]) into `dir`, each atomically.
     /// Returns the paths written.
     pub fn write_report(&self, dir: &Path) -> Result<Vec<std::path::PathBuf>> {
-        std::fs::create_dir_all(dir).map_err(|e| MetricsError::io(dir, e))?;
+        std::fs::create_dir_all(dir).map_err(|e| StudyError::io(dir, e))?;
         let mut written = Vec::new();
         let json =
-            serde_json::to_string_pretty(self).map_err(|e| MetricsError::invalid(e.to_string()))?;
+            serde_json::to_string_pretty(self).map_err(|e| StudyError::invalid(e.to_string()))?;
         for (name, text) in [
             ("report.md", self.to_markdown()),
             ("pairs.csv", self.pairs_csv()),

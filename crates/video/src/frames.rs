@@ -10,8 +10,8 @@
 use std::cmp::Ordering;
 use std::path::{Path, PathBuf};
 
-use crate::error::{Result, SceneError};
-use crate::image::Image;
+use fewview_scene::Image;
+use fewview_scene::error::{Result, SceneError};
 
 /// Frame rate assumed for a folder without `video.json` (FFmpeg's `image2` demuxer default).
 pub const DEFAULT_FOLDER_FPS: f32 = 25.0;
@@ -77,7 +77,7 @@ pub(crate) fn write_frames(dir: &Path, frames: &[Image], fps: f32) -> Result<()>
         frames: frames.len(),
     })
     .expect("plain struct serialises");
-    crate::atomic::write_bytes(&staging.path().join(SIDECAR), &sidecar)?;
+    fewview_scene::atomic::write_bytes(&staging.path().join(SIDECAR), &sidecar)?;
 
     // `tempdir` creates 0700; a finished video folder should be as readable as `mkdir` makes it.
     #[cfg(unix)]

@@ -4,7 +4,7 @@
 //! rank-normalise with Blom's offset (3/8), R̂ = max(bulk, folded), and the effective sample size
 //! from Geyer's initial monotone sequence of the chain-averaged autocorrelations.
 
-use crate::error::{MetricsError, Result};
+use crate::error::{Result, StudyError};
 
 /// The fewest draws per chain: the chains are split in halves, and Geyer's initial positive
 /// sequence in [`ess`] looks at lags 1 to 3 of each half, so a half needs at least 5 draws.
@@ -54,12 +54,12 @@ pub fn ess_tail(chains: &[Vec<f64>]) -> Result<f64> {
 fn check(chains: &[Vec<f64>]) -> Result<()> {
     let n = chains.first().map_or(0, Vec::len);
     if chains.is_empty() || n < MIN_DRAWS || chains.iter().any(|c| c.len() != n) {
-        return Err(MetricsError::invalid(format!(
+        return Err(StudyError::invalid(format!(
             "diagnostics need chains of equal length with at least {MIN_DRAWS} draws"
         )));
     }
     if chains.iter().flatten().any(|v| !v.is_finite()) {
-        return Err(MetricsError::invalid(
+        return Err(StudyError::invalid(
             "diagnostics: draws contain NaN or infinite values",
         ));
     }

@@ -1,17 +1,14 @@
 //! `fewview study`: run a pairwise 2AFC user study (paper 000 §5, Fig. 3) and analyse it
 //! (Tables 1–2 and the Bayesian Bradley–Terry ranking).
 
-pub mod config;
-pub mod server;
-pub mod store;
-
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Subcommand;
-use fewview_metrics::study::bradley_terry::{MAX_DRAWS, MIN_DRAWS};
-use fewview_metrics::study::{self, BtSettings};
+use fewview_study::analysis::bradley_terry::{MAX_DRAWS, MIN_DRAWS};
+use fewview_study::analysis::{self as study, BtSettings};
+use fewview_study::{StudyConfig, server, store};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -71,7 +68,7 @@ enum StudyCommand {
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.command {
         StudyCommand::Serve { config, addr } => {
-            let config = config::StudyConfig::load(&config)?;
+            let config = StudyConfig::load(&config)?;
             let db = config.database.clone();
             let per = config.trials_per_participant();
             server::serve(config, addr, |bound| {
@@ -79,7 +76,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     "study: http://{bound}/  ({per} comparisons per participant; answers in {})",
                     db.display()
                 );
-            })
+            })?;
+            Ok(())
         }
         StudyCommand::Analyze {
             config,
@@ -94,7 +92,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         } => {
             let (answers, order) = match (config, responses) {
                 (Some(path), None) => {
-                    let cfg = config::StudyConfig::load(&path)?;
+                    let cfg = StudyConfig::load(&path)?;
                     let store = store::Store::open(&cfg.database)?;
                     (
                         store.responses().with_context(|| {
@@ -124,7 +122,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Ok(())
         }
         StudyCommand::Export { config, out } => {
-            let cfg = config::StudyConfig::load(&config)?;
+            let cfg = StudyConfig::load(&config)?;
             let store = store::Store::open(&cfg.database)?;
             let answers = store.responses()?;
             study::write_responses_csv(&out, &answers)?;
