@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The Table 4-style ablations of crates/surface/README.md on DTU scan65 narrow views 22,23,24,
+# The Table 4-style ablations (docs/experiments.md) on DTU scan65 narrow views 22,23,24,
 # sigma 0.15, seed 0, with the uncertainty / patch-NCC / geometric-consistency switches.
 #
 #   scripts/ablation_table4.sh OUT [cpu|short]
@@ -17,17 +17,17 @@ common=(surface --data "$data/dtu/scan65" --train-views 22,23,24 --downscale 2
   --pose-noise 0.15 --seed 0 --mesh-resolution 64 --eval-views 1 --eval-scale 4)
 case "$mode" in
   cpu) common+=(--iterations 2000 --checkpoint-every 250) ;;
-  short) common+=(--schedule paper --pose-warmup --pose-start 0.5 --iterations 240
+  short) common+=(--schedule paper --pose-warmup on --pose-start 0.5 --iterations 240
     --checkpoint-every 60) ;;
   *) echo "unknown mode $mode (cpu or short)" >&2; exit 2 ;;
 esac
 declare -A rows=(
-  [A]="--no-uncertainty --no-ncc --no-gc"
-  [B]="--no-uncertainty --no-gc"
-  [C]="--no-uncertainty --no-ncc"
-  [D]="--no-uncertainty"
-  [E]="--no-gc"
-  [F]="--no-ncc"
+  [A]="--no-loss uncertainty,ncc,gc"
+  [B]="--no-loss uncertainty,gc"
+  [C]="--no-loss uncertainty,ncc"
+  [D]="--no-loss uncertainty"
+  [E]="--no-loss gc"
+  [F]="--no-loss ncc"
   [G]=""
 )
 mkdir -p "$out"

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Paper 000's method and its alternatives side by side: plain and (a)-(f), seed 0, on the demo
+# The fusion paper's method and its alternatives side by side: plain and (a)-(f), seed 0, on the demo
 # scene and on LLFF fern 3-view, then one Markdown table per scene (README, "Gradient-domain
 # fusion").
 #

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Paper 001's Table 1 protocol: the default `fewview surface` command on each DTU scan, both
+# The surface paper's Table 1 protocol: the default `fewview surface` command on each DTU scan, both
 # triplets (narrow 22,23,24 and wide 22,25,28) and seeds 0, 1, 2 at 400 x 300 with sigma = 0.15
 # pose noise, then one Markdown table beside the paper's rows (`fewview surface --table`).
 # Finished runs are kept and skipped, so an interrupted protocol goes on where it stopped.

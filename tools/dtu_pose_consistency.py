@@ -4,7 +4,7 @@ matches fix the poses?
 
 An independent check of the reference the surface method is scored against: matches joined into
 tracks, then a three-view bundle adjustment (SciPy, Huber loss on reprojection errors,
-intrinsics fixed) started from the calibrated poses, scored against them with paper 001's
+intrinsics fixed) started from the calibrated poses, scored against them with the surface paper's
 Alg. 1/2 (the pose metric `fewview surface` reports: pairwise similarity alignment, arccos
 clamped at 1 - 1e-6), and the 1-sigma rotation uncertainty of each adjusted view from the
 curvature of the cost. If the images' own optimum lay far from the calibration, no method could
@@ -183,7 +183,7 @@ def c2w(r, t):
 
 
 def paper_pose_error(est, gt):
-    """Paper 001 Alg. 1/2: best pairwise similarity alignment, mean rotation (degrees) and
+    """The surface paper Alg. 1/2: best pairwise similarity alignment, mean rotation (degrees) and
     translation errors over the views."""
     views = list(gt)
     e = np.array([c2w(*est[v][1:]) for v in views])
@@ -256,7 +256,7 @@ def main():
     adjusted, median, std = bundle_adjust(cams, tracks, ids[0], args.max_evaluations)
     print(f"median reprojection error after adjustment: {median:.3f} px")
     rot, trans = paper_pose_error(adjusted, cams)
-    print(f"adjusted poses vs the calibration (paper 001 Alg. 1/2): rotation {rot:.3f} deg, "
+    print(f"adjusted poses vs the calibration (the surface paper Alg. 1/2): rotation {rot:.3f} deg, "
           f"translation {trans:.5f}")
     for v, s in std.items():
         print(f"view {v}: rotation 1-sigma {s:.4f} deg")

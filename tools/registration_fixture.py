@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Registration fixture (paper 001 Alg. 3) and Open3D's reference result on it.
+"""Registration fixture (the surface paper Alg. 3) and Open3D's reference result on it.
 
 Makes two partial, noisy point clouds of the Stanford bunny, moves the source by a random
 similarity, simulates the camera-based pre-alignment, and runs Open3D's FPFH + RANSAC + ICP on

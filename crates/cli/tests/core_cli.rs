@@ -557,11 +557,11 @@ fn surface_refuses_bad_numbers_before_writing() {
         ("--pose-noise", "NaN"),
         ("--pose-noise", "-1"),
         ("--pose-noise", "1e300"),
-        ("--lambda-mc", "NaN"),
-        ("--lambda-u", "-1"),
-        ("--lambda-gc", "inf"),
-        ("--lambda-geo", "1e300"),
-        ("--lambda-psdf", "NaN"),
+        ("--lambda", "mc=NaN"),
+        ("--lambda", "u=-1"),
+        ("--lambda", "gc=inf"),
+        ("--lambda", "geo=1e300"),
+        ("--lambda", "psdf=NaN"),
         ("--eval-scale", "0"),
     ] {
         let out = surface(&[&format!("{flag}={value}")]);

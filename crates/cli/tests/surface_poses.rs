@@ -1,4 +1,4 @@
-//! Paper 001's pose recovery on more than the scan it was developed on: the default
+//! The surface paper's pose recovery on more than the scan it was developed on: the default
 //! `fewview surface` command's matching, global start and epipolar warm-up on DTU scan37 and
 //! scan65 (wide triplet 22, 25, 28 at 400 × 300, σ = 0.15 noise), stopped after one training
 //! iteration. They need `FEWVIEW_DATA` (CI sets it to `../shared/data`).

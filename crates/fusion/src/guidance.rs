@@ -1,4 +1,4 @@
-//! The guidance field of the gradient-domain fusion (paper 000, "Splat-based Gradient-domain
+//! The guidance field of the gradient-domain fusion (the fusion paper, "Splat-based Gradient-domain
 //! Fusion for Seamless View Transition", Eq. 3's `w`), built from the two reprojected neighbours
 //! of a virtual view.
 //!

@@ -1,6 +1,6 @@
 #![doc = include_str!("../README.md")]
 //! Sparse-view Gaussian splatting whose colours change smoothly while the camera moves between
-//! the input views: the gradient-domain fusion of paper 000 ("Splat-based Gradient-domain Fusion
+//! the input views: the gradient-domain fusion of the fusion paper ("Splat-based Gradient-domain Fusion
 //! for Seamless View Transition") on virtual views between adjacent training views, its
 //! alternatives (supplement §4), and the transition videos and metrics it is judged by.
 //!

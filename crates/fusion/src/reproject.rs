@@ -1,5 +1,5 @@
 //! Reprojection of the training photos into a virtual view through meshes of rendered depth
-//! (paper 000, "Splat-based Gradient-domain Fusion for Seamless View Transition", supplement §1):
+//! (the fusion paper, "Splat-based Gradient-domain Fusion for Seamless View Transition", supplement §1):
 //! each training view's depth, as the Gaussians render it, is meshed with the Eq. (1) depth-edge
 //! test and coloured by its photo; the mesh is rasterised into the virtual camera with a
 //! z-buffer, giving the reprojected image `f*` and its mask `Ω_f*`.

@@ -1,5 +1,5 @@
 //! From finished fusion runs to a pairwise user study: each run's transition video becomes one
-//! method of the study, as paper 000's user study (B) compares its alternatives on the same
+//! method of the study, as the fusion paper's user study (B) compares its alternatives on the same
 //! camera path (supplement §5: 8-second, 20 fps clips, two questions).
 
 use std::path::{Path, PathBuf};

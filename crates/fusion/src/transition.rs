@@ -1,4 +1,4 @@
-//! Transition videos and how smooth they are (paper 000, "Splat-based Gradient-domain Fusion for
+//! Transition videos and how smooth they are (the fusion paper, "Splat-based Gradient-domain Fusion for
 //! Seamless View Transition"): the camera moves through the training views in order and back,
 //! 8 s at 20 fps as the paper's study clips, and the frames are scored for temporal consistency.
 //!

@@ -1,4 +1,4 @@
-//! The method and its alternatives (paper 000, "Splat-based Gradient-domain Fusion for Seamless
+//! The method and its alternatives (the fusion paper, "Splat-based Gradient-domain Fusion for Seamless
 //! View Transition", supplement §4), chosen by one setting, and the settings they share.
 
 use serde::{Deserialize, Serialize};

@@ -1,4 +1,4 @@
-//! Virtual cameras between adjacent training views (paper 000, "Splat-based Gradient-domain
+//! Virtual cameras between adjacent training views (the fusion paper, "Splat-based Gradient-domain
 //! Fusion for Seamless View Transition"): the views the fusion term renders while training, and
 //! the path a transition video follows.
 

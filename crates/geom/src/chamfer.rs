@@ -1,6 +1,6 @@
 //! Surface-reconstruction metrics.
 //!
-//! **DTU protocol** ([`dtu_chamfer`]), as in the DTU evaluation used by IDR, NeuS and paper 001
+//! **DTU protocol** ([`dtu_chamfer`]), as in the DTU evaluation used by IDR, NeuS and the surface paper
 //! (`eval.py` of DTUeval-python, after the official MATLAB code): the predicted mesh is sampled
 //! at density 0.2 ([`dtu_sample`]), shuffled and radius-down-sampled at the same 0.2
 //! ([`radius_downsample`]); the points are restricted to the observation mask's bounding box

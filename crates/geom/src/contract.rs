@@ -1,5 +1,5 @@
-//! The contraction of paper 000 Eq. (2), the choice of its reference camera and bounds, and
-//! random subsampling of the point cloud for Gaussian initialisation (paper 000 §2, §4(a)).
+//! The contraction of the fusion paper Eq. (2), the choice of its reference camera and bounds, and
+//! random subsampling of the point cloud for Gaussian initialisation (the fusion paper §2, §4(a)).
 //!
 //! **Eq. (2), literally.** `Contract(X) = X − T` when `d = ‖X − T‖ ≤ B_near`, else
 //! `(X − T)·(B_far − B_near)/d`. The far branch has norm `B_far − B_near` whatever `d` is, so
@@ -136,7 +136,7 @@ pub fn contraction_reference(
 }
 
 /// A random subset of `round(fraction·n)` points, without replacement, in their original order
-/// (paper 000: 10 % for our initialisation, 1 % for alternative (a)).
+/// (the fusion paper: 10 % for our initialisation, 1 % for alternative (a)).
 pub fn subsample(points: &Points, fraction: f64, seed: u64) -> Result<Points> {
     Ok(points.select(&sample_indices(points.len(), fraction, seed)?))
 }

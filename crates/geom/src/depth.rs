@@ -1,4 +1,4 @@
-//! Depth maps to meshes and point clouds (paper 000 §1–2).
+//! Depth maps to meshes and point clouds (the fusion paper §1–2).
 //!
 //! Every pixel `(i, j)` is back-projected through its centre `(i + 0.5, j + 0.5)` at its z-depth
 //! (distance along the optical axis, as rasterizers render it). Pixels at *depth edges* are
@@ -32,7 +32,7 @@ use nalgebra::Vector3;
 use crate::error::{GeomError, Result};
 use crate::mesh::{Mesh, Points};
 
-/// The paper's τ_depth (paper 000 §1).
+/// The paper's τ_depth (the fusion paper §1).
 pub const TAU_DEPTH: f32 = 1e-4;
 
 /// Which quantity Eq. (1) thresholds (see the module docs).
@@ -210,7 +210,7 @@ fn back_project(
     (pos, idx, col)
 }
 
-/// Mesh of a depth map (paper 000 §1): one vertex per valid pixel, two triangles per 2×2 block
+/// Mesh of a depth map (the fusion paper §1): one vertex per valid pixel, two triangles per 2×2 block
 /// of valid pixels, faces towards the camera; `colors` (same size, 1/3/4 channels) become
 /// vertex colours. `tau` is τ_depth of Eq. (1) (≤ 0: no filter).
 pub fn depth_to_mesh(
@@ -267,7 +267,7 @@ pub fn depth_to_mesh_with(
     })
 }
 
-/// Point cloud of a depth map (paper 000 §2): the valid pixels of the same Eq. (1) filter,
+/// Point cloud of a depth map (the fusion paper §2): the valid pixels of the same Eq. (1) filter,
 /// back-projected to world space, with colours when given.
 pub fn depth_to_points(
     depth: &[f32],

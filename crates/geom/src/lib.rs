@@ -1,20 +1,20 @@
 #![doc = include_str!("../README.md")]
-//! Geometry toolbox (paper 000 §1–2, §4; paper 001 Alg. 3).
+//! Geometry toolbox (the fusion paper §1–2, §4; the surface paper Alg. 3).
 //!
 //! - [`depth`]: depth maps to meshes and point clouds with the depth-edge test of Eq. (1),
-//!   [`contract`]: the contraction of Eq. (2) and point subsampling (paper 000 §1–2).
+//!   [`contract`]: the contraction of Eq. (2) and point subsampling (the fusion paper §1–2).
 //! - [`stereo`]: calibrated rectification, Semi-Global Matching (OpenCV's `StereoSGBM`,
 //!   bit for bit), sub-pixel refinement and the confidence-based hierarchical point cloud of
-//!   paper 000 §2, the start of its Gaussians; [`colormap`]: false colour for depth and disparity.
+//!   the fusion paper §2, the start of its Gaussians; [`colormap`]: false colour for depth and disparity.
 //! - [`blend`]: occlusion-aware Poisson blending (Eq. 3), standard Poisson, Laplacian-pyramid and
-//!   Gaussian-feather blending (paper 000 §4, Fig. 2/9).
+//!   Gaussian-feather blending (the fusion paper §4, Fig. 2/9).
 //! - [`raster`]: triangle rasterisation with a z-buffer and perspective-correct attributes, to
-//!   reproject depth meshes into virtual views (paper 000 §1, §4).
+//!   reproject depth meshes into virtual views (the fusion paper §1, §4).
 //! - [`mcubes`]: marching cubes on dense grids and chunked closures; [`cleanup`]: largest
 //!   component and mask culling.
 //! - [`epipolar`]: the five-point relative pose with RANSAC, rotation averaging and camera
-//!   centres from baseline directions: a global start for noisy poses (paper 001).
-//! - [`registration`]: similarity pre-alignment, FPFH + RANSAC, ICP (paper 001 Alg. 3).
+//!   centres from baseline directions: a global start for noisy poses (the surface paper).
+//! - [`registration`]: similarity pre-alignment, FPFH + RANSAC, ICP (the surface paper Alg. 3).
 //! - [`chamfer`]: the DTU Chamfer protocol and Chamfer-L1 / F-score / normal consistency.
 //! - [`io`]: PLY, OBJ, OFF, `.npy`, depth PNGs and camera JSON.
 

@@ -1,4 +1,4 @@
-//! Triangle rasterisation into a pinhole camera with a z-buffer (paper 000, supplement §1, §4).
+//! Triangle rasterisation into a pinhole camera with a z-buffer (the fusion paper, supplement §1, §4).
 //!
 //! Reprojects meshes built from rendered depth maps ([`crate::depth::depth_to_mesh`]) into a
 //! virtual camera, carrying per-vertex attributes (colours, source pixel positions, ...).

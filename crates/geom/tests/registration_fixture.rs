@@ -1,4 +1,4 @@
-//! Paper 001 Alg. 3 on the bunny fixture made by `tools/registration_fixture.py` (random
+//! The surface paper Alg. 3 on the bunny fixture made by `tools/registration_fixture.py` (random
 //! similarity, 1 % Gaussian noise, 70 % overlap, camera pre-alignment), against Open3D's
 //! FPFH + RANSAC + ICP result on the same inputs, recorded in the fixture.
 

@@ -1,4 +1,4 @@
-//! The "3DGS per frame" baseline of paper 002's comparisons (its Tables 1 and 2, "3D-GS"):
+//! The "3DGS per frame" baseline of the PoseGaussian paper's comparisons (its Tables 1 and 2, "3D-GS"):
 //! plain 3D Gaussian splatting (fewview-splat, the engine of `fewview train`) optimised from
 //! scratch on the input cameras of one frame, then rendered into that frame's held-out cameras.
 //!
@@ -49,7 +49,7 @@ pub struct SplatBaselineOptions {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum BaselineInit {
     /// What `fewview train` does on the same views ([`InitStrategy::Auto`]: the stereo start
-    /// of the overlapping input pairs, else random points): the baseline as paper 002 and its
+    /// of the overlapping input pairs, else random points): the baseline as the PoseGaussian paper and its
     /// issue define it, plain 3DGS on the frame's input cameras.
     #[default]
     Train,

@@ -1,4 +1,4 @@
-//! Inference time per frame of the PoseGaussian network (paper 002 reports about 100 ms on an
+//! Inference time per frame of the PoseGaussian network (the PoseGaussian paper reports about 100 ms on an
 //! RTX 4080), split as the paper splits it, on a synthetic frame so that no data is needed; and
 //! beside it, as the reference of the same run, the multiply-add rate of a plain matrix product
 //! on the same backend, so that the network's own rate reads as a fraction of what the machine

@@ -1,4 +1,4 @@
-//! Scores of novel views against the held-out cameras, the way paper 002 reports them: PSNR,
+//! Scores of novel views against the held-out cameras, the way the PoseGaussian paper reports them: PSNR,
 //! SSIM and LPIPS per frame, and the temporal Δ-metrics (mean and standard deviation of
 //! `|m_t − m_{t−1}|` over consecutive frames of one camera, fewview-metrics' `MetricSeries`),
 //! each averaged over the held-out cameras.

@@ -58,7 +58,7 @@ impl Model {
     }
 }
 
-/// Seconds one frame took, by stage (paper 002 reports rendering, pose encoder, image
+/// Seconds one frame took, by stage (the PoseGaussian paper reports rendering, pose encoder, image
 /// features, TPS and the rest).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct FrameTimes {

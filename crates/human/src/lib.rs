@@ -1,7 +1,7 @@
 #![doc = include_str!("../README.md")]
 //! People filmed by a ring of synchronized, calibrated cameras: the data layer and network of
 //! "PoseGaussian: Pose-Driven Novel View Synthesis for Robust 3D Human Reconstruction"
-//! (paper 002, whose supplement is in `papers/`).
+//! (the PoseGaussian paper, whose supplement is in `papers/`).
 //!
 //! - [`baseline`]: the "3DGS per frame" baseline, 3DGS trained on one frame's input views.
 //! - [`dataset`]: the synthetic capture (`$FEWVIEW_DATA/human`), exact depth and joints.

@@ -20,7 +20,7 @@ use crate::error::{HumanError, Result};
 use crate::maps::{DepthMap, Mask};
 use crate::source::MultiView;
 
-/// Input cameras in paper 002's protocol ("8 input cameras uniformly sampled across the rig").
+/// Input cameras in the PoseGaussian paper's protocol ("8 input cameras uniformly sampled across the rig").
 pub const PAPER_INPUT_CAMERAS: usize = 8;
 
 /// The file in a run folder that holds its split.

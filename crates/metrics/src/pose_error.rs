@@ -1,4 +1,4 @@
-//! Camera pose error of paper 001 (Appendix B.3, Alg. 1 and 2, after SPARF), and the same
+//! Camera pose error of the surface paper (Appendix B.3, Alg. 1 and 2, after SPARF), and the same
 //! errors after a Umeyama similarity alignment of the camera centres (for many views).
 //!
 //! **Alg. 2** (per view, camera-to-world `R`, `t` against the target's): rotation error
@@ -32,7 +32,7 @@ use serde::Serialize;
 pub const EPS: f64 = 1e-6;
 
 /// ε of SPARF's and BARF's code (`rotation_distance`, in f32), whose floor of 0.028° is the
-/// 0.03° paper 001 reports (Appendix B.3: "the rotation error 0.03 is caused by an eps value")
+/// 0.03° the surface paper reports (Appendix B.3: "the rotation error 0.03 is caused by an eps value")
 /// although its Alg. 2 prints 10⁻⁶. Figures at this ε compare with the paper's Table 1; figures
 /// at [`EPS`] follow the printed algorithm and cannot go below 0.081°.
 pub const SPARF_CODE_EPS: f64 = 1e-7;
@@ -198,7 +198,7 @@ fn evaluate_aligned(
     }
 }
 
-/// Paper 001 Alg. 1 + 2 on world-to-camera poses (see the module docs).
+/// The surface paper Alg. 1 + 2 on world-to-camera poses (see the module docs).
 pub fn pose_error_pairwise(
     est: &[Se3],
     gt: &[Se3],

@@ -1,10 +1,10 @@
 //! Temporal-coherence metrics of a rendered sequence against its ground truth.
 //!
 //! * **Per-frame** PSNR, SSIM and (optionally) LPIPS.
-//! * **Δ (frame-to-frame change of a metric)**, the Δ columns of paper 002's tables: for a
+//! * **Δ (frame-to-frame change of a metric)**, the Δ columns of the PoseGaussian paper's tables: for a
 //!   per-frame metric `m_t`, `d_t = |m_t − m_{t−1}|` for `t = 1..T−1`, reported as the mean and
 //!   the (population, `1/(T−1)`) standard deviation of `d_t`. A method whose quality flickers
-//!   from frame to frame has a large Δ even when its mean quality is good. Paper 002 does not
+//!   from frame to frame has a large Δ even when its mean quality is good. The PoseGaussian paper does not
 //!   spell the formula out; this is the definition used here, stated so results can be compared.
 //!   Two consecutive infinite PSNRs (exact frames) count as no change.
 //! * **tLP** (TecoGAN, Chu et al. 2020, Eq. 9 of their paper): `100 · |LPIPS(gt_{t−1}, gt_t) −

@@ -46,7 +46,7 @@ pub enum InitStrategy {
     RandomBox { half_size: Option<f64> },
     /// Gaussians read from an Inria-layout PLY.
     Ply(PathBuf),
-    /// The stereo start of paper 000 §2: a sample of the hierarchical point cloud of the
+    /// The stereo start of the fusion paper §2: a sample of the hierarchical point cloud of the
     /// training views' stereo pairs ([`crate::stereo_start`]), built as [`RunConfig::stereo`]
     /// says.
     Stereo,

@@ -1,5 +1,5 @@
 //! The stereo start of "Splat-based Gradient-domain Fusion for Seamless View Transition"
-//! (paper 000 §2): initial Gaussians from the confidence-based hierarchical point cloud of the
+//! (the fusion paper §2): initial Gaussians from the confidence-based hierarchical point cloud of the
 //! training views' stereo pairs instead of random points.
 //!
 //! The training views are ordered along their baseline and paired with their neighbours
@@ -35,7 +35,7 @@ pub enum DepthFrom {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StereoInit {
     pub depth: DepthFrom,
-    /// Fraction of the hierarchical cloud that becomes Gaussians (paper 000: 0.1; its
+    /// Fraction of the hierarchical cloud that becomes Gaussians (the fusion paper: 0.1; its
     /// alternative (a): 0.01).
     pub fraction: f64,
     pub sgm: SgmParams,

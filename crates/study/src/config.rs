@@ -7,7 +7,7 @@
 //! methods = ["FreeNeRF", "CoherentGS", "MVPGS", "Ours"]
 //! scenes = ["truck", "train"]
 //!
-//! [[questions]]                   # optional; the default is paper 000's Q1 and Q2
+//! [[questions]]                   # optional; the default is the fusion paper's Q1 and Q2
 //! id = "Q1"
 //! text = "Which video shows more natural color transitions as the viewpoint changes?"
 //!
@@ -52,7 +52,7 @@ fn default_database() -> PathBuf {
     "responses.sqlite".into()
 }
 
-/// Paper 000's two questions (supplementary §5).
+/// The fusion paper's two questions (supplementary §5).
 pub fn paper_questions() -> Vec<Question> {
     vec![
         Question {

@@ -1,4 +1,4 @@
-//! Pairwise two-alternative forced-choice (2AFC) user studies, as in paper 000 (supplementary
+//! Pairwise two-alternative forced-choice (2AFC) user studies, as in the fusion paper (supplementary
 //! §5–6): the configuration (`study.toml`, [`config`]), the web server participants answer in
 //! ([`server`]), the SQLite store that keeps every answer ([`store`]) and the analysis of the
 //! answers ([`analysis`]: win rates, exact binomial p-values, Bayesian Bradley–Terry ranking by

@@ -53,7 +53,7 @@ fn fnv1a(s: &str) -> u64 {
 }
 
 /// A participant's plan: every scene × unordered method pair once, in a random order, each with
-/// a random left/right assignment (paper 000 §5: scene, method pairing and left–right order are
+/// a random left/right assignment (the fusion paper §5: scene, method pairing and left–right order are
 /// randomised). Deterministic in (study seed, participant id).
 pub fn plan(config: &StudyConfig, participant: &str) -> Vec<Trial> {
     let mut trials = Vec::new();

@@ -1,4 +1,4 @@
-//! User-study statistics: MCMC diagnostics against ArviZ, and the analysis of paper 000's
+//! User-study statistics: MCMC diagnostics against ArviZ, and the analysis of the fusion paper's
 //! Tables 1–2 win counts (144 responses per pair).
 
 use std::path::PathBuf;
@@ -36,7 +36,7 @@ fn diagnostics_match_arviz() {
     }
 }
 
-/// `(method a, method b, Q1 win % of a, Q2 win % of a)` as printed in paper 000.
+/// `(method a, method b, Q1 win % of a, Q2 win % of a)` as printed in the fusion paper.
 type Row = (&'static str, &'static str, f64, f64);
 
 /// Responses whose win counts are those the printed percentages imply for 144 answers a pair.

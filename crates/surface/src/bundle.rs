@@ -1,6 +1,6 @@
 //! Bundle adjustment of the warmed-up poses on the matches' tracks, as structure from motion
-//! ends its start (a deviation from paper 001, which refines the poses through the field
-//! alone; `--no-bundle-adjustment` switches it off).
+//! ends its start (a deviation from the surface paper, which refines the poses through the field
+//! alone; `--bundle-adjustment off` switches it off).
 //!
 //! **Why.** The epipolar warm-up ([`crate::warmup`]) fits each pair's matches on their own:
 //! a pair's Sampson cost cannot say that the point a match of views 0–1 sees is the point a

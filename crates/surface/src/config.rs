@@ -42,7 +42,7 @@ pub struct RunConfig {
     #[serde(default)]
     pub pose_warmup: Option<WarmupOptions>,
     /// Match only pairs of views whose optical axes, under the initial poses, are at most this
-    /// many degrees apart ([`crate::matching::covisible_pairs`]). Paper 001 matches every pair
+    /// many degrees apart ([`crate::matching::covisible_pairs`]). The surface paper matches every pair
     /// of its three views; on rings of views the default drops the opposite ones. Noise can push
     /// a wide pair past it: pass 180 to match every pair as the paper does, or let dense
     /// matching compose that pair through a middle view (`DensifyOptions::compose_unmatched_pairs`, as
@@ -56,7 +56,7 @@ pub struct RunConfig {
     pub match_refinement: Option<AffineRefineOptions>,
     /// Deviation, off by default: grow dense matches from the (refined) sparse ones by affine
     /// Lucas–Kanade with forward–backward checks ([`crate::matching::densify::densify_matches`]), standing in for the
-    /// density of paper 001's PDC-Net matches.
+    /// density of the surface paper's PDC-Net matches.
     #[serde(default)]
     pub densify: Option<DensifyOptions>,
     /// Deviation, used by [`Schedule::Cpu`]: when [`Self::densify`] is off,
@@ -189,26 +189,27 @@ mod tests {
     fn cpu_schedule_warms_up_releases_late_and_falls_back_to_the_paper() {
         let mut c = RunConfig::default();
         Schedule::Cpu.apply(&mut c);
-        assert_eq!(
-            c.pose_warmup,
-            Some(WarmupOptions {
-                covariance_polish: true,
-                ..Default::default()
-            })
-        );
-        assert_eq!(c.train.pose_start, 0.75);
-        assert_eq!((c.train.pose_lr.start, c.train.pose_lr.end), (1e-4, 1e-5));
-        assert_eq!(c.pose_timing_without_warmup, Some(PoseTiming::PAPER));
-        assert_eq!(c.densify, None);
-        assert_eq!(c.densify_if_needed.as_ref().map(|d| d.spacing_px), Some(4));
-        assert_eq!(c.bundle_adjustment, Some(BundleOptions::default()));
-        assert_eq!(c.patch_adjustment, Some(PatchAdjustmentOptions::default()));
-        assert!(c.hold_poses_after_patch_adjustment);
-        // After a patch adjustment the poses are held for the whole run.
+        // The poses are first placed by the warm-up (with its covariance polish), then the
+        // tracks' bundle adjustment and, on dense matches, the patch adjustment.
+        assert!(c.pose_warmup.as_ref().is_some_and(|w| w.covariance_polish));
+        assert!(c.bundle_adjustment.is_some() && c.patch_adjustment.is_some());
+        // Dense matches are grown only when the sparse ones cannot tie the views together.
+        assert!(c.densify.is_none() && c.densify_if_needed.is_some());
+        // The field then refines them later and more gently than the paper's schedule.
+        let paper = PoseTiming::PAPER;
+        assert!(c.train.pose_start > paper.start);
+        assert!(c.train.pose_lr.start < paper.lr.start && c.train.pose_lr.end < paper.lr.end);
+        // After a patch adjustment the poses are held for the whole run; otherwise released late.
         let ran = warmup_report(None);
         let (held, fell_back) = c.effective_train(Some(&ran), true);
         assert_eq!((held.pose_start, fell_back), (1.0, false));
-        assert_eq!(c.effective_train(Some(&ran), false).0.pose_start, 0.75);
+        let (released, fell_back) = c.effective_train(Some(&ran), false);
+        assert_eq!((released, fell_back), (c.train.clone(), false));
+        // A declined warm-up falls back to the paper's timing.
+        let declined = warmup_report(Some("too few matches"));
+        let (train, fell_back) = c.effective_train(Some(&declined), false);
+        assert!(fell_back);
+        assert_eq!(PoseTiming::of(&train), paper);
         // Back to the paper's clears all of it.
         Schedule::Paper.apply(&mut c);
         assert_eq!(c, RunConfig::default());

@@ -6,7 +6,7 @@
 //!   Neuralangelo), progressive levels through the BARF window. This is the CPU-practical path.
 //! - [`NeusMlpSdf`]: NeuS's 8×256 MLP with a skip connection at layer 4, positional encoding
 //!   with BARF's coarse-to-fine window, Softplus(β = 100) and the geometric initialisation —
-//!   the architecture paper 001 uses (§B.1). Weight normalisation is left out (it only
+//!   the architecture the surface paper uses (§B.1). Weight normalisation is left out (it only
 //!   reparameterises the optimisation).
 //!
 //! Normals `n(P) = ∂s/∂P` (Eq. 3) come from finite differences of the network

@@ -1,5 +1,5 @@
 #![doc = include_str!("../README.md")]
-//! Neural implicit surfaces from sparse, noisy poses (paper 001): a NeuS renderer over a signed
+//! Neural implicit surfaces from sparse, noisy poses (the surface paper): a NeuS renderer over a signed
 //! distance field (hash grid or NeuS MLP), per-camera pose refinement with SPARF's
 //! parameterisation, correspondence-based losses with the paper's uncertainty-aware photometric
 //! and geometric consistency (Eqs. 5–7), and the progressive SDF loss (Eqs. 8, 9, 12, 13).

@@ -1,4 +1,4 @@
-//! The loss terms of paper 001 (§3.3–3.5), each a function of rendered tensors so that the
+//! The loss terms of the surface paper (§3.3–3.5), each a function of rendered tensors so that the
 //! trainer can switch them on and off for ablations.
 //!
 //! Reductions the paper leaves open are chosen as in the code it builds on and documented at

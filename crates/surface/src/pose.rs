@@ -1,10 +1,10 @@
 //! Camera poses: the BARF/SPARF synthetic perturbation and SPARF's pose parameterisation.
 //!
-//! **Perturbation** (BARF, SPARF; paper 001 §4.1): `ξ ~ N(0, σ²)` in se(3) (rotation part
+//! **Perturbation** (BARF, SPARF; the surface paper §4.1): `ξ ~ N(0, σ²)` in se(3) (rotation part
 //! first), `P_noisy = P_w2c ∘ exp(ξ)` — BARF's `pose.compose([pose_noise, pose])`, i.e. the noise
 //! acts in world coordinates before the world-to-camera transform.
 //!
-//! **Parameterisation** (SPARF `FirstTwoColunmnsPoseParameters`, paper 001 §B.1): each
+//! **Parameterisation** (SPARF `FirstTwoColunmnsPoseParameters`, the surface paper §B.1): each
 //! world-to-camera pose is 9 numbers, the translation `t` and the first two *rows* of `R`
 //! (Zhou et al.'s 6D representation), mapped back to a rotation by Gram–Schmidt. The parameters
 //! start at the initial (noisy) pose and are optimised directly with their own Adam.

@@ -1,4 +1,4 @@
-//! NeuS volume rendering (paper 001 Eqs. 1–3; Wang et al. 2021): samples along each ray inside
+//! NeuS volume rendering (the surface paper Eqs. 1–3; Wang et al. 2021): samples along each ray inside
 //! the unit sphere, hierarchical up-sampling with fixed sharpness, then the unbiased opacity
 //!
 //! `α_i = max((Φ_s(s_prev) − Φ_s(s_next)) / Φ_s(s_prev), 0)`,

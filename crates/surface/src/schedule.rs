@@ -1,7 +1,7 @@
 //! Pose schedules: when the camera poses start to move and how fast, before and after the
 //! epipolar warm-up.
 //!
-//! Paper 001 §B.1 refines the poses from the first iteration with their own Adam,
+//! The surface paper §B.1 refines the poses from the first iteration with their own Adam,
 //! 10⁻³ → 10⁻⁴, over 100k GPU iterations, from PDC-Net's dense matches. On a CPU budget of
 //! about 2000 iterations that schedule does not converge: while the field is young its colour
 //! and correspondence gradients pull the poses away. The schedule that converges here
@@ -26,7 +26,7 @@ pub struct PoseTiming {
 }
 
 impl PoseTiming {
-    /// Paper 001 §B.1: refined from the first iteration, 10⁻³ → 10⁻⁴.
+    /// The surface paper §B.1: refined from the first iteration, 10⁻³ → 10⁻⁴.
     pub const PAPER: Self = Self {
         start: 0.0,
         lr: ExpSchedule {
@@ -65,7 +65,7 @@ impl PoseTiming {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Schedule {
-    /// Paper 001: no warm-up, poses refined from the first iteration at 10⁻³ → 10⁻⁴.
+    /// The surface paper: no warm-up, poses refined from the first iteration at 10⁻³ → 10⁻⁴.
     Paper,
     /// The CPU schedule that converges (the module docs): the epipolar warm-up, then
     /// [`PoseTiming::LATE_RELEASE`]. When the sparse matches cannot tie the views together for

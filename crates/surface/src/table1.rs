@@ -1,4 +1,4 @@
-//! Paper 001's Table 1 protocol as a table of finished `surface` runs: for each scan, triplet
+//! The surface paper's Table 1 protocol as a table of finished `surface` runs: for each scan, triplet
 //! and seed the rotation and translation errors of the initial poses, after the warm-up and at
 //! the end, the masked PSNR and the wall time, beside the paper's row for that scan and
 //! triplet, with whether the run meets the targets (rotation ≤ 0.1°, translation ×100 ≤ 1.25 ×
@@ -10,7 +10,7 @@ use serde_json::Value;
 
 use crate::error::{Result, SurfaceError};
 
-/// Paper 001 Table 1, "Ours", translation ×100 per DTU scan: (scan, narrow, wide). The paper's
+/// The surface paper Table 1, "Ours", translation ×100 per DTU scan: (scan, narrow, wide). The paper's
 /// rotation error is 0.03° on every scan and triplet (the floor of its alignment's ε = 10⁻⁶).
 pub const PAPER_TRANSLATION: [(u32, f64, f64); 15] = [
     (24, 0.19, 0.62),
@@ -30,13 +30,13 @@ pub const PAPER_TRANSLATION: [(u32, f64, f64); 15] = [
     (122, 0.32, 0.33),
 ];
 
-/// Paper 001's rotation error on every scan (degrees).
+/// The surface paper's rotation error on every scan (degrees).
 pub const PAPER_ROTATION_DEG: f64 = 0.03;
 /// The acceptance's rotation target (degrees) and its translation target relative to the paper.
 pub const TARGET_ROTATION_DEG: f64 = 0.1;
 pub const TARGET_TRANSLATION_FACTOR: f64 = 1.25;
 
-/// The two triplets of paper 001's DTU protocol.
+/// The two triplets of the surface paper's DTU protocol.
 pub const NARROW: [usize; 3] = [22, 23, 24];
 pub const WIDE: [usize; 3] = [22, 25, 28];
 

@@ -1,4 +1,4 @@
-//! Joint optimisation of the field and the camera poses (paper 001 §3.5):
+//! Joint optimisation of the field and the camera poses (the surface paper §3.5):
 //!
 //! `L = L_C + λ_u L_u + λ_geo L_geo` with `L_C = colour + λ_M.C. L_M.C.` (Eq. 10),
 //! `L_u = L_u,ncc + λ_u,gc L_u,gc` (Eqs. 6, 7, 11), `L_geo = L_Eik + λ_pSDF L_pSDF` (Eqs. 8, 9),
@@ -7,7 +7,7 @@
 //! Each iteration draws random pixels of random training views and a batch of correspondences
 //! (both ends rendered), samples the rays (NeuS up-sampling, no gradient), renders them with
 //! gradients to the field and the poses, and takes one Adam step for the field and one for the
-//! poses (separate optimisers, paper 001 §B.1). All randomness comes from
+//! poses (separate optimisers, the surface paper §B.1). All randomness comes from
 //! `(seed, iteration)`, so a run resumed from a checkpoint repeats the uninterrupted run.
 
 use burn::tensor::{Device, Tensor, TensorData};
@@ -25,7 +25,7 @@ use crate::pose::{d9_to_pose, d9_to_rows, pose_to_d9};
 use crate::rays::{camera_dirs, intrinsics_rows, select_rows, world_rays};
 use crate::render::{Rendered, SampleConfig, eikonal_loss, render_rays, sample_rays};
 
-/// Loss weights and switches (defaults: paper 001 §B.1).
+/// Loss weights and switches (defaults: the surface paper §B.1).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LossConfig {
     /// `λ_M.C.` of Eq. 10 (10⁻³).

@@ -310,7 +310,7 @@ fn refined_cameras_file_reloads_as_the_refined_poses(
     }
 }
 
-/// The epipolar warm-up (`--pose-warmup`, a deviation) on the narrow triplet 22, 23, 24,
+/// The epipolar warm-up (`--pose-warmup on`, a deviation) on the narrow triplet 22, 23, 24,
 /// trained at 400 × 300 and matched at 800 × 600, from σ = 0.15 noise, three seeds: the
 /// affinely refined matches alone bring the rotation error from about 12° to under 0.13°, and
 /// without the refinement (seed 0) the error is more than twice as large. On the wide triplet
@@ -428,7 +428,7 @@ fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
     // schedule's covariance polish then weighs each dense match by its Lucas–Kanade
     // uncertainty. Measured 0.103° / 0.126° / 0.110°, t×100 0.39 / 0.40 / 0.48 (without the
     // polish 0.163° / 0.159° / 0.186°, t×100 0.64 / 0.63 / 0.86). The patch adjustment then
-    // lands under 0.1° (its measured figures in crates/surface/README.md).
+    // lands under 0.1° (its measured figures in docs/experiments.md).
     for seed in 0..3 {
         let dense = RunConfig::resolve(
             Schedule::Cpu,
@@ -461,7 +461,7 @@ fn dtu_scan65_epipolar_warmup_recovers_most_of_the_pose_noise() {
         );
         assert!(after.rotation_deg < 0.14, "seed {seed}: {after:?}");
         assert!(after.translation < 0.0055, "seed {seed}: {after:?}");
-        // The photometric patch adjustment that follows (CPU schedule) meets paper 001's
+        // The photometric patch adjustment that follows (CPU schedule) meets the surface paper's
         // target on every seed.
         assert!(
             patches.skipped.is_none() && patches.joined > 800,

@@ -10,7 +10,7 @@ use fewview_surface::checkpoint;
 use fewview_surface::pipeline::{prepare, prepare_with_matching, run_identity};
 use fewview_surface::sdf_scene::{SdfSceneOptions, observed_faces, sdf_dataset, surface_mesh};
 use fewview_surface::train::Trainer;
-use fewview_surface::{InitialPoses, RunConfig, RunInputs, RunReport, run};
+use fewview_surface::{InitialPoses, Overrides, RunConfig, RunInputs, RunReport, Schedule, run};
 
 /// The analytic scene with six views at `width × height`, these ones for training.
 fn six_view_scene(width: usize, height: usize, train: Vec<usize>) -> Dataset {
@@ -456,18 +456,13 @@ fn bad_configuration_or_single_view_writes_nothing() {
     }
 }
 
-/// The analytic scene from noisy poses, a reduced run that fits the CI budget: 6 views at
-/// 160 × 120, σ = 0.05 se(3) noise, 300 iterations. It bounds the Chamfer-L1 of the extracted
-/// mesh to the true surface (after the Alg. 3 registration) at 5 % of the bounding-box
-/// diagonal (measured 4.29 %), on the observed part of the surface at 3.5 % (measured 2.92 %),
-/// and bounds how far the joint training drives the poses (within 20 % of the initial errors;
-/// measured R 5.50° → 6.07°, t 0.277 → 0.283: without the warm-up this schedule does not
-/// recover σ = 0.05 noise, it drifts by a tenth). Measured on the session-14 scene (new texture
-/// hash and fill light), the same on this machine and on CI; on the earlier scene 3.84 %,
-/// 2.64 %, R → 5.15°, t → 0.214. This is a regression bound, **not** the acceptance
-/// figure (≤ 1 %), which this schedule does not reach; `densified_matches_…`,
-/// `dense_warm_up_recovers_the_all_around_scene` and the crate README cover the warm-up path
-/// that does.
+/// The analytic scene from noisy poses under the CLI's default (CPU) schedule, reduced to fit
+/// the CI budget: 6 views at 160 × 120, σ = 0.05 se(3) noise, 300 iterations. The poses must
+/// come out better than they went in (by a third, in rotation and translation), and the
+/// extracted mesh must lie near the true surface after the Alg. 3 registration: Chamfer-L1
+/// within 5 % of the bounding-box diagonal, 2.5 % on the part a training view sees. These are
+/// regression bounds under the figures in docs/experiments.md, not the ≤ 1 % acceptance figure
+/// of the full run.
 #[test]
 fn analytic_scene_with_noisy_poses_reduced_run() {
     let ds = sdf_dataset(&SdfSceneOptions {
@@ -478,15 +473,22 @@ fn analytic_scene_with_noisy_poses_reduced_run() {
         supersample: 2,
         ..Default::default()
     });
-    let mut config = RunConfig::default();
-    config.train.iterations = analytic_iterations();
-    config.train.rays_per_batch = 384;
-    config.train.matches_per_batch = 64;
-    config.initial_poses = InitialPoses::NoisyGroundTruth { sigma: 0.05 };
-    config.checkpoint_every = 0;
-    config.mesh_resolution = 128;
-    config.eval_views = 2;
-    config.eval_scale = 2;
+    // The CLI's default schedule, at a test's size.
+    let config = RunConfig::resolve(
+        Schedule::Cpu,
+        &Overrides {
+            iterations: analytic_iterations(),
+            rays_per_batch: 384,
+            matches_per_batch: 64,
+            initial_poses: InitialPoses::NoisyGroundTruth { sigma: 0.05 },
+            checkpoint_every: 0,
+            mesh_resolution: 128,
+            eval_views: 2,
+            eval_scale: 2,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let truth = surface_mesh(192).unwrap();
     let cameras: Vec<_> = ds
         .train
@@ -524,9 +526,9 @@ fn analytic_scene_with_noisy_poses_reduced_run() {
         report.mean_psnr_masked,
         report.train_seconds_wall
     );
-    // Scored like DTU on the faces a training view sees (67 % of them): measured 2.92 %.
+    // Scored like DTU on the faces a training view sees (67 % of them).
     assert!(
-        seen.relative <= 0.035 && seen.relative < chamfer.relative,
+        seen.relative <= 0.025 && seen.relative < chamfer.relative,
         "observed part {:.4} of the diagonal",
         seen.relative
     );
@@ -537,9 +539,9 @@ fn analytic_scene_with_noisy_poses_reduced_run() {
     );
     let (before, after) = (&report.initial_pose_error, &report.final_pose_error);
     assert!(
-        after.rotation_deg < 1.2 * before.rotation_deg
-            && after.translation < 1.2 * before.translation,
-        "poses driven away: {before:?} → {after:?}"
+        after.rotation_deg < 0.67 * before.rotation_deg
+            && after.translation < 0.67 * before.translation,
+        "poses not improved: {before:?} → {after:?}"
     );
     for f in [
         "mesh.ply",

@@ -1,4 +1,4 @@
-//! `fewview blend`: blend two images with two validity masks (paper 000 §4, Fig. 2 and 9).
+//! `fewview blend`: blend two images with two validity masks (the fusion paper §4, Fig. 2 and 9).
 
 use std::path::PathBuf;
 

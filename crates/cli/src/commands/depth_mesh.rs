@@ -1,4 +1,4 @@
-//! `fewview depth-mesh`: mesh a depth map (paper 000 §1, Eq. 1).
+//! `fewview depth-mesh`: mesh a depth map (the fusion paper §1, Eq. 1).
 
 use std::path::PathBuf;
 

@@ -1,4 +1,4 @@
-//! `fewview depth-points`: point clouds from depth maps (paper 000 §2): Eq. (1) filter,
+//! `fewview depth-points`: point clouds from depth maps (the fusion paper §2): Eq. (1) filter,
 //! contraction of Eq. (2), random subsampling for Gaussian initialisation.
 
 use std::path::PathBuf;

@@ -1,5 +1,5 @@
 //! `fewview eval-video`: temporal-coherence metrics of a rendered sequence against ground truth
-//! (per-frame PSNR/SSIM/LPIPS, their frame-to-frame Δ as in paper 002's tables, TecoGAN's tLP,
+//! (per-frame PSNR/SSIM/LPIPS, their frame-to-frame Δ as in the PoseGaussian paper's tables, TecoGAN's tLP,
 //! and the warping error with a caller-supplied flow). Inputs are videos (`.mp4`, `.gif`) or
 //! folders of PNG/JPEG frames, read by `fewview_video`.
 

@@ -1,5 +1,5 @@
 //! `fewview fusion`: sparse-view splatting with gradient-domain fusion on virtual views
-//! (paper 000), or one of its alternatives, and the transition video it is judged by.
+//! (the fusion paper), or one of its alternatives, and the transition video it is judged by.
 
 use std::path::{Path, PathBuf};
 

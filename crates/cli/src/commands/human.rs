@@ -1,4 +1,4 @@
-//! `fewview human`: pose-guided feed-forward Gaussians of moving people (paper 002).
+//! `fewview human`: pose-guided feed-forward Gaussians of moving people (the PoseGaussian paper).
 
 use std::io::Write;
 use std::path::PathBuf;

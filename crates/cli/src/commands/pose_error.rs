@@ -1,4 +1,4 @@
-//! `fewview pose-error`: camera pose error of paper 001 (Alg. 1 and 2, after SPARF).
+//! `fewview pose-error`: camera pose error of the surface paper (Alg. 1 and 2, after SPARF).
 
 use std::path::PathBuf;
 

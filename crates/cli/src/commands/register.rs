@@ -1,4 +1,4 @@
-//! `fewview register`: paper 001 Alg. 3 — pre-align, FPFH + RANSAC, ICP.
+//! `fewview register`: the surface paper Alg. 3 — pre-align, FPFH + RANSAC, ICP.
 
 use std::path::PathBuf;
 

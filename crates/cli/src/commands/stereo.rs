@@ -1,4 +1,4 @@
-//! `fewview stereo`: two-view stereo of one pair of a dataset (paper 000 §2), with everything it
+//! `fewview stereo`: two-view stereo of one pair of a dataset (the fusion paper §2), with everything it
 //! computes written out for inspection.
 
 use std::path::PathBuf;

@@ -1,4 +1,4 @@
-//! `fewview study`: run a pairwise 2AFC user study (paper 000 §5, Fig. 3) and analyse it
+//! `fewview study`: run a pairwise 2AFC user study (the fusion paper §5, Fig. 3) and analyse it
 //! (Tables 1–2 and the Bayesian Bradley–Terry ranking).
 
 use std::net::SocketAddr;

@@ -1,5 +1,5 @@
 //! `fewview surface`: neural implicit surface + pose refinement from a few views with noisy
-//! poses (paper 001). The flags are the library's [`Overrides`]; this module parses them,
+//! poses (the surface paper). The flags are the library's [`Overrides`]; this module parses them,
 //! shows progress and prints the report.
 
 use std::path::PathBuf;
@@ -43,7 +43,7 @@ fn pose_noise(s: &str) -> Result<f64, String> {
 /// millions of triangles (gigabytes), 4× the 512 NeuS meshes at; 100000 ran for ever.
 const MAX_MESH_RESOLUTION: i64 = 2048;
 
-/// Reconstruct a surface (NeuS SDF) and refine noisy camera poses from a few views (paper 001):
+/// Reconstruct a surface (NeuS SDF) and refine noisy camera poses from a few views (the surface paper):
 /// a run directory with the refined poses, `mesh.ply`, renders and `metrics.json`.
 #[derive(Debug, ClapArgs)]
 #[command(mut_arg("data", |a| a.required(false)))]
@@ -60,14 +60,14 @@ pub struct Args {
     /// Run directory. Default: `runs/surface-<dataset folder name>`.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
-    /// Instead of a run: print paper 001's Table 1 (Markdown) for these finished runs.
+    /// Instead of a run: print the surface paper's Table 1 (Markdown) for these finished runs.
     #[arg(long, num_args = 1.., value_name = "RUN", conflicts_with_all = ["synthetic", "out", "resume"])]
     pub table: Vec<PathBuf>,
     /// Continue the run in `--out` from its checkpoint; only --iterations, --checkpoint-every
     /// and the output settings may change.
     #[arg(long)]
     pub resume: bool,
-    /// Training iterations (paper 001: 100k on a GPU; the default fits a CPU budget).
+    /// Training iterations (the surface paper: 100k on a GPU; the default fits a CPU budget).
     #[arg(long, default_value_t = 2000)]
     pub iterations: usize,
     /// Random rays per iteration.
@@ -83,7 +83,7 @@ pub struct Args {
     #[arg(long, value_enum, default_value_t = InitialPosesArg::Noisy)]
     pub initial_poses: InitialPosesArg,
     /// Pose schedule: `cpu` (warm-up and adjustments, then a late release; deviations that
-    /// converge on a CPU budget) or `paper` (paper 001 §B.1).
+    /// converge on a CPU budget) or `paper` (the surface paper §B.1).
     #[arg(long, value_enum, default_value_t = ScheduleArg::Cpu)]
     pub schedule: ScheduleArg,
     /// Pose learning rate at the start and end of its decay (default from `--schedule`).
@@ -98,7 +98,7 @@ pub struct Args {
     /// Match only views whose optical axes are at most this many degrees apart (180: all).
     #[arg(long, default_value_t = 80.0, value_name = "DEG")]
     pub max_pair_angle: f64,
-    /// Sub-pixel refinement of the matches by Lucas–Kanade (a deviation from paper 001).
+    /// Sub-pixel refinement of the matches by Lucas–Kanade (a deviation from the surface paper).
     #[arg(long, value_enum, default_value_t = MatchRefineArg::Affine)]
     pub match_refine: MatchRefineArg,
     /// With `--match-refine quadratic`: drop matches whose second-order term moves a window
@@ -109,12 +109,10 @@ pub struct Args {
     /// sparse ones cannot tie the views together for the warm-up.
     #[arg(long, default_value = "auto", value_name = "PX|auto|off")]
     pub densify: Densify,
-    /// Refine the initial poses on the matches' epipolar constraints before training.
-    #[arg(long, conflicts_with = "no_pose_warmup")]
-    pub pose_warmup: bool,
-    /// No epipolar warm-up, whatever `--schedule` says.
-    #[arg(long)]
-    pub no_pose_warmup: bool,
+    /// Refine the initial poses on the matches' epipolar constraints before training (default
+    /// from `--schedule`).
+    #[arg(long, value_name = "on|off")]
+    pub pose_warmup: Option<Toggle>,
     /// The warm-up uses only the pairs of views with at least this many matches.
     #[arg(long, default_value_t = 40, value_name = "N")]
     pub warmup_min_matches: usize,
@@ -123,25 +121,19 @@ pub struct Args {
           value_parser = super::number_args::positive)]
     pub warmup_cauchy: f64,
     /// Polish the warmed-up poses with each dense match weighted by its Lucas–Kanade
-    /// covariance.
-    #[arg(long, conflicts_with = "no_warmup_covariance")]
-    pub warmup_covariance: bool,
-    /// No covariance polish after the warm-up, whatever `--schedule` says.
-    #[arg(long)]
-    pub no_warmup_covariance: bool,
+    /// covariance (default from `--schedule`).
+    #[arg(long, value_name = "on|off")]
+    pub warmup_covariance: Option<Toggle>,
     /// Start the warm-up from the initial poses, without the global start from the matches.
     #[arg(long)]
     pub no_global_start: bool,
     /// After a warm-up on dense matches, refine the poses photometrically on small planes
-    /// seeded by the matches.
-    #[arg(long, conflicts_with = "no_patch_adjustment")]
-    pub patch_adjustment: bool,
-    /// No patch adjustment after the warm-up, whatever `--schedule` says.
-    #[arg(long)]
-    pub no_patch_adjustment: bool,
-    /// No bundle adjustment after the warm-up, whatever `--schedule` says.
-    #[arg(long)]
-    pub no_bundle_adjustment: bool,
+    /// seeded by the matches (default from `--schedule`).
+    #[arg(long, value_name = "on|off")]
+    pub patch_adjustment: Option<Toggle>,
+    /// Bundle-adjust the matches' tracks after the warm-up (default from `--schedule`).
+    #[arg(long, value_name = "on|off")]
+    pub bundle_adjustment: Option<Toggle>,
     /// What the warm-up's pairs must form: `rigid` (baseline lengths tied together, e.g.
     /// chained triangles) or `connected` (any connected graph).
     #[arg(long, value_enum, default_value_t = ConnectivityArg::Rigid)]
@@ -164,33 +156,16 @@ pub struct Args {
     /// Importance samples per ray.
     #[arg(long, default_value_t = 32)]
     pub importance: usize,
-    /// Loss switches for ablations.
-    #[arg(long)]
-    pub no_matching: bool,
-    #[arg(long)]
-    pub no_ncc: bool,
-    #[arg(long)]
-    pub no_gc: bool,
-    #[arg(long)]
-    pub no_uncertainty: bool,
-    #[arg(long)]
-    pub no_psdf: bool,
-    #[arg(long)]
-    pub no_eikonal: bool,
+    /// Switch loss terms off for ablations, e.g. `--no-loss ncc,gc`.
+    #[arg(long, value_name = "TERM,...", value_delimiter = ',')]
+    pub no_loss: Vec<LossTerm>,
     /// Do not use object masks (colour loss on all pixels, no mask loss, no culling).
     #[arg(long)]
     pub no_masks: bool,
-    /// Loss weights, finite and ≥ 0 (defaults: paper 001 §B.1).
-    #[arg(long, value_parser = non_negative_f32)]
-    pub lambda_mc: Option<f32>,
-    #[arg(long, value_parser = non_negative_f32)]
-    pub lambda_u: Option<f32>,
-    #[arg(long, value_parser = non_negative_f32)]
-    pub lambda_gc: Option<f32>,
-    #[arg(long, value_parser = non_negative_f32)]
-    pub lambda_geo: Option<f32>,
-    #[arg(long, value_parser = non_negative_f32)]
-    pub lambda_psdf: Option<f32>,
+    /// Loss weights λ (mc, u, gc, geo, psdf), finite and ≥ 0, e.g. `--lambda u=0.02,gc=0`
+    /// (defaults: the surface paper §B.1).
+    #[arg(long, value_name = "NAME=VALUE,...", value_delimiter = ',', value_parser = loss_weight)]
+    pub lambda: Vec<(WeightName, f32)>,
     /// Coarse-to-fine window (α₁, α₂) as fractions of the iterations, e.g. `0.4,0.7`.
     #[arg(long, value_name = "A1,A2", value_parser = c2f_window)]
     pub c2f: Option<(f64, f64)>,
@@ -210,6 +185,45 @@ pub struct Args {
     /// Iterations between checkpoints.
     #[arg(long, default_value_t = 250)]
     pub checkpoint_every: usize,
+}
+
+/// `on` or `off` for a stage whose default comes from `--schedule`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Toggle {
+    On,
+    Off,
+}
+
+/// A loss term `--no-loss` switches off ([`LossSwitches`]; `gc`: geometric consistency).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum LossTerm {
+    Matching,
+    Ncc,
+    Gc,
+    Uncertainty,
+    Psdf,
+    Eikonal,
+}
+
+/// The λ that `--lambda NAME=VALUE` sets ([`LossWeights`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum WeightName {
+    Mc,
+    U,
+    Gc,
+    Geo,
+    Psdf,
+}
+
+/// `NAME=VALUE` of `--lambda`.
+fn loss_weight(s: &str) -> std::result::Result<(WeightName, f32), String> {
+    use clap::ValueEnum;
+    let (name, value) = s
+        .split_once('=')
+        .ok_or_else(|| format!("{s}: expected NAME=VALUE, e.g. u=0.02"))?;
+    let name = WeightName::from_str(name.trim(), true)
+        .map_err(|_| format!("{s}: unknown weight {name:?} (mc, u, gc, geo, psdf)"))?;
+    Ok((name, non_negative_f32(value.trim())?))
 }
 
 /// `--schedule` ([`Schedule`]).
@@ -337,15 +351,41 @@ fn pose_rates(s: &str) -> Result<ExpSchedule, String> {
 }
 
 /// `Some(true)` for `--x`, `Some(false)` for `--no-x`, `None` for neither (the schedule's).
-fn switch(on: bool, off: bool) -> Option<bool> {
-    match (on, off) {
-        (true, _) => Some(true),
-        (_, true) => Some(false),
-        _ => None,
-    }
+fn switch(toggle: Option<Toggle>) -> Option<bool> {
+    toggle.map(|t| t == Toggle::On)
 }
 
 impl Args {
+    fn loss_switches(&self) -> LossSwitches {
+        let on = |term| !self.no_loss.contains(&term);
+        LossSwitches {
+            matching: on(LossTerm::Matching),
+            ncc: on(LossTerm::Ncc),
+            geometric_consistency: on(LossTerm::Gc),
+            uncertainty: on(LossTerm::Uncertainty),
+            psdf: on(LossTerm::Psdf),
+            eikonal: on(LossTerm::Eikonal),
+        }
+    }
+
+    /// The λ given by `--lambda`; the last one wins where a name repeats.
+    fn loss_weights(&self) -> LossWeights {
+        let given = |name| {
+            self.lambda
+                .iter()
+                .rev()
+                .find(|(n, _)| *n == name)
+                .map(|&(_, v)| v)
+        };
+        LossWeights {
+            mc: given(WeightName::Mc),
+            u: given(WeightName::U),
+            gc: given(WeightName::Gc),
+            geo: given(WeightName::Geo),
+            psdf: given(WeightName::Psdf),
+        }
+    }
+
     /// The flags as the library's settings.
     pub fn overrides(&self) -> Overrides {
         Overrides {
@@ -366,33 +406,20 @@ impl Args {
             match_refine: self.match_refine.warp(),
             match_max_bend_px: self.match_max_bend,
             densify: self.densify,
-            pose_warmup: switch(self.pose_warmup, self.no_pose_warmup),
+            pose_warmup: switch(self.pose_warmup),
             warmup_min_matches: self.warmup_min_matches,
             warmup_cauchy_px: self.warmup_cauchy,
             warmup_connectivity: self.warmup_connectivity.into(),
-            warmup_covariance: switch(self.warmup_covariance, self.no_warmup_covariance),
+            warmup_covariance: switch(self.warmup_covariance),
             global_start: !self.no_global_start,
-            bundle_adjustment: switch(false, self.no_bundle_adjustment),
-            patch_adjustment: switch(self.patch_adjustment, self.no_patch_adjustment),
+            bundle_adjustment: switch(self.bundle_adjustment),
+            patch_adjustment: switch(self.patch_adjustment),
             encoder: self.encoder.into(),
             fd_scheme: self.fd.into(),
             n_coarse: self.coarse,
             n_importance: self.importance,
-            losses: LossSwitches {
-                matching: !self.no_matching,
-                ncc: !self.no_ncc,
-                geometric_consistency: !self.no_gc,
-                uncertainty: !self.no_uncertainty,
-                psdf: !self.no_psdf,
-                eikonal: !self.no_eikonal,
-            },
-            weights: LossWeights {
-                mc: self.lambda_mc,
-                u: self.lambda_u,
-                gc: self.lambda_gc,
-                geo: self.lambda_geo,
-                psdf: self.lambda_psdf,
-            },
+            losses: self.loss_switches(),
+            weights: self.loss_weights(),
             use_masks: !self.no_masks,
             c2f: self.c2f,
             mesh_resolution: self.mesh_resolution as usize,
@@ -629,7 +656,7 @@ fn print_report(r: &RunReport, out: &std::path::Path) {
     }
     let sparf = &r.rotation_at_sparf_eps;
     println!(
-        "  at ε = {:.0e}     R {:.3}° → {}{:.3}° (SPARF's code; paper 001 Table 1's convention)",
+        "  at ε = {:.0e}     R {:.3}° → {}{:.3}° (SPARF's code; the surface paper Table 1's convention)",
         sparf.eps,
         sparf.initial_deg,
         [
@@ -722,14 +749,14 @@ mod tests {
         assert_eq!(PoseTiming::of(&c.train), PoseTiming::PAPER);
         assert_eq!(c.pose_timing_without_warmup, None);
         // A warm-up asked for explicitly keeps the paper's pose timing.
-        let c = config(&["--schedule", "paper", "--pose-warmup"]);
+        let c = config(&["--schedule", "paper", "--pose-warmup", "on"]);
         assert!(c.pose_warmup.is_some());
         assert_eq!(PoseTiming::of(&c.train), PoseTiming::PAPER);
     }
 
     #[test]
     fn explicit_flags_override_the_schedule_and_its_fallback() {
-        let c = config(&["--no-pose-warmup"]);
+        let c = config(&["--pose-warmup", "off"]);
         assert!(c.pose_warmup.is_none());
         let c = config(&["--pose-start", "0.5"]);
         assert_eq!(c.train.pose_start, 0.5);
@@ -789,15 +816,17 @@ mod tests {
         // The covariance polish: on with the CPU schedule, off with the paper's (whose
         // warm-up, when asked for, is the plain one), and either way by flag.
         assert!(c.pose_warmup.unwrap().covariance_polish);
-        let c = config(&["--no-warmup-covariance"]);
+        let c = config(&["--warmup-covariance", "off"]);
         assert!(!c.pose_warmup.unwrap().covariance_polish);
-        let c = config(&["--schedule", "paper", "--pose-warmup"]);
+        let c = config(&["--schedule", "paper", "--pose-warmup", "on"]);
         assert!(!c.pose_warmup.unwrap().covariance_polish);
         let c = config(&[
             "--schedule",
             "paper",
             "--pose-warmup",
+            "on",
             "--warmup-covariance",
+            "on",
         ]);
         assert!(c.pose_warmup.unwrap().covariance_polish);
         let refused = |flags: &[&str]| {
@@ -821,11 +850,47 @@ mod tests {
     }
 
     #[test]
+    fn loss_switches_and_weights_reach_the_overrides() {
+        let argv = [
+            "surface",
+            "--no-loss",
+            "ncc,gc",
+            "--no-loss",
+            "eikonal",
+            "--lambda",
+            "u=0.02,GC=0",
+            "--lambda",
+            "u=0.5",
+        ];
+        let args = Cli::try_parse_from(argv).unwrap().args;
+        let on = args.loss_switches();
+        assert_eq!(
+            (on.matching, on.ncc, on.geometric_consistency),
+            (true, false, false)
+        );
+        assert_eq!((on.uncertainty, on.psdf, on.eikonal), (true, true, false));
+        let w = args.loss_weights();
+        assert_eq!(
+            (w.u, w.gc, w.mc, w.geo, w.psdf),
+            (Some(0.5), Some(0.0), None, None, None)
+        );
+        for bad in ["u", "v=1", "u=-1", "u=NaN"] {
+            let err = Cli::try_parse_from(["surface", "--lambda", bad])
+                .err()
+                .expect("refused")
+                .to_string();
+            assert!(err.contains("--lambda") && err.contains(bad), "{err}");
+        }
+        assert!(Cli::try_parse_from(["surface", "--no-loss", "colour"]).is_err());
+    }
+
+    #[test]
     fn contradictory_or_bad_schedule_flags_are_refused() {
         let parse = |flags: &[&str]| {
             Cli::try_parse_from(std::iter::once("surface").chain(flags.iter().copied()))
         };
-        assert!(parse(&["--pose-warmup", "--no-pose-warmup"]).is_err());
+        assert!(parse(&["--pose-warmup", "on", "--pose-warmup", "off"]).is_err());
+        assert!(parse(&["--pose-warmup", "yes"]).is_err());
         assert!(parse(&["--schedule", "fast"]).is_err());
         let args = parse(&["--pose-start", "1.5"]).unwrap().args;
         let err = args.config().unwrap_err().to_string();

@@ -1,4 +1,4 @@
-//! Blending two images with two validity masks (paper 000 §4, Fig. 2 and Fig. 9): the
+//! Blending two images with two validity masks (the fusion paper §4, Fig. 2 and Fig. 9): the
 //! occlusion-aware Poisson blend of Eq. (3), standard Poisson blending (Pérez et al. 2003),
 //! Laplacian-pyramid blending (Burt & Adelson 1983) and Gaussian feathering.
 //!

@@ -1,4 +1,4 @@
-//! Poisson image blending: occlusion-aware (paper 000 §4, Eq. 3) and standard (Pérez et al.
+//! Poisson image blending: occlusion-aware (the fusion paper §4, Eq. 3) and standard (Pérez et al.
 //! 2003).
 //!
 //! Discretisation (Pérez et al. Eq. 7): for every unknown pixel `p` and each 4-neighbour `q`
@@ -174,7 +174,7 @@ fn to_image(w: usize, h: usize, planes: &[Vec<f64>]) -> Image {
     img
 }
 
-/// Occlusion-aware Poisson blending (paper 000 Eq. 3) in f64 planes (see
+/// Occlusion-aware Poisson blending (the fusion paper Eq. 3) in f64 planes (see
 /// [`occlusion_aware_poisson_with`]).
 pub(crate) fn occlusion_aware_planes(
     f: &Image,
@@ -223,7 +223,7 @@ pub(crate) fn occlusion_aware_planes(
     solve_masked(w, h, ch, cells, fixed_value, guidance, options)
 }
 
-/// Occlusion-aware Poisson blending of `f` and `g` (paper 000 §4, Eq. 3):
+/// Occlusion-aware Poisson blending of `f` and `g` (the fusion paper §4, Eq. 3):
 /// pixels valid in one mask only keep that image's value (Dirichlet condition), pixels valid
 /// in both are solved for with the guidance field `w_f ∇f + (1 − w_f) ∇g`, pixels in neither
 /// are 0.

@@ -2,7 +2,7 @@
 //! essential matrix ([`five_point`]), the relative pose of a pair by RANSAC and refinement
 //! ([`relative_pose`]), and the absolute rotations and centres those pairs imply
 //! ([`average_rotations`], [`centres_from_baselines`]) — a global start for the poses before
-//! any local refinement (paper 001's Table 1 protocol on DTU).
+//! any local refinement (the surface paper's Table 1 protocol on DTU).
 
 pub mod averaging;
 pub mod five_point;

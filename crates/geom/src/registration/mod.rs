@@ -1,4 +1,4 @@
-//! Point-cloud registration of paper 001 Alg. 3 (Appendix B.4): pre-align the reconstruction
+//! Point-cloud registration of the surface paper Alg. 3 (Appendix B.4): pre-align the reconstruction
 //! with the similarity found by the camera-pose evaluation, then Open3D's standard pipeline —
 //! voxel down-sampling, normals, FPFH features, RANSAC global registration on feature matches,
 //! and ICP refinement on the full clouds.
@@ -84,7 +84,7 @@ impl DenoiseOptions {
 }
 
 impl RegistrationOptions {
-    /// The tutorial's parameters for voxel size `v` (point-to-point ICP, as in paper 001).
+    /// The tutorial's parameters for voxel size `v` (point-to-point ICP, as in the surface paper).
     pub fn for_voxel(v: f64) -> Self {
         Self {
             voxel_size: v,
@@ -136,7 +136,7 @@ fn fits_better(a: &Evaluation, b: &Evaluation) -> bool {
     a.fitness > b.fitness || (a.fitness == b.fitness && a.inlier_rmse < b.inlier_rmse)
 }
 
-/// Paper 001 Alg. 3: registers `source` onto `target`, starting from `prealignment` (the
+/// The surface paper Alg. 3: registers `source` onto `target`, starting from `prealignment` (the
 /// camera-evaluation similarity; identity when `None`).
 pub fn register(
     source: &Points,

@@ -1,4 +1,4 @@
-//! The confidence-based hierarchical point cloud of paper 000 §2 (its Fig. 1): stereo depth of
+//! The confidence-based hierarchical point cloud of the fusion paper §2 (its Fig. 1): stereo depth of
 //! every pair of adjacent training views, back-projected and accepted in three tiers of falling
 //! confidence, so that doubtful depth may only add geometry *behind* what is already trusted.
 //!
@@ -506,7 +506,7 @@ fn contraction_of(
 }
 
 impl HierarchicalCloud {
-    /// A random `fraction` of the points (paper 000: 0.1; alternative (a): 0.01), in order, with
+    /// A random `fraction` of the points (the fusion paper: 0.1; alternative (a): 0.01), in order, with
     /// their regions.
     pub fn sample(&self, fraction: f64, seed: u64) -> Result<(Points, Vec<Region>)> {
         let idx = sample_indices(self.points.len(), fraction, seed)?;

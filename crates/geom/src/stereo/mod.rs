@@ -1,5 +1,5 @@
 //! Calibrated two-view stereo for the start of "Splat-based Gradient-domain Fusion for Seamless
-//! View Transition" (paper 000 §2), in the order the work happens:
+//! View Transition" (the fusion paper §2), in the order the work happens:
 //!
 //! 1. [`pairs`]: which training views are matched (consecutive views along the baseline);
 //! 2. [`rectify`]: both views of a pair turned to a common image plane, rows aligned;

@@ -1,4 +1,4 @@
-//! Which training views form stereo pairs (paper 000 §2): the views ordered along their common
+//! Which training views form stereo pairs (the fusion paper §2): the views ordered along their common
 //! baseline, each with the next, and the two ends together when they still overlap.
 
 use fewview_scene::{Camera, Image};

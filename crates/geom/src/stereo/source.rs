@@ -1,6 +1,6 @@
 //! Where the depth of a stereo pair comes from: [`DepthSource`] is the seam between the
 //! hierarchical point cloud and whatever estimates depth. [`SgmSource`] rectifies the pair and
-//! runs Semi-Global Matching in both directions (our stand-in for paper 000's UniMatch);
+//! runs Semi-Global Matching in both directions (our stand-in for the fusion paper's UniMatch);
 //! [`DepthMapSource`] serves a user's own depth maps (one per view, e.g. from a learned model).
 
 use std::path::Path;

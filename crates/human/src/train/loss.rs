@@ -1,11 +1,11 @@
 //! The training loss of one target view.
 //!
-//! `L = (1 − λ)·L1 + λ·(1 − SSIM)` on the target image (λ = 0.2, paper 002's 0.8/0.2), plus two
+//! `L = (1 − λ)·L1 + λ·(1 − SSIM)` on the target image (λ = 0.2, the PoseGaussian paper's 0.8/0.2), plus two
 //! terms weighted by the network's own confidences (the uncertainty head's two channels, in
 //! `(0, 1)`). Both use the Laplace negative log-likelihood with the confidence as the inverse
 //! scale, `c·e − log c` (Kendall and Gal, "What Uncertainties Do We Need in Bayesian Deep
 //! Learning for Computer Vision?", 2017): a pixel may declare itself unsure (small `c`) to pay
-//! less for a large error `e`, at the price `−log c`. The form is ours; paper 002 says only that
+//! less for a large error `e`, at the price `−log c`. The form is ours; the PoseGaussian paper says only that
 //! the confidences weight the depth and SR-opacity terms.
 //!
 //! - **Depth** (where the dataset has depth): per source foreground pixel, `e = |d − d*| / τ`

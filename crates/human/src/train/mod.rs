@@ -1,4 +1,4 @@
-//! Training the PoseGaussian network (paper 002) on the input cameras of the training frames:
+//! Training the PoseGaussian network (the PoseGaussian paper) on the input cameras of the training frames:
 //! each step renders one input camera of one frame from its nearest other input cameras and
 //! compares it with that camera's image ([`loss`]).
 //!

@@ -50,7 +50,7 @@ pub struct TrainConfig {
     /// Adam's step size (GPS-Gaussian's 2·10⁻⁴).
     pub learning_rate: f64,
     pub seed: u64,
-    /// Source views per target (paper 002: the 2 nearest).
+    /// Source views per target (the PoseGaussian paper: the 2 nearest).
     pub source_views: usize,
     pub loss: LossWeights,
     pub bracket: DepthBracket,

@@ -1,11 +1,11 @@
-//! Training hyper-parameters: the learning rates of paper 000 §3 (= the Inria 3DGS defaults) and
+//! Training hyper-parameters: the learning rates of the fusion paper §3 (= the Inria 3DGS defaults) and
 //! a densification schedule rescaled for short sparse-view runs.
 
 use serde::{Deserialize, Serialize};
 
 use super::adam::AdamConfig;
 
-/// Learning rates (paper 000 §3; Kerbl et al. 2023).
+/// Learning rates (the fusion paper §3; Kerbl et al. 2023).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LearningRates {
     /// Position learning rate at the first iteration, times the scene extent.
@@ -83,7 +83,7 @@ pub struct TrainConfig {
     /// re-composited over the same colour, on views whose images have alpha (NeRF-synthetic
     /// RGBA). Gaussians must then match the alpha as well as the colour, so floaters that
     /// blend into a fixed white background are pruned. nerfstudio's splatfacto default for
-    /// RGBA data; not in paper 000 or Inria's 3DGS (whose `--random_background` leaves the
+    /// RGBA data; not in the fusion paper or Inria's 3DGS (whose `--random_background` leaves the
     /// targets composited over the fixed colour).
     #[serde(default)]
     pub random_background: bool,

@@ -137,7 +137,7 @@ impl LossContext<'_> {
     }
 }
 
-/// An extra loss term (e.g. the fusion method of paper 000 and its ablations).
+/// An extra loss term (e.g. the fusion method of the fusion paper and its ablations).
 pub trait LossTerm: Send {
     fn name(&self) -> &str;
     /// This term's (already weighted) loss at this iteration, or `None` to skip.

@@ -1,6 +1,6 @@
 //! Exact binomial test, two-sided, as SciPy's `scipy.stats.binomtest(k, n, p).pvalue`: the sum
 //! of the probabilities of every outcome no more likely than the observed one (with SciPy's
-//! relative tolerance of 1e-7 on "no more likely"). Paper 000 (supplementary §6, Tables 1–2)
+//! relative tolerance of 1e-7 on "no more likely"). The fusion paper (supplementary §6, Tables 1–2)
 //! reports these p-values for each method pair's win count against the null of no preference
 //! (`p = 0.5`).
 
@@ -78,7 +78,7 @@ mod tests {
         }
     }
 
-    /// The p-values paper 000 prints in Table 2 for 144 responses per pair.
+    /// The p-values the fusion paper prints in Table 2 for 144 responses per pair.
     #[test]
     fn reproduces_paper_000_table_2() {
         let cases = [

@@ -1,4 +1,4 @@
-//! Bayesian Bradley–Terry model of paper 000 (supplementary §5): each method's skill
+//! Bayesian Bradley–Terry model of the fusion paper (supplementary §5): each method's skill
 //! `s_m ~ Normal(0, σ = 2)`; each comparison won by `w` against `l` is a Bernoulli observation of
 //! probability `logistic(s_w − s_l)`. The posterior is sampled with NUTS (`nuts-rs`, the sampler
 //! behind PyMC's `nutpie`) with the paper's settings: 4 chains, 4000 tuning steps, 4000 draws,

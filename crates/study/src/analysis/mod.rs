@@ -1,4 +1,4 @@
-//! Analysis of pairwise two-alternative forced-choice (2AFC) user studies, as in paper 000
+//! Analysis of pairwise two-alternative forced-choice (2AFC) user studies, as in the fusion paper
 //! (supplementary §5–6): per method pair and question the win rate and the two-sided exact
 //! binomial p-value (Tables 1–2), and a Bayesian Bradley–Terry ranking with credible intervals.
 

@@ -1,7 +1,7 @@
 //! A dense two-view matcher that needs neither poses nor sparse seeds: coarse-to-fine
 //! PatchMatch with affine patches from a global search at the coarsest level, affine
 //! Lucas–Kanade at full resolution, forward–backward checks and match propagation. It stands
-//! in for the learned dense matcher of paper 001 (PDC-Net) where SIFT finds too few seeds for
+//! in for the learned dense matcher of the surface paper (PDC-Net) where SIFT finds too few seeds for
 //! [`super::densify`] to grow from.
 //!
 //! **What.** Points of view `a` on a regular grid (spacing `spacing_px`, by default 1 % of the

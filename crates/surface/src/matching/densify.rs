@@ -1,7 +1,7 @@
-//! Dense correspondences grown from sparse matches (a deviation from paper 001, off by default:
+//! Dense correspondences grown from sparse matches (a deviation from the surface paper, off by default:
 //! `--densify`).
 //!
-//! **Why.** Paper 001 takes PDC-Net's dense matches: thousands per pair. SIFT finds a few dozen
+//! **Why.** The surface paper takes PDC-Net's dense matches: thousands per pair. SIFT finds a few dozen
 //! per pair on views 45° apart (the analytic ring: 5–50) and a few hundred on DTU's narrow
 //! triplet, and the pose errors the matches fix shrink with their number (crate README's noise
 //! analysis). The issue names dense flow with forward–backward checks as the classical

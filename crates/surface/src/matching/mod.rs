@@ -1,4 +1,4 @@
-//! Correspondences between training views. Paper 001 uses PDC-Net (a learned dense matcher
+//! Correspondences between training views. The surface paper uses PDC-Net (a learned dense matcher
 //! whose weights cannot be fetched here); [`Matcher`] is the seam where a learned matcher plugs
 //! in, and [`sift::SiftMatcher`] is the classical one used by default: SIFT features, Lowe's
 //! ratio test, a mutual nearest-neighbour check and an optional RANSAC fundamental-matrix

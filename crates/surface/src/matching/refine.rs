@@ -1,4 +1,4 @@
-//! Sub-pixel refinement of correspondences by affine Lucas–Kanade (a deviation from paper 001,
+//! Sub-pixel refinement of correspondences by affine Lucas–Kanade (a deviation from the surface paper,
 //! which takes PDC-Net's matches as they come; on by default, `--match-refine none` turns it
 //! off).
 //!
@@ -54,7 +54,7 @@ pub struct AffineRefineOptions {
     /// the window by more than this (pixels); `None` keeps all. The true bend between views
     /// tens of degrees apart is a few tenths of a pixel over a window; a larger one is the
     /// warp's freedom fitting a different part of the image. Off by default: on DTU's wide
-    /// triplet every limit tried (1–8 px) made the warm-up worse (crates/surface/README.md).
+    /// triplet every limit tried made the warm-up worse (docs/experiments.md).
     #[serde(default)]
     pub max_bend_px: Option<f64>,
 }
@@ -69,16 +69,13 @@ pub enum WarpModel {
     /// `x_b = b + A·d + ½·(dᵀQ₁d, dᵀQ₂d)`: 12 parameters. Between views tens of degrees apart
     /// the true warp of a window bends (perspective, a curved surface); an affine fit then
     /// absorbs the window-weighted mean of the second-order term into `b`, a bias that grows
-    /// with the window's area. Measured on the analytic ring (45° between views, true
-    /// correspondences from the sphere tracer, 10 px half-window): the affine fit puts `b`
-    /// 0.37 px (median) along the epipolar line from the truth, the quadratic fit 0.04 px;
-    /// see crates/surface/README.md for what that does to the poses.
+    /// with the window's area; the quadratic fit removes most of it (figures and what it does
+    /// to the poses: docs/experiments.md).
     Quadratic,
 }
 
 impl Default for AffineRefineOptions {
-    /// Settings chosen on DTU scan65 views 22–24 at 800×600 (see crates/surface/README.md):
-    /// windows of 10 px half-size and blurs of 0.5–1 px gave the same gain.
+    /// Settings chosen on DTU scan65 views 22–24 (docs/experiments.md).
     fn default() -> Self {
         Self {
             half_window: 10,

@@ -1,6 +1,6 @@
-//! Photometric patch adjustment of the warmed-up poses: a deviation from paper 001 (which has
+//! Photometric patch adjustment of the warmed-up poses: a deviation from the surface paper (which has
 //! PDC-Net's matches and refines the poses through the field alone). With the CPU schedule it
-//! follows the epipolar warm-up whenever dense matches were grown; `--patch-adjustment`
+//! follows the epipolar warm-up whenever dense matches were grown; `--patch-adjustment on|off`
 //! switches it.
 //!
 //! **Why.** The epipolar warm-up ([`crate::warmup`]) fits the poses to matches that were each

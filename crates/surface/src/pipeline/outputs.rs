@@ -94,7 +94,7 @@ pub(super) fn z_depth(
     }
 }
 
-/// Paper 001 Alg. 3: the mesh pre-aligned with the pose-evaluation similarity, then
+/// The surface paper Alg. 3: the mesh pre-aligned with the pose-evaluation similarity, then
 /// registered to the reference by FPFH + RANSAC and point-to-point ICP (ICP also from the
 /// pre-alignment, see `fewview_geom::registration::IcpStarts`).
 pub fn register_to_reference(

@@ -57,7 +57,7 @@ pub struct RunReport {
     /// Whether that is [`crate::config::RunConfig::pose_timing_without_warmup`] because the warm-up declined.
     pub pose_timing_fell_back: bool,
     pub final_pose_error: PoseError,
-    /// The rotation errors again at the ε of SPARF's code, the convention of paper 001
+    /// The rotation errors again at the ε of SPARF's code, the convention of the surface paper
     /// Table 1's figures ([`SparfEpsRotation`]).
     pub rotation_at_sparf_eps: SparfEpsRotation,
     pub last_step: StepStats,
@@ -86,7 +86,7 @@ pub struct RunReport {
 
 /// Rotation errors by Alg. 1/2 with ε = 10⁻⁷ ([`fewview_metrics::pose_error::SPARF_CODE_EPS`]) instead of the printed 10⁻⁶.
 /// A view aligned exactly (Alg. 1's anchor always is) scores arccos(1 − ε): 0.081° at 10⁻⁶,
-/// 0.026° here, which is the floor behind the 0.03° of paper 001 Table 1; the mean over three
+/// 0.026° here, which is the floor behind the 0.03° of the surface paper Table 1; the mean over three
 /// views at 10⁻⁶ carries 0.027° of floor from the anchor alone. Translation errors do not
 /// depend on ε (beyond which alignment Alg. 1 picks).
 #[derive(Clone, Debug, Serialize)]

@@ -1,4 +1,4 @@
-//! Epipolar pose warm-up: a deviation from paper 001, off by default (`--pose-warmup`).
+//! Epipolar pose warm-up: a deviation from the surface paper, off in the paper schedule (`--pose-warmup on|off`).
 //!
 //! Why: the paper's joint optimisation relies on PDC-Net's thousands of dense matches per pair
 //! to pull noisy poses back while the field is fitted. With the far fewer matches a classical

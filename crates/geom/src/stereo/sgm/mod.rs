@@ -1,6 +1,6 @@
 //! Semi-Global Matching on a rectified pair (Hirschmüller 2008), block-matching variant as
 //! OpenCV's `StereoSGBM` computes it, so that its parameters mean the same here and its output
-//! can serve as the reference (paper 000 §2 uses a learned model, UniMatch, whose weights cannot
+//! can serve as the reference (the fusion paper §2 uses a learned model, UniMatch, whose weights cannot
 //! be fetched here; see [`crate::stereo::source`] for plugging one in).
 //!
 //! The stages, each in its own module:
