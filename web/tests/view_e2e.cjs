@@ -84,7 +84,9 @@ async function main() {
       check(!result.error.includes("\n"), `error is not one line: ${result.error}`);
       return;
     }
-    await page.waitForFunction(() => window.fewviewView && window.fewviewView.stats.fullPicture !== null, null, { timeout: 300000 });
+    await page.waitForFunction(() => window.fewviewView && window.fewviewView.stats.firstPicture !== null, null, { timeout: 120000 });
+    result.firstPictureMs = await page.evaluate(() => window.fewviewView.stats.firstPicture);
+    await page.waitForFunction(() => window.fewviewView.stats.fullPicture !== null, null, { timeout: 240000 });
     const stats = await page.evaluate(() => ({ ...window.fewviewView.stats }));
     result.firstPictureMs = stats.firstPicture;
     result.fullPictureMs = stats.fullPicture;
@@ -109,6 +111,7 @@ async function main() {
     result.orbitRedrawMs = Date.now() - tDrag;
     savePng(after, "after.png");
     result.orbit = await compare(page, before, after, background);
+    result.lastFrameMs = await page.evaluate(() => window.fewviewView.stats.lastFrameMs);
     if (mode === "timing") return;
 
     result.cameras = await page.$$eval("#cameras li", (ls) => ls.length);

@@ -239,22 +239,22 @@ vec4 mainTexel(int i, int k) {
   return texelFetch(u_main, ivec2(idx % ${TEX_WIDTH}, idx / ${TEX_WIDTH}), 0);
 }
 
-vec3 shCoeff(int i, int k) {
-  // Coefficient k (1-based), channels r, g, b: halves 3(k-1) .. 3(k-1)+2.
-  int h = 3 * (k - 1);
-  vec3 c;
-  for (int ch = 0; ch < 3; ch++) {
-    int hh = h + ch;
-    int word = hh / 2;
-    int texel = word / 4;
-    int comp = word % 4;
-    ivec2 at = ivec2((i % u_shPerRow) * u_shTexels + texel, i / u_shPerRow);
-    uvec4 v = texelFetch(u_sh, at, 0);
-    uint w = comp == 0 ? v.x : comp == 1 ? v.y : comp == 2 ? v.z : v.w;
-    vec2 pair = unpackHalf2x16(w);
-    c[ch] = (hh % 2 == 0) ? pair.x : pair.y;
+// The SH rest coefficients of Gaussian i, unpacked once per vertex: halves 3(k−1)+c hold
+// coefficient k (1-based) of channel c.
+float rest[48];
+void loadRest(int i) {
+  ivec2 at = ivec2((i % u_shPerRow) * u_shTexels, i / u_shPerRow);
+  for (int t = 0; t < 6; t++) {
+    if (t >= u_shTexels) break;
+    uvec4 v = texelFetch(u_sh, at + ivec2(t, 0), 0);
+    vec2 a = unpackHalf2x16(v.x), b = unpackHalf2x16(v.y), c = unpackHalf2x16(v.z), d = unpackHalf2x16(v.w);
+    rest[8 * t] = a.x; rest[8 * t + 1] = a.y; rest[8 * t + 2] = b.x; rest[8 * t + 3] = b.y;
+    rest[8 * t + 4] = c.x; rest[8 * t + 5] = c.y; rest[8 * t + 6] = d.x; rest[8 * t + 7] = d.y;
   }
-  return c;
+}
+vec3 shCoeff(int k) {
+  int h = 3 * (k - 1);
+  return vec3(rest[h], rest[h + 1], rest[h + 2]);
 }
 
 void cull() {
@@ -301,20 +301,21 @@ void main() {
 
   vec3 color = vec3(0.5) + vec3(t2.z, t2.w, t3.x);
   if (u_shDegree > 0) {
+    loadRest(i);
     vec3 d = normalize(p - u_center);
     float x = d.x, y = d.y, z = d.z;
-    color += -SH_C1 * y * shCoeff(i, 1) + SH_C1 * z * shCoeff(i, 2) - SH_C1 * x * shCoeff(i, 3);
+    color += -SH_C1 * y * shCoeff(1) + SH_C1 * z * shCoeff(2) - SH_C1 * x * shCoeff(3);
     if (u_shDegree > 1) {
       float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
-      color += C2[0] * xy * shCoeff(i, 4) + C2[1] * yz * shCoeff(i, 5)
-        + C2[2] * (2.0 * zz - xx - yy) * shCoeff(i, 6) + C2[3] * xz * shCoeff(i, 7)
-        + C2[4] * (xx - yy) * shCoeff(i, 8);
+      color += C2[0] * xy * shCoeff(4) + C2[1] * yz * shCoeff(5)
+        + C2[2] * (2.0 * zz - xx - yy) * shCoeff(6) + C2[3] * xz * shCoeff(7)
+        + C2[4] * (xx - yy) * shCoeff(8);
       if (u_shDegree > 2) {
-        color += C3[0] * y * (3.0 * xx - yy) * shCoeff(i, 9) + C3[1] * xy * z * shCoeff(i, 10)
-          + C3[2] * y * (4.0 * zz - xx - yy) * shCoeff(i, 11)
-          + C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * shCoeff(i, 12)
-          + C3[4] * x * (4.0 * zz - xx - yy) * shCoeff(i, 13) + C3[5] * z * (xx - yy) * shCoeff(i, 14)
-          + C3[6] * x * (xx - 3.0 * yy) * shCoeff(i, 15);
+        color += C3[0] * y * (3.0 * xx - yy) * shCoeff(9) + C3[1] * xy * z * shCoeff(10)
+          + C3[2] * y * (4.0 * zz - xx - yy) * shCoeff(11)
+          + C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * shCoeff(12)
+          + C3[4] * x * (4.0 * zz - xx - yy) * shCoeff(13) + C3[5] * z * (xx - yy) * shCoeff(14)
+          + C3[6] * x * (xx - 3.0 * yy) * shCoeff(15);
       }
     }
   }

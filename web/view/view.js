@@ -64,9 +64,9 @@ const S = {
   target: [0, 0, 0], up: [0, -1, 0], sceneScale: 1,
   mode: "orbit", fixed: null, overlays: true, exactSort: false, selected: -1,
   version: 0, dataVersion: 0, sort: null, sorted: { version: -1, data: -1, exact: false },
-  dirty: true, loadedAll: false, keys: new Set(), waiters: [], placed: false,
+  dirty: true, loadedAll: false, lastSortAt: 0, fence: null, drawStart: 0, keys: new Set(), waiters: [], placed: false,
 };
-const stats = { firstPicture: null, fullPicture: null, loadedAt: null, gaussians: 0 };
+const stats = { firstPicture: null, fullPicture: null, loadedAt: null, gaussians: 0, lastFrameMs: 0 };
 let resolveReady;
 const ready = new Promise((r) => { resolveReady = r; });
 
@@ -345,7 +345,7 @@ function draw() {
   }
   if (S.overlays && S.lines) drawGeometry(v, S.lines, gl.LINES, false);
   const drewSomething = (S.splats && S.splats.instances > 0) || S.mesh;
-  if (drewSomething && stats.firstPicture === null) stats.firstPicture = performance.now();
+  S.drewSomething = !!drewSomething;
 }
 
 function requestSort() {
@@ -360,22 +360,44 @@ function isSettled() {
   return !S.sort && S.sorted.version === S.version && S.sorted.data === S.dataVersion && S.sorted.exact === S.exactSort;
 }
 
+const LOADING_SORT_MS = 500;
 let last = performance.now();
 function frame(now) {
   requestAnimationFrame(frame);
   const dt = Math.min(0.1, (now - last) / 1000);
   last = now;
   if (S.keys.size) fly(dt);
-  if (S.splats && !S.sort && (S.sorted.version !== S.version || S.sorted.data !== S.dataVersion || S.sorted.exact !== S.exactSort)) {
+  // While the model streams in, new Gaussians join the picture with the next sort, at most
+  // every LOADING_SORT_MS (each sort is followed by a redraw of everything loaded so far).
+  const viewChanged = S.sorted.version !== S.version || S.sorted.exact !== S.exactSort;
+  const dataChanged = S.sorted.data !== S.dataVersion;
+  const loadingWait = !S.loadedAll && S.sorted.data >= 0 &&
+    now - S.lastSortAt < Math.max(LOADING_SORT_MS, 2 * stats.lastFrameMs);
+  if (S.splats && !S.sort && (viewChanged || (dataChanged && !loadingWait))) {
+    S.lastSortAt = now;
     requestSort();
   }
   if (canvas.clientWidth && !S.fixed) {
     const dpr = window.devicePixelRatio || 1;
     if (canvas.width !== Math.round(canvas.clientWidth * dpr) || canvas.height !== Math.round(canvas.clientHeight * dpr)) S.dirty = true;
   }
+  // One frame in flight: a software GPU (SwiftShader) can take seconds for a million splats,
+  // and queued frames would hold up the texture uploads of the stream and the controls.
+  if (S.fence) {
+    if (gl.getSyncParameter(S.fence, gl.SYNC_STATUS) !== gl.SIGNALED) return;
+    gl.deleteSync(S.fence);
+    S.fence = null;
+    stats.lastFrameMs = now - S.drawStart;
+    // The first frame with something in it, once the GPU has finished it.
+    if (S.drewSomething && stats.firstPicture === null) stats.firstPicture = performance.now();
+  }
   if (S.dirty) {
     S.dirty = false;
+    S.drawStart = now;
     draw();
+    S.fence = gl.fenceSync(gl.SYNC_GPU_COMMANDS_COMPLETE, 0);
+    gl.flush();
+    return;
   }
   if (isSettled()) {
     if (stats.fullPicture === null) { stats.fullPicture = performance.now(); resolveReady(); }
@@ -528,7 +550,6 @@ async function loadSplats(model) {
     const p = S.data.positions.slice(3 * start, 3 * (start + n));
     S.worker.postMessage({ type: "positions", start, data: p }, [p.buffer]);
     S.dataVersion++;
-    S.dirty = true;
     if (!S.placed) initialView();
     $("status").textContent = `${(start + n).toLocaleString()} of ${model.count.toLocaleString()} Gaussians`;
   }, (bytes) => { progress.value = bytes / model.file_bytes; });
