@@ -425,7 +425,11 @@ mod tests {
             nalgebra::Vector3::z(),
         );
         for f in ["poses_initial.json", "poses_refined.json"] {
-            fewview_geom::io::cameras::write_cameras(&dir.path().join(f), &[cam.clone()]).unwrap();
+            fewview_geom::io::cameras::write_cameras(
+                &dir.path().join(f),
+                std::slice::from_ref(&cam),
+            )
+            .unwrap();
         }
         let run = Run::open(dir.path()).unwrap();
         assert_eq!(run.manifest.kind, RunKind::Surface);
