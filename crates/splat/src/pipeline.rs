@@ -4,6 +4,8 @@
 //!
 //! ```text
 //! <run>/config.json        resolved configuration and split
+//! <run>/cameras.json       the training cameras, then the held-out ones, in config.json's
+//!                          order (the camera-file form of `fewview_geom::io::cameras`)
 //! <run>/checkpoint.bin     latest checkpoint (removed when the run completes)
 //! <run>/point_cloud.ply    trained Gaussians (Inria layout)
 //! <run>/metrics.json       held-out PSNR/SSIM per view and means, Gaussian count, timings
@@ -110,6 +112,11 @@ impl RunDir {
     }
     pub fn metrics(&self) -> PathBuf {
         self.0.join("metrics.json")
+    }
+    /// The cameras of the split, so that a viewer or `fewview render --cameras` can show the
+    /// run from its own views without the dataset.
+    pub fn cameras(&self) -> PathBuf {
+        self.0.join("cameras.json")
     }
     pub fn renders(&self, split: &str) -> PathBuf {
         self.0.join("renders").join(split)
@@ -494,6 +501,14 @@ pub fn train_run_with(
     let json =
         serde_json::to_vec_pretty(&resolved).map_err(|e| PipelineError::Eval(e.to_string()))?;
     fewview_scene::atomic::write_bytes(&run.config(), &json)?;
+    let cameras: Vec<serde_json::Value> = ds
+        .train_views()
+        .chain(ds.test_views())
+        .map(|v| fewview_geom::io::cameras::camera_to_json(&v.camera))
+        .collect();
+    let json =
+        serde_json::to_vec_pretty(&cameras).map_err(|e| PipelineError::Eval(e.to_string()))?;
+    fewview_scene::atomic::write_bytes(&run.cameras(), &json)?;
     if let Some(s) = &start {
         s.write(ds, &run.init())
             .map_err(|e| PipelineError::Init(e.to_string()))?;

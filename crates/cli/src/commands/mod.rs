@@ -24,6 +24,7 @@ pub mod study;
 mod surface;
 mod train;
 mod train_args;
+mod view;
 
 use clap::Subcommand;
 
@@ -52,6 +53,7 @@ pub enum Command {
     Study(study::Args),
     /// Pose-guided Gaussians of moving people (PoseGaussian).
     Human(human::Args),
+    View(view::Args),
 }
 
 pub fn run(command: Command) -> anyhow::Result<()> {
@@ -74,5 +76,6 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::EvalVideo(args) => eval_video::run(args),
         Command::Study(args) => study::run(args),
         Command::Human(args) => human::run(args),
+        Command::View(args) => view::run(args),
     }
 }

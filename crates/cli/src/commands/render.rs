@@ -32,12 +32,22 @@ pub enum Which {
 /// Renders a trained model (Inria PLY) at a dataset's cameras to PNG, and optionally along a smooth
 /// camera path through the training views (rotations by SLERP, centres linearly) to a video.
 #[derive(Debug, ClapArgs)]
+#[command(mut_arg("data", |a| a.required_unless_present("cameras")))]
 pub struct Args {
     /// Trained Gaussians (Inria PLY layout).
     #[arg(long, value_name = "FILE")]
     pub ply: PathBuf,
     #[command(flatten)]
     pub dataset: DatasetArgs,
+    /// Render at the cameras of this file instead of a dataset's: a run's `cameras.json` (its
+    /// training cameras, then the held-out ones) or any camera file `pose-error` reads. Writes
+    /// `camera_000.png`, `camera_001.png`, ... in the file's order.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["data", "views", "path"])]
+    pub cameras: Option<PathBuf>,
+    /// The background with `--cameras` (a dataset brings its own): `R,G,B` in [0, 1], as the
+    /// run's `config.json` has it.
+    #[arg(long, value_name = "R,G,B", requires = "cameras", value_parser = parse_rgb)]
+    pub background: Option<[f32; 3]>,
     /// Which dataset views to render.
     #[arg(long, value_enum, default_value_t = Which::Test)]
     pub views: Which,
@@ -65,7 +75,58 @@ pub struct Args {
 /// 30 fps. A larger count is refused before anything is rendered.
 const MAX_PATH_FRAMES: usize = 10_000;
 
+fn parse_rgb(s: &str) -> Result<[f32; 3], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| {
+            x.trim()
+                .parse::<f32>()
+                .map_err(|_| format!("`{x}` is not a number"))
+        })
+        .collect::<Result<_, _>>()?;
+    match v.as_slice() {
+        [r, g, b] if v.iter().all(|x| (0.0..=1.0).contains(x)) => Ok([*r, *g, *b]),
+        _ => Err("give three numbers in [0, 1], e.g. 0,0,0".into()),
+    }
+}
+
+/// `--cameras`: every camera of the file, with the given background.
+fn render_cameras(args: &Args, file: &std::path::Path) -> anyhow::Result<()> {
+    check_folder(&args.out, "--out")?;
+    let cameras = fewview_geom::io::cameras::read_cameras(file)?;
+    let model = read_ply(&args.ply).context("cannot read the model")?;
+    let settings = RenderSettings {
+        background: args.background.unwrap_or([0.0; 3]),
+        sh_degree: model.sh_degree(),
+        ..RenderSettings::default()
+    };
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let bar = progress::iterations(cameras.len() as u64, "render");
+    for (i, c) in cameras.iter().enumerate() {
+        let r = render_model(&model, &RenderCamera::from(c), &settings);
+        r.rgb
+            .save_png(&args.out.join(format!("camera_{i:03}.png")))?;
+        if args.depth {
+            r.normalized_depth()
+                .scaled_to_unit_max()
+                .save_png(&args.out.join(format!("camera_{i:03}_depth.png")))?;
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    println!(
+        "rendered {} cameras to {}",
+        cameras.len(),
+        args.out.display()
+    );
+    Ok(())
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(file) = &args.cameras {
+        return render_cameras(&args, file);
+    }
     // The outputs and the path's flags are checked before any work: a bad container, frame
     // count, frame rate or output folder used to be found only after every view was rendered
     // and written (or never, for a huge count).

@@ -1,0 +1,266 @@
+//! The header of a Gaussian PLY as the page reads it. The page parses the vertex rows itself as
+//! they stream in; the server checks the header first, so that a file the page cannot draw is
+//! a one-line error before anything is served, and hands the page the row layout.
+//!
+//! Readable: the Inria 3DGS layout (`fewview_splat::ply` writes it) in binary little-endian,
+//! one `vertex` element first, its properties in any order, extra scalar properties of any type
+//! (skipped), and `float` for the ones drawn: `x y z f_dc_0..2 opacity scale_0..2 rot_0..3` and
+//! 0, 9, 24 or 45 `f_rest_*` (SH degree 0–3, channel-major). ASCII and big-endian files, list
+//! properties and `double` parameters are refused with the reason.
+
+use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::error::{Result, ViewError};
+
+/// The layout of a Gaussian PLY's vertex rows.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct GaussianPly {
+    /// Number of Gaussians.
+    pub count: usize,
+    /// SH degree, from the number of `f_rest_*` properties.
+    pub sh_degree: usize,
+    /// Bytes before the first row (the header, `end_header\n` included).
+    pub header_bytes: usize,
+    /// Bytes per row.
+    pub stride: usize,
+    /// Byte offset inside a row of each drawn property (all `float`).
+    pub offsets: BTreeMap<String, usize>,
+    /// Size of the whole file.
+    pub file_bytes: u64,
+}
+
+/// The most header lines read before giving up: a Gaussian PLY has about 70.
+const MAX_HEADER_LINES: usize = 10_000;
+
+fn scalar_size(ty: &str) -> Option<usize> {
+    Some(match ty {
+        "char" | "uchar" | "int8" | "uint8" => 1,
+        "short" | "ushort" | "int16" | "uint16" => 2,
+        "int" | "uint" | "float" | "int32" | "uint32" | "float32" => 4,
+        "double" | "float64" => 8,
+        _ => return None,
+    })
+}
+
+/// The names of the properties the page draws, for SH degree `degree`.
+fn drawn(degree: usize) -> Vec<String> {
+    let mut names: Vec<String> = ["x", "y", "z"].iter().map(|s| s.to_string()).collect();
+    names.extend((0..3).map(|c| format!("f_dc_{c}")));
+    let rest = 3 * ((degree + 1) * (degree + 1) - 1);
+    names.extend((0..rest).map(|i| format!("f_rest_{i}")));
+    names.push("opacity".into());
+    names.extend((0..3).map(|i| format!("scale_{i}")));
+    names.extend((0..4).map(|i| format!("rot_{i}")));
+    names
+}
+
+/// Reads and checks the header of the Gaussian PLY at `path` (and that the file holds every
+/// row it announces).
+pub fn check_gaussian_ply(path: &Path) -> Result<GaussianPly> {
+    let file = std::fs::File::open(path).map_err(|e| ViewError::io(path, e))?;
+    let file_bytes = file.metadata().map_err(|e| ViewError::io(path, e))?.len();
+    let mut r = BufReader::new(file);
+    let bad = |m: String| ViewError::format(path, m);
+    let mut header_bytes = 0;
+    let mut lines = Vec::new();
+    loop {
+        let mut line = Vec::new();
+        let n = r
+            .read_until(b'\n', &mut line)
+            .map_err(|e| ViewError::io(path, e))?;
+        if n == 0 {
+            return Err(bad(if lines.is_empty() {
+                "empty file, not a PLY".into()
+            } else {
+                "PLY header ends before `end_header`".into()
+            }));
+        }
+        header_bytes += n;
+        let text = String::from_utf8_lossy(&line).trim_end().to_string();
+        if lines.is_empty() && text != "ply" {
+            return Err(bad("not a PLY file (missing `ply` magic)".into()));
+        }
+        if text == "end_header" {
+            break;
+        }
+        lines.push(text);
+        if lines.len() > MAX_HEADER_LINES {
+            return Err(bad(format!(
+                "no `end_header` in the first {MAX_HEADER_LINES} lines"
+            )));
+        }
+    }
+    let mut count = None;
+    let mut props: Vec<(String, String)> = Vec::new();
+    let mut in_vertex = false;
+    for line in &lines[1..] {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.as_slice() {
+            ["format", "binary_little_endian", _] => {}
+            ["format", other, _] => {
+                return Err(bad(format!(
+                    "the viewer reads binary little-endian PLY, this one is {other}"
+                )));
+            }
+            ["element", "vertex", n] => {
+                if count.is_some() {
+                    return Err(bad("two `vertex` elements".into()));
+                }
+                count = Some(
+                    n.parse::<usize>()
+                        .map_err(|_| bad(format!("bad vertex count `{n}`")))?,
+                );
+                in_vertex = true;
+            }
+            ["element", name, ..] => {
+                if count.is_none() {
+                    return Err(bad(format!(
+                        "element `{name}` comes before `vertex`; the viewer reads the vertices first"
+                    )));
+                }
+                in_vertex = false;
+            }
+            ["property", "list", ..] if in_vertex => {
+                return Err(bad("list properties in `vertex` are not supported".into()));
+            }
+            ["property", ty, name] if in_vertex => {
+                if scalar_size(ty).is_none() {
+                    return Err(bad(format!("property {name} has unknown type `{ty}`")));
+                }
+                props.push((name.to_string(), ty.to_string()));
+            }
+            _ => {}
+        }
+    }
+    let count = count.ok_or_else(|| bad("no `vertex` element".into()))?;
+    if count == 0 {
+        return Err(bad("holds no Gaussians (vertex count 0)".into()));
+    }
+    let rest = props
+        .iter()
+        .filter(|(n, _)| n.starts_with("f_rest_"))
+        .count();
+    let sh_degree = match rest {
+        0 => 0,
+        9 => 1,
+        24 => 2,
+        45 => 3,
+        n => {
+            return Err(bad(format!(
+                "{n} f_rest properties: not SH degree 0–3 (0, 9, 24 or 45)"
+            )));
+        }
+    };
+    let mut offset = 0;
+    let mut all = BTreeMap::new();
+    for (name, ty) in &props {
+        all.insert(name.clone(), (offset, ty.clone()));
+        offset += scalar_size(ty).unwrap_or(0);
+    }
+    let stride = offset;
+    let mut offsets = BTreeMap::new();
+    for name in drawn(sh_degree) {
+        match all.get(&name) {
+            None => {
+                return Err(bad(format!(
+                    "not a Gaussian splat PLY: no `{name}` property (the Inria 3DGS layout is \
+                     x y z f_dc_* f_rest_* opacity scale_* rot_*)"
+                )));
+            }
+            Some((_, ty)) if ty != "float" && ty != "float32" => {
+                return Err(bad(format!(
+                    "property {name} is `{ty}`; the viewer reads Gaussian parameters as `float`"
+                )));
+            }
+            Some((o, _)) => {
+                offsets.insert(name, *o);
+            }
+        }
+    }
+    let need = header_bytes as u64 + count as u64 * stride as u64;
+    if file_bytes < need {
+        return Err(bad(format!(
+            "truncated: {count} Gaussians need {need} bytes, the file has {file_bytes}"
+        )));
+    }
+    Ok(GaussianPly {
+        count,
+        sh_degree,
+        header_bytes,
+        stride,
+        offsets,
+        file_bytes,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn header(props: &[&str], count: usize, format: &str) -> String {
+        let mut h = format!("ply\nformat {format} 1.0\nelement vertex {count}\n");
+        for p in props {
+            h += &format!("property float {p}\n");
+        }
+        h + "end_header\n"
+    }
+
+    const PROPS: [&str; 17] = [
+        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0",
+        "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
+    ];
+
+    #[test]
+    fn reads_the_inria_layout_and_its_offsets() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.ply");
+        let h = header(&PROPS, 2, "binary_little_endian");
+        let mut bytes = h.clone().into_bytes();
+        bytes.extend(vec![0u8; 2 * 17 * 4]);
+        std::fs::write(&path, bytes).unwrap();
+        let p = check_gaussian_ply(&path).unwrap();
+        assert_eq!(
+            (p.count, p.sh_degree, p.header_bytes, p.stride),
+            (2, 0, h.len(), 68)
+        );
+        assert_eq!(p.offsets["f_dc_0"], 24);
+        assert_eq!(p.offsets["rot_3"], 64);
+        assert!(!p.offsets.contains_key("nx"));
+    }
+
+    #[test]
+    fn refuses_what_the_page_cannot_draw_in_one_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.ply");
+        let cases: Vec<(Vec<u8>, &str)> = vec![
+            (b"hello\n".to_vec(), "not a PLY"),
+            (b"ply\nformat ascii 1.0\n".to_vec(), "before `end_header`"),
+            (
+                header(&PROPS, 1, "ascii").into_bytes(),
+                "binary little-endian",
+            ),
+            (
+                header(&PROPS[..9], 1, "binary_little_endian").into_bytes(),
+                "no `opacity`",
+            ),
+            (
+                header(&PROPS, 3, "binary_little_endian").into_bytes(),
+                "truncated",
+            ),
+            (
+                header(&PROPS, 0, "binary_little_endian").into_bytes(),
+                "no Gaussians",
+            ),
+        ];
+        for (bytes, needle) in cases {
+            std::fs::write(&path, bytes).unwrap();
+            let e = check_gaussian_ply(&path).unwrap_err().to_string();
+            assert!(e.contains(needle) && !e.contains('\n'), "{e}");
+            assert!(e.contains("a.ply"), "{e}");
+        }
+    }
+}
