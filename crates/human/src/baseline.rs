@@ -381,8 +381,8 @@ mod tests {
                 .collect();
             Ok(Mask::new(64, 64, data))
         }
-        fn depth(&self, _camera: usize, _frame: usize) -> Option<DepthMap> {
-            None
+        fn depth(&self, _camera: usize, _frame: usize) -> Result<Option<DepthMap>> {
+            Ok(None)
         }
         fn joints2d(&self, _camera: usize, _frame: usize) -> Result<Vec<[f64; 2]>> {
             Ok(Vec::new())

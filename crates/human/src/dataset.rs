@@ -258,6 +258,12 @@ impl MultiView for HumanDataset {
         Ok(mask)
     }
 
+    /// A capture without a `depth/` folder has none; a missing or broken file inside one is
+    /// an error of [`MultiView::depth`].
+    fn has_depth(&self) -> bool {
+        self.sequence.join("depth").is_dir()
+    }
+
     fn depth(&self, camera: usize, frame: usize) -> Result<DepthMap> {
         let path = self.depth_path(camera, frame);
         self.access(&path, Some(camera), frame)?;

@@ -32,6 +32,8 @@ pub trait MultiView: Sync {
     fn image(&self, camera: usize, frame: usize) -> Result<Image>;
     /// The person's mask.
     fn mask(&self, camera: usize, frame: usize) -> Result<Mask>;
+    /// Whether the capture has depth maps ([`MultiView::depth`]).
+    fn has_depth(&self) -> bool;
     /// Metric z-depth, where the capture has it (an error otherwise).
     fn depth(&self, camera: usize, frame: usize) -> Result<DepthMap>;
     /// The joints' pixel positions `(u, v)` in this camera; an error if one lies outside the image.

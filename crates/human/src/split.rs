@@ -229,6 +229,11 @@ impl<'a> TrainingView<'a> {
         self.source.depth(camera, frame)
     }
 
+    /// Whether the capture has depth maps at all.
+    pub fn has_depth(&self) -> bool {
+        self.source.has_depth()
+    }
+
     pub fn joints2d(&self, camera: usize, frame: usize) -> Result<Vec<[f64; 2]>> {
         self.check(camera, frame)?;
         self.source.joints2d(camera, frame)

@@ -155,3 +155,32 @@ fn seq_a_training_pass_never_reads_held_out_views_or_test_frames() {
         split.input_cameras
     );
 }
+
+/// The depth term's input: a capture without depth maps gives none, a broken depth file is an
+/// error naming it (it used to read as "no depth").
+#[test]
+fn training_depth_is_absent_or_an_error_never_silently_dropped() {
+    use fewview_human::train::InputViews;
+    let dir = tempfile::tempdir().unwrap();
+    common::write_capture(dir.path(), 4, 3);
+    let split = Split::uniform(4, 2, 3, 2).unwrap();
+    let depth_dir = dir.path().join("seq/depth");
+    {
+        let data = HumanDataset::open(dir.path(), "seq").unwrap();
+        let view = TrainingView::new(&data, &split).unwrap();
+        let depth = InputViews::depth(&view, 0, 1).unwrap().expect("depth");
+        assert_eq!((depth.width, depth.height), (16, 16));
+    }
+    let broken = depth_dir.join("cam_00/frame_0001.png");
+    std::fs::write(&broken, b"not a png").unwrap();
+    {
+        let data = HumanDataset::open(dir.path(), "seq").unwrap();
+        let view = TrainingView::new(&data, &split).unwrap();
+        let e = InputViews::depth(&view, 0, 1).unwrap_err().to_string();
+        assert!(e.contains("frame_0001.png"), "{e}");
+    }
+    std::fs::remove_dir_all(&depth_dir).unwrap();
+    let data = HumanDataset::open(dir.path(), "seq").unwrap();
+    let view = TrainingView::new(&data, &split).unwrap();
+    assert!(InputViews::depth(&view, 0, 1).unwrap().is_none());
+}

@@ -21,8 +21,9 @@ pub trait InputViews: Sync {
     fn input_cameras(&self) -> &[usize];
     fn image(&self, camera: usize, frame: usize) -> Result<Image>;
     fn mask(&self, camera: usize, frame: usize) -> Result<Mask>;
-    /// The dataset's depth, when it has one (the loss's depth term).
-    fn depth(&self, camera: usize, frame: usize) -> Option<DepthMap>;
+    /// The dataset's depth (the loss's depth term): `None` when the capture has no depth
+    /// maps, an error when one of its files cannot be read.
+    fn depth(&self, camera: usize, frame: usize) -> Result<Option<DepthMap>>;
     fn joints2d(&self, camera: usize, frame: usize) -> Result<Vec<[f64; 2]>>;
 }
 
@@ -39,8 +40,11 @@ impl InputViews for TrainingView<'_> {
     fn mask(&self, camera: usize, frame: usize) -> Result<Mask> {
         TrainingView::mask(self, camera, frame)
     }
-    fn depth(&self, camera: usize, frame: usize) -> Option<DepthMap> {
-        TrainingView::depth(self, camera, frame).ok()
+    fn depth(&self, camera: usize, frame: usize) -> Result<Option<DepthMap>> {
+        if !self.has_depth() {
+            return Ok(None);
+        }
+        TrainingView::depth(self, camera, frame).map(Some)
     }
     fn joints2d(&self, camera: usize, frame: usize) -> Result<Vec<[f64; 2]>> {
         TrainingView::joints2d(self, camera, frame)
@@ -79,8 +83,8 @@ impl InputViews for InferenceInputs<'_> {
         self.check(camera)?;
         self.source.mask(camera, frame)
     }
-    fn depth(&self, _camera: usize, _frame: usize) -> Option<DepthMap> {
-        None
+    fn depth(&self, _camera: usize, _frame: usize) -> Result<Option<DepthMap>> {
+        Ok(None)
     }
     fn joints2d(&self, camera: usize, frame: usize) -> Result<Vec<[f64; 2]>> {
         self.check(camera)?;
@@ -245,7 +249,7 @@ pub fn prepare_frame(
                 image: crop.image(&inputs.image(c, frame)?),
                 mask: crop.mask(&inputs.mask(c, frame)?),
                 hull_depth: render_depth(mesh, &camera)?,
-                depth: inputs.depth(c, frame).map(|d| crop.depth(&d)),
+                depth: inputs.depth(c, frame)?.map(|d| crop.depth(&d)),
                 joints: joints.iter().map(|&p| crop.point(p)).collect(),
                 camera,
             })

@@ -257,6 +257,10 @@ impl MultiView for ZjuDataset {
         })
     }
 
+    fn has_depth(&self) -> bool {
+        false
+    }
+
     fn depth(&self, _camera: usize, _frame: usize) -> Result<DepthMap> {
         Err(HumanError::invalid(
             &self.root,
