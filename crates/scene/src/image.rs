@@ -80,16 +80,45 @@ impl Image {
         self.width * self.height
     }
 
-    /// Reads a PNG or JPEG (8 or 16 bit, grey/RGB/RGBA) into `[0, 1]` floats, keeping the
-    /// alpha channel when the file has one.
-    pub fn load(path: &Path) -> Result<Self> {
-        let reader = image::ImageReader::open(path)
+    /// The decoder of a PNG or JPEG file.
+    fn decoder(path: &Path) -> Result<impl image::ImageDecoder> {
+        image::ImageReader::open(path)
             .map_err(|e| SceneError::io(path, e))?
             .with_guessed_format()
-            .map_err(|e| SceneError::io(path, e))?;
-        let img = reader
-            .decode()
+            .map_err(|e| SceneError::io(path, e))?
+            .into_decoder()
+            .map_err(|e| SceneError::format(path, format!("cannot decode image: {e}")))
+    }
+
+    /// The width and height of an image file as [`Image::load`] returns it (after its EXIF
+    /// orientation), read from the header alone.
+    pub fn dimensions(path: &Path) -> Result<(usize, usize)> {
+        use image::ImageDecoder;
+        let mut decoder = Self::decoder(path)?;
+        let (w, h) = decoder.dimensions();
+        let turned = decoder.orientation().is_ok_and(|o| {
+            use image::metadata::Orientation::*;
+            matches!(o, Rotate90 | Rotate270 | Rotate90FlipH | Rotate270FlipH)
+        });
+        Ok(if turned {
+            (h as usize, w as usize)
+        } else {
+            (w as usize, h as usize)
+        })
+    }
+
+    /// Reads a PNG or JPEG (8 or 16 bit, grey/RGB/RGBA) into `[0, 1]` floats, keeping the
+    /// alpha channel when the file has one, turned upright by its EXIF orientation (as a
+    /// photo viewer shows it; phones store the sensor's pixels and the turn apart).
+    pub fn load(path: &Path) -> Result<Self> {
+        use image::ImageDecoder;
+        let mut decoder = Self::decoder(path)?;
+        let orientation = decoder
+            .orientation()
+            .unwrap_or(image::metadata::Orientation::NoTransforms);
+        let mut img = image::DynamicImage::from_decoder(decoder)
             .map_err(|e| SceneError::format(path, format!("cannot decode image: {e}")))?;
+        img.apply_orientation(orientation);
         let (w, h) = (img.width() as usize, img.height() as usize);
         let out = if img.color().has_alpha() {
             Self::from_vec(w, h, 4, img.into_rgba32f().into_raw())

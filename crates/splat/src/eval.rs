@@ -71,24 +71,46 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
     if n == 0 { f64::NAN } else { s / n as f64 }
 }
 
-/// Scores one render against a view's image (and mask).
+/// The product of two masks of one size (both must hold for a pixel to count).
+fn intersect(a: &Image, b: &Image) -> Image {
+    let data = a.data.iter().zip(&b.data).map(|(x, y)| x * y).collect();
+    Image::from_vec(a.width, a.height, 1, data)
+}
+
+/// Scores one render against a view's image (and mask). A view with a validity mask (the
+/// blank border of an undistorted photo) is scored on its valid pixels only, the masked
+/// scores on the pixels both masks keep.
 pub fn score(
     name: &str,
     rendered: &Image,
     view: &View,
 ) -> Result<ViewScore, fewview_metrics::error::MetricsError> {
     let opts = SsimOptions::default();
-    let (mp, ms) = match &view.mask {
+    let mask = match (&view.mask, &view.valid) {
+        (Some(m), Some(v)) if m.data.len() == v.data.len() => Some(intersect(m, v)),
+        (m, _) => m.clone(),
+    };
+    let (mp, ms) = match &mask {
         Some(mask) => (
             Some(psnr_masked(rendered, &view.image, mask)?),
             Some(ssim_masked(rendered, &view.image, mask, &opts)?),
         ),
         None => (None, None),
     };
+    let (p, s) = match &view.valid {
+        Some(valid) => (
+            psnr_masked(rendered, &view.image, valid)?,
+            ssim_masked(rendered, &view.image, valid, &opts)?,
+        ),
+        None => (
+            psnr(rendered, &view.image)?,
+            ssim_with(rendered, &view.image, &opts)?,
+        ),
+    };
     Ok(ViewScore {
         name: name.to_string(),
-        psnr: psnr(rendered, &view.image)?,
-        ssim: ssim_with(rendered, &view.image, &opts)?,
+        psnr: p,
+        ssim: s,
         masked_psnr: mp,
         masked_ssim: ms,
     })
