@@ -97,8 +97,9 @@ fn bad_lenses_and_models_are_one_line_errors() {
     std::fs::write(&transforms, &original).unwrap();
     edit_json(&transforms, |d| {
         d["camera_model"] = "OPENCV_FISHEYE".into();
-        d["p1"] = 0.0.into();
-        d["p2"] = 0.0.into();
+        for k in ["k1", "k2", "p1", "p2"] {
+            d[k] = 0.0.into();
+        }
         d["fl_x"] = 5.0.into();
         d["fl_y"] = 5.0.into();
     });

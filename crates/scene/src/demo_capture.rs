@@ -9,6 +9,7 @@ use std::path::Path;
 use serde_json::json;
 
 use crate::axes::opengl_to_opencv;
+use crate::camera::Intrinsics;
 use crate::distortion::{Distortion, LensCamera};
 use crate::error::{Result, SceneError};
 use crate::synthetic::{DemoOptions, demo_dataset, demo_render_through};
@@ -23,7 +24,7 @@ pub struct CaptureSummary {
 }
 
 /// Writes the demo views of `opts`, ray traced through `distortion` (OpenCV's radial–tangential
-/// model; `None` for an ideal pinhole) with the demo's intrinsics, into `dir`: `images/
+/// model; `None` for an ideal pinhole) with `intrinsics` (`None`: the demo's), into `dir`: `images/
 /// view_NN.png`, `transforms.json` (`camera_model` `OPENCV`, `fl_x fl_y cx cy w h k1 k2 p1
 /// p2`, OpenGL camera-to-world matrices) and `sparse/0/{cameras,images,points3D}.txt` (one
 /// `OPENCV` camera, or `PINHOLE` without distortion). Every file is written atomically.
@@ -31,6 +32,7 @@ pub fn write_demo_capture(
     dir: &Path,
     opts: &DemoOptions,
     distortion: Option<Distortion>,
+    intrinsics: Option<Intrinsics>,
 ) -> Result<CaptureSummary> {
     // The pinhole demo gives the poses and the intrinsics; the images are traced again through
     // the lens.
@@ -38,7 +40,7 @@ pub fn write_demo_capture(
         supersample: 1,
         ..opts.clone()
     });
-    let k = pinhole.views[0].camera.intrinsics;
+    let k = intrinsics.unwrap_or(pinhole.views[0].camera.intrinsics);
     let lens = LensCamera::new(k, distortion);
     lens.check_invertible()
         .map_err(|m| SceneError::invalid(dir, format!("the capture's lens: {m}")))?;
@@ -129,7 +131,7 @@ mod tests {
             ..DemoOptions::default()
         };
         let d = Distortion::opencv(&[0.06, -0.08, 1e-3, 1e-3]);
-        write_demo_capture(dir.path(), &opts, Some(d)).unwrap();
+        write_demo_capture(dir.path(), &opts, Some(d), None).unwrap();
         for format in [DatasetFormat::Nerfstudio, DatasetFormat::Colmap] {
             let load = LoadOptions {
                 format: Some(format),

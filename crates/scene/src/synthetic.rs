@@ -293,21 +293,14 @@ pub fn demo_render(camera: &Camera, opts: &DemoOptions) -> Image {
     render_view(&Scene::new(), camera, opts).0
 }
 
-/// The demo scene photographed through a lens: `camera` gives the pose and the size, `lens`
-/// the intrinsics and distortion. Each (supersampled) pixel position is undistorted through
-/// the lens ([`LensCamera::undistort_normalized`]) and the pinhole ray through that ideal
-/// point is traced, so the image is what a real camera with this lens records. Positions the
-/// lens does not map (outside its valid region) stay black.
+/// The demo scene photographed through a lens from `camera`'s pose: `lens` gives the
+/// intrinsics, the image size and the distortion. Each (supersampled) pixel position is
+/// undistorted through the lens ([`LensCamera::undistort_normalized`]) and the pinhole ray
+/// through that ideal point is traced, so the image is what a real camera with this lens
+/// records. Positions the lens does not map stay black.
 pub fn demo_render_through(camera: &Camera, lens: &LensCamera, opts: &DemoOptions) -> Image {
     let k = &lens.intrinsics;
-    let ideal = Camera::new(
-        Intrinsics {
-            width: camera.width(),
-            height: camera.height(),
-            ..*k
-        },
-        camera.world_to_camera,
-    );
+    let ideal = Camera::new(*k, camera.world_to_camera);
     let ray = |u: f64, v: f64| {
         lens.undistort_normalized(u, v)
             .map(|(x, y)| ideal.ray(k.fx * x + k.cx, k.fy * y + k.cy))

@@ -48,10 +48,19 @@ pub struct Args {
         value_delimiter = ','
     )]
     pub capture_distortion: Vec<f64>,
+    /// The capture's intrinsics `fx,fy,cx,cy,width,height` instead of the demo's (e.g. the
+    /// undistorted camera of a distorted capture, to render its exact pinhole truth).
+    #[arg(long, value_name = "FX,FY,CX,CY,W,H", value_delimiter = ',')]
+    pub capture_intrinsics: Option<Vec<f64>>,
 }
 
 /// `--write-capture`: the demo views as a capture with lens distortion.
-fn write_capture(dir: &std::path::Path, opts: &DemoOptions, coeffs: &[f64]) -> anyhow::Result<()> {
+fn write_capture(
+    dir: &std::path::Path,
+    opts: &DemoOptions,
+    coeffs: &[f64],
+    intrinsics: Option<&[f64]>,
+) -> anyhow::Result<()> {
     if coeffs.len() != 4 {
         anyhow::bail!(
             "--capture-distortion takes 4 values k1,k2,p1,p2, got {}",
@@ -59,7 +68,20 @@ fn write_capture(dir: &std::path::Path, opts: &DemoOptions, coeffs: &[f64]) -> a
         );
     }
     let distortion = fewview_scene::distortion::Distortion::opencv(coeffs);
-    let summary = fewview_scene::demo_capture::write_demo_capture(dir, opts, Some(distortion))?;
+    let intrinsics = match intrinsics {
+        Some(&[fx, fy, cx, cy, w, h]) if w >= 1.0 && h >= 1.0 => Some(fewview_scene::Intrinsics {
+            fx,
+            fy,
+            cx,
+            cy,
+            width: w as u32,
+            height: h as u32,
+        }),
+        Some(_) => anyhow::bail!("--capture-intrinsics takes fx,fy,cx,cy,width,height"),
+        None => None,
+    };
+    let summary =
+        fewview_scene::demo_capture::write_demo_capture(dir, opts, Some(distortion), intrinsics)?;
     println!(
         "wrote {} views through {:?} to {} (the demo trains on views {:?})",
         summary.views,
@@ -90,7 +112,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..DemoOptions::default()
     };
     if let Some(dir) = &args.write_capture {
-        return write_capture(dir, &opts, &args.capture_distortion);
+        return write_capture(
+            dir,
+            &opts,
+            &args.capture_distortion,
+            args.capture_intrinsics.as_deref(),
+        );
     }
     eprintln!(
         "ray tracing {} ground-truth views at {}x{} ...",
