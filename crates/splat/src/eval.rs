@@ -169,3 +169,48 @@ pub fn evaluate(
     };
     Ok((report, renders))
 }
+
+#[cfg(test)]
+mod tests {
+    use fewview_scene::{Camera, Intrinsics, Se3};
+
+    use super::*;
+
+    /// Pixels outside a view's validity mask (the blank border of an undistorted photo) do not
+    /// count: an error of 0.1 inside gives exactly 20 dB whatever the border holds.
+    #[test]
+    fn the_blank_border_is_not_scored() {
+        let (w, h) = (24, 20);
+        let target = Image::filled(w, h, &[0.5, 0.5, 0.5]);
+        let mut valid = Image::filled(w, h, &[1.0]);
+        let mut rendered = Image::filled(w, h, &[0.6, 0.6, 0.6]);
+        for y in 0..h {
+            for x in 0..3 {
+                valid.set(x, y, 0, 0.0);
+                for c in 0..3 {
+                    rendered.set(x, y, c, 1.0);
+                }
+            }
+        }
+        let view = View {
+            name: "v".into(),
+            camera: Camera::new(
+                Intrinsics::centered(20.0, w as u32, h as u32),
+                Se3::identity(),
+            ),
+            image: target,
+            mask: None,
+            mask_is_alpha: false,
+            valid: Some(valid),
+            depth_bounds: None,
+            source_index: 0,
+        };
+        let s = score("v", &rendered, &view).unwrap();
+        assert!((s.psnr - 20.0).abs() < 1e-4, "{}", s.psnr);
+        let unmasked = View {
+            valid: None,
+            ..view
+        };
+        assert!(score("v", &rendered, &unmasked).unwrap().psnr < 19.0);
+    }
+}
