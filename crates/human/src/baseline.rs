@@ -236,6 +236,7 @@ fn input_views(
                 camera: crop.camera(full),
                 mask: Some(Image::from_vec(mask.width, mask.height, 1, alpha)),
                 mask_is_alpha: true,
+                valid: None,
                 depth_bounds: Some((framing.near, framing.far)),
                 source_index: c,
                 image,

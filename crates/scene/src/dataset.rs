@@ -22,6 +22,9 @@ pub struct View {
     /// colour. False for masks read from separate files (DTU), which outline an object in
     /// front of a real background.
     pub mask_is_alpha: bool,
+    /// Pixels that hold photo data (1) or lie in the blank border an undistortion left (0),
+    /// 1 channel; `None` when every pixel is valid. Losses and metrics ignore invalid pixels.
+    pub valid: Option<Image>,
     /// Near/far depth bounds of this view when the format gives them (LLFF).
     pub depth_bounds: Option<(f64, f64)>,
     /// Which entry of the camera file this view was read from, so that refined poses can be

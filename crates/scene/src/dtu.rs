@@ -257,6 +257,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
                 mask,
                 depth_bounds: None,
                 mask_is_alpha: false,
+                valid: None,
                 source_index: i,
             })
         }))?;

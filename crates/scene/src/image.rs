@@ -80,16 +80,45 @@ impl Image {
         self.width * self.height
     }
 
-    /// Reads a PNG or JPEG (8 or 16 bit, grey/RGB/RGBA) into `[0, 1]` floats, keeping the
-    /// alpha channel when the file has one.
-    pub fn load(path: &Path) -> Result<Self> {
-        let reader = image::ImageReader::open(path)
+    /// The decoder of a PNG or JPEG file.
+    fn decoder(path: &Path) -> Result<impl image::ImageDecoder> {
+        image::ImageReader::open(path)
             .map_err(|e| SceneError::io(path, e))?
             .with_guessed_format()
-            .map_err(|e| SceneError::io(path, e))?;
-        let img = reader
-            .decode()
+            .map_err(|e| SceneError::io(path, e))?
+            .into_decoder()
+            .map_err(|e| SceneError::format(path, format!("cannot decode image: {e}")))
+    }
+
+    /// The width and height of an image file as [`Image::load`] returns it (after its EXIF
+    /// orientation), read from the header alone.
+    pub fn dimensions(path: &Path) -> Result<(usize, usize)> {
+        use image::ImageDecoder;
+        let mut decoder = Self::decoder(path)?;
+        let (w, h) = decoder.dimensions();
+        let turned = decoder.orientation().is_ok_and(|o| {
+            use image::metadata::Orientation::*;
+            matches!(o, Rotate90 | Rotate270 | Rotate90FlipH | Rotate270FlipH)
+        });
+        Ok(if turned {
+            (h as usize, w as usize)
+        } else {
+            (w as usize, h as usize)
+        })
+    }
+
+    /// Reads a PNG or JPEG (8 or 16 bit, grey/RGB/RGBA) into `[0, 1]` floats, keeping the
+    /// alpha channel when the file has one, turned upright by its EXIF orientation (as a
+    /// photo viewer shows it; phones store the sensor's pixels and the turn apart).
+    pub fn load(path: &Path) -> Result<Self> {
+        use image::ImageDecoder;
+        let mut decoder = Self::decoder(path)?;
+        let orientation = decoder
+            .orientation()
+            .unwrap_or(image::metadata::Orientation::NoTransforms);
+        let mut img = image::DynamicImage::from_decoder(decoder)
             .map_err(|e| SceneError::format(path, format!("cannot decode image: {e}")))?;
+        img.apply_orientation(orientation);
         let (w, h) = (img.width() as usize, img.height() as usize);
         let out = if img.color().has_alpha() {
             Self::from_vec(w, h, 4, img.into_rgba32f().into_raw())
@@ -258,6 +287,60 @@ mod tests {
         g.data = vec![0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0];
         let d = g.downscale(2);
         assert_eq!(d.data, vec![2.5, 4.5]);
+    }
+
+    /// A JPEG whose EXIF says "rotate 90° clockwise to view" (orientation 6) loads upright:
+    /// a 4×2 photo with a white left column becomes 2×4 with a white top row.
+    #[test]
+    fn exif_orientation_is_applied() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut img = Image::new(4, 2, 3);
+        for y in 0..2 {
+            for c in 0..3 {
+                img.set(0, y, c, 1.0);
+            }
+        }
+        let mut jpeg = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 100)
+            .encode(&img.to_u8(), 4, 2, image::ExtendedColorType::Rgb8)
+            .unwrap();
+        // APP1 "Exif\0\0" + little-endian TIFF with one IFD entry: 0x0112 SHORT 1 = 6.
+        let mut tiff = b"II*\0\x08\0\0\0\x01\0".to_vec();
+        tiff.extend_from_slice(&[0x12, 0x01, 3, 0, 1, 0, 0, 0, 6, 0, 0, 0, 0, 0, 0, 0]);
+        let mut app1 = b"Exif\0\0".to_vec();
+        app1.extend_from_slice(&tiff);
+        let len = (app1.len() + 2) as u16;
+        let mut bytes = jpeg[..2].to_vec();
+        bytes.extend_from_slice(&[0xFF, 0xE1]);
+        bytes.extend_from_slice(&len.to_be_bytes());
+        bytes.extend_from_slice(&app1);
+        bytes.extend_from_slice(&jpeg[2..]);
+        let path = dir.path().join("turned.jpg");
+        std::fs::write(&path, &bytes).unwrap();
+        let back = Image::load(&path).unwrap();
+        assert_eq!((back.width, back.height), (2, 4));
+        assert_eq!(Image::dimensions(&path).unwrap(), (2, 4));
+        assert!(
+            back.get(0, 0, 0) > 0.9 && back.get(1, 0, 0) > 0.9,
+            "top row white"
+        );
+        assert!(back.get(0, 3, 0) < 0.1, "bottom row dark");
+    }
+
+    /// 16-bit PNGs keep their precision; RGBA keeps its alpha.
+    #[test]
+    fn sixteen_bit_and_rgba_pngs_are_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("deep.png");
+        let px: Vec<u16> = vec![1, 40000, 65535, 30000, 2, 3, 4, 5];
+        let buf: image::ImageBuffer<image::Rgba<u16>, Vec<u16>> =
+            image::ImageBuffer::from_raw(2, 1, px.clone()).unwrap();
+        buf.save(&path).unwrap();
+        let back = Image::load(&path).unwrap();
+        assert_eq!((back.width, back.height, back.channels), (2, 1, 4));
+        for (a, &b) in back.data.iter().zip(&px) {
+            assert!((a - b as f32 / 65535.0).abs() < 1e-6, "{a} {b}");
+        }
     }
 
     #[test]

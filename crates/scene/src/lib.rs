@@ -19,12 +19,15 @@ pub mod camera;
 pub mod colmap;
 pub mod cputime;
 pub mod dataset;
+pub mod demo_capture;
+pub mod distortion;
 pub mod dtu;
 pub mod error;
 pub mod image;
 pub mod llff;
 pub mod load;
 mod load_options;
+mod load_report;
 pub mod numpy;
 pub mod ply_scalar;
 pub mod pose_export;
@@ -38,4 +41,7 @@ pub use camera::{Camera, Intrinsics, Se3, axes_meeting_point, camera_path};
 pub use dataset::{Dataset, PointCloud, View};
 pub use error::{FileIoError, SceneError};
 pub use image::Image;
-pub use load::{DatasetFormat, LoadOptions, detect_format, load_dataset};
+pub use load::{
+    DatasetFormat, LoadOptions, LoadReport, UndistortMode, detect_format, load_dataset,
+    load_dataset_with_report,
+};

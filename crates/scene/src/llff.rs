@@ -274,6 +274,7 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
                     camera,
                     image,
                     mask_is_alpha: mask.is_some(),
+                    valid: None,
                     mask,
                     depth_bounds: Some(bounds[i]),
                     source_index: i,

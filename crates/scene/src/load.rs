@@ -11,7 +11,8 @@ use std::path::Path;
 
 use crate::dataset::Dataset;
 use crate::error::{Result, SceneError};
-pub use crate::load_options::{DatasetFormat, LoadOptions};
+pub use crate::load_options::{DatasetFormat, LoadOptions, UndistortMode};
+pub use crate::load_report::LoadReport;
 pub use crate::view_files::MAX_CAMERA_MAGNITUDE;
 
 impl LoadOptions {
@@ -27,6 +28,13 @@ impl LoadOptions {
 /// Loads the dataset in `path`, detecting its format from the folder contents (see
 /// [`detect_format`]) unless `opts.format` forces one.
 pub fn load_dataset(path: &Path, opts: &LoadOptions) -> Result<Dataset> {
+    load_dataset_with_report(path, opts).map(|(d, _)| d)
+}
+
+/// [`load_dataset`], with what the load did besides: frames skipped, photos undistorted, how
+/// the undistortion cache served them, and warnings to show the user.
+pub fn load_dataset_with_report(path: &Path, opts: &LoadOptions) -> Result<(Dataset, LoadReport)> {
+    let mut report = LoadReport::default();
     if !path.is_dir() {
         let e = std::io::Error::new(std::io::ErrorKind::NotFound, "no such dataset folder");
         return Err(SceneError::io(path, e));
@@ -34,13 +42,13 @@ pub fn load_dataset(path: &Path, opts: &LoadOptions) -> Result<Dataset> {
     opts.validate(path)?;
     let dataset = match opts.format_of(path)? {
         DatasetFormat::Llff => crate::llff::load(path, opts),
-        DatasetFormat::Blender => crate::transforms::load_blender(path, opts),
-        DatasetFormat::Nerfstudio => crate::transforms::load_nerfstudio(path, opts),
+        DatasetFormat::Blender => crate::transforms::load_blender(path, opts, &mut report),
+        DatasetFormat::Nerfstudio => crate::transforms::load_nerfstudio(path, opts, &mut report),
         DatasetFormat::DtuIdr => crate::dtu::load(path, opts),
-        DatasetFormat::Colmap => crate::colmap::load(path, opts),
+        DatasetFormat::Colmap => crate::colmap::load(path, opts, &mut report),
     }?;
     check_camera_magnitudes(path, &dataset)?;
-    Ok(dataset)
+    Ok((dataset, report))
 }
 /// Refuses a dataset whose cameras, after the format's own normalisation, hold a value the
 /// single-precision maths cannot use (e.g. a camera file with a 10³⁰⁰ that is finite but

@@ -3,12 +3,53 @@
 //! options without depending on the entry point that dispatches to them.
 
 use std::fmt;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
+use crate::distortion::UndistortFit;
 use crate::error::{Result, SceneError};
+
+/// What loading does with a camera's lens distortion.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum UndistortMode {
+    /// Undistort into a pinhole with no blank border (COLMAP `image_undistorter`'s default).
+    #[default]
+    NoBorder,
+    /// Undistort keeping every photo pixel; the blank border is masked out of losses and
+    /// metrics.
+    AllPixels,
+    /// Ignore the distortion: the photos are used as if taken by the pinhole of the same
+    /// intrinsics (a baseline, wrong for real lenses).
+    Ignore,
+}
+
+impl UndistortMode {
+    /// The framing of the undistorted image; `None` when distortion is ignored.
+    pub fn fit(self) -> Option<UndistortFit> {
+        match self {
+            UndistortMode::NoBorder => Some(UndistortFit::NoBorder),
+            UndistortMode::AllPixels => Some(UndistortFit::AllPixels),
+            UndistortMode::Ignore => None,
+        }
+    }
+}
+
+impl FromStr for UndistortMode {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "no-border" => Ok(UndistortMode::NoBorder),
+            "all-pixels" => Ok(UndistortMode::AllPixels),
+            "ignore" => Ok(UndistortMode::Ignore),
+            _ => Err(format!(
+                "unknown undistortion mode {s:?}: expected no-border, all-pixels or ignore"
+            )),
+        }
+    }
+}
 
 /// The dataset layouts [`load_dataset`] reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -102,6 +143,11 @@ pub struct LoadOptions {
     /// LLFF / COLMAP / nerfstudio hold-out: every `holdout_every`-th view is a test view
     /// (NeRF's `llffhold = 8`).
     pub holdout_every: usize,
+    /// COLMAP / nerfstudio: what to do with lens distortion (undistort on load by default).
+    pub undistort: UndistortMode,
+    /// Where undistorted photos are cached; `None` = `.fewview-cache/undistorted/` in the
+    /// dataset folder ([`crate::distortion::cache`]).
+    pub cache_dir: Option<PathBuf>,
 }
 
 impl Default for LoadOptions {
@@ -117,6 +163,8 @@ impl Default for LoadOptions {
             llff_factor: 8,
             llff_normalize: true,
             holdout_every: 8,
+            undistort: UndistortMode::default(),
+            cache_dir: None,
         }
     }
 }

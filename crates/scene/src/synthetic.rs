@@ -13,6 +13,7 @@ use nalgebra::Vector3;
 
 use crate::camera::{Camera, Intrinsics};
 use crate::dataset::{Dataset, View};
+use crate::distortion::LensCamera;
 use crate::image::Image;
 
 /// Size and views of the demo scene.
@@ -243,6 +244,7 @@ pub fn demo_dataset(opts: &DemoOptions) -> Dataset {
             mask: None,
             depth_bounds: Some((near * 0.9, far * 1.1)),
             mask_is_alpha: false,
+            valid: None,
             source_index: i,
         });
     }
@@ -291,9 +293,33 @@ pub fn demo_render(camera: &Camera, opts: &DemoOptions) -> Image {
     render_view(&Scene::new(), camera, opts).0
 }
 
-/// Ray-traced image (box-filtered `ss × ss` samples per pixel, `ss = opts.supersample`) and the
-/// range of hit depths.
+/// The demo scene photographed through a lens from `camera`'s pose: `lens` gives the
+/// intrinsics, the image size and the distortion. Each (supersampled) pixel position is
+/// undistorted through the lens ([`LensCamera::undistort_normalized`]) and the pinhole ray
+/// through that ideal point is traced, so the image is what a real camera with this lens
+/// records. Positions the lens does not map stay black.
+pub fn demo_render_through(camera: &Camera, lens: &LensCamera, opts: &DemoOptions) -> Image {
+    let k = &lens.intrinsics;
+    let ideal = Camera::new(*k, camera.world_to_camera);
+    let ray = |u: f64, v: f64| {
+        lens.undistort_normalized(u, v)
+            .map(|(x, y)| ideal.ray(k.fx * x + k.cx, k.fy * y + k.cy))
+    };
+    render_rays(&Scene::new(), &ideal, opts, ray).0
+}
+
 fn render_view(scene: &Scene, camera: &Camera, opts: &DemoOptions) -> (Image, f64, f64) {
+    render_rays(scene, camera, opts, |u, v| Some(camera.ray(u, v)))
+}
+
+/// Ray-traced image (box-filtered `ss × ss` samples per pixel, `ss = opts.supersample`, each
+/// along `ray(u, v)` of its position; `None` adds black) and the range of hit depths.
+fn render_rays(
+    scene: &Scene,
+    camera: &Camera,
+    opts: &DemoOptions,
+    ray: impl Fn(f64, f64) -> Option<(Vector3<f64>, Vector3<f64>)>,
+) -> (Image, f64, f64) {
     let ss = opts.supersample.max(1);
     let (w, h) = (camera.width() as usize, camera.height() as usize);
     let mut img = Image::new(w, h, 3);
@@ -306,7 +332,9 @@ fn render_view(scene: &Scene, camera: &Camera, opts: &DemoOptions) -> (Image, f6
                 for sx in 0..ss {
                     let u = x as f64 + (sx as f64 + 0.5) / ss as f64;
                     let v = y as f64 + (sy as f64 + 0.5) / ss as f64;
-                    let (o, d) = camera.ray(u, v);
+                    let Some((o, d)) = ray(u, v) else {
+                        continue;
+                    };
                     let c = scene.shade(&o, &d, opts.shading);
                     for k in 0..3 {
                         acc[k] += c[k];

@@ -11,10 +11,13 @@
 //! crate's half-integer pixel convention, as in 3DGS and nerfstudio; NeRF's original ray
 //! generator put pixel centres at integers, half a pixel off from this.
 //!
-//! **Distortion is not supported**: the coefficients `k1, k2, k3, k4, p1, p2` are read and any
-//! non-zero one is an error (undistort the images first, e.g. with COLMAP's
-//! `image_undistorter`); so are non-pinhole `camera_model`s (`OPENCV_FISHEYE`,
-//! `EQUIRECTANGULAR`).
+//! **Distortion**: `camera_model` `OPENCV` (or none, as instant-ngp writes) with `k1 k2 k3 k4
+//! p1 p2`, or `OPENCV_FISHEYE` with `k1 … k4`, per file or per frame
+//! ([`crate::distortion::camera_from_transforms`]); photos are undistorted into a pinhole on
+//! load ([`LoadOptions::undistort`]). Other models (`EQUIRECTANGULAR`) are errors.
+//!
+//! nerfstudio: frames whose image file is missing are skipped (as instant-ngp and nerfstudio
+//! do) and counted in the load report; an error only when none remains.
 //!
 //! RGBA images are composited over the background (white by default, the NeRF protocol
 //! `rgb·a + (1 − a)`) and their alpha kept as the view's (soft) mask. A frame's `mask_path`, when
@@ -29,8 +32,12 @@ use serde::Deserialize;
 use crate::axes::opengl_to_opencv;
 use crate::camera::{Camera, Intrinsics, Se3};
 use crate::dataset::{Dataset, View};
+use crate::distortion::cache::CacheOutcome;
+use crate::distortion::{LensCamera, camera_from_transforms};
 use crate::error::{Result, SceneError};
+use crate::image::Image;
 use crate::load_options::LoadOptions;
+use crate::load_report::LoadReport;
 use crate::split;
 use crate::view_files;
 
@@ -74,32 +81,33 @@ impl CameraFields {
         }
     }
 
-    /// Rejects distortion and non-pinhole models (see the module docs).
-    fn check_pinhole(&self) -> std::result::Result<(), String> {
-        if let Some(m) = &self.camera_model {
-            let m = m.to_ascii_uppercase();
-            if !matches!(m.as_str(), "PINHOLE" | "SIMPLE_PINHOLE" | "OPENCV") {
-                return Err(format!("camera_model {m} is not a pinhole model"));
-            }
-        }
-        let named = [
-            ("k1", self.k1),
-            ("k2", self.k2),
-            ("k3", self.k3),
-            ("k4", self.k4),
-            ("p1", self.p1),
-            ("p2", self.p2),
-        ];
-        for (name, v) in named {
-            if let Some(v) = v
-                && v != 0.0
-            {
-                return Err(format!(
-                    "distortion {name} = {v} is not supported: undistort the images first"
-                ));
-            }
-        }
-        Ok(())
+    /// The camera with its lens for an image of `width × height` (see the module docs).
+    fn lens(&self, width: usize, height: usize) -> std::result::Result<LensCamera, String> {
+        let intrinsics = self.intrinsics(width, height)?;
+        camera_from_transforms(
+            intrinsics,
+            self.camera_model.as_deref(),
+            [self.k1, self.k2, self.k3, self.k4],
+            [self.p1, self.p2],
+        )
+    }
+
+    /// Whether the camera model and distortion fields can be read, before any image is.
+    fn check_model(&self) -> std::result::Result<(), String> {
+        camera_from_transforms(
+            Intrinsics::centered(1.0, 1, 1),
+            self.camera_model.as_deref(),
+            [self.k1, self.k2, self.k3, self.k4],
+            [self.p1, self.p2],
+        )
+        .map(|_| ())
+    }
+
+    /// The image size the fields state, when they state both `w` and `h`.
+    fn stated_size(&self) -> Option<(usize, usize)> {
+        let (w, h) = (self.w?, self.h?);
+        (w >= 1.0 && h >= 1.0 && w.fract() == 0.0 && h.fract() == 0.0)
+            .then_some((w as usize, h as usize))
     }
 
     /// Pinhole intrinsics for an image of `width × height`.
@@ -218,8 +226,9 @@ pub(crate) fn parse_transforms(text: &str, path: &Path) -> Result<Vec<Frame>> {
                 ));
             }
             let camera = f.camera.or(&file.camera);
+            // The lens model is checked before any image is read.
             camera
-                .check_pinhole()
+                .check_model()
                 .map_err(|m| SceneError::invalid(path, format!("frame {i} ({}): {m}", f.file_path)))?;
             let mut image = dir.join(&f.file_path);
             if image.extension().is_none() {
@@ -237,23 +246,66 @@ pub(crate) fn parse_transforms(text: &str, path: &Path) -> Result<Vec<Frame>> {
         .collect()
 }
 
-/// Loads one frame as a view: image (RGBA composited over `background`, alpha kept as the
-/// mask), camera from the frame's intrinsics at the image's size, then downscaled by `k`.
-fn load_frame(frame: &Frame, background: [f32; 3], k: u32) -> Result<View> {
-    let photo = view_files::load_photo(&frame.image, background)?;
-    let (w, h) = (photo.rgb.width, photo.rgb.height);
-    let intrinsics = frame.camera.intrinsics(w, h).map_err(|m| {
-        SceneError::invalid(
-            &frame.source,
-            format!("frame {} ({}): {m}", frame.index, frame.image.display()),
-        )
-    })?;
-    let camera = Camera::from_camera_to_world(intrinsics, frame.camera_to_world);
+/// Loads one frame as a view: image (undistorted into a pinhole unless `opts` ignores
+/// distortion; RGBA composited over `background`, alpha kept as the mask), camera from the
+/// frame's intrinsics at the image's size, then downscaled by `opts.downscale`.
+fn load_frame(
+    frame: &Frame,
+    background: [f32; 3],
+    opts: &LoadOptions,
+    root: &Path,
+) -> Result<(View, CacheOutcome)> {
+    let k = opts.downscale;
+    let what = format!("frame {} ({})", frame.index, frame.image.display());
+    let size = match frame.camera.stated_size() {
+        Some(s) => s,
+        None => Image::dimensions(&frame.image)?,
+    };
+    let lens = frame
+        .camera
+        .lens(size.0, size.1)
+        .map_err(|m| SceneError::invalid(&frame.source, format!("{what}: {m}")))?;
+    let p = view_files::load_lens_photo(
+        &frame.image,
+        &lens,
+        opts,
+        root,
+        background,
+        (&frame.source, &what),
+    )?;
+    let (w, h) = (p.photo.rgb.width, p.photo.rgb.height);
+    if p.outcome == CacheOutcome::Pinhole {
+        // The file's w/h against the image as decoded.
+        frame
+            .camera
+            .intrinsics(w, h)
+            .map_err(|m| SceneError::invalid(&frame.source, format!("{what}: {m}")))?;
+    }
+    let camera = Camera::from_camera_to_world(p.intrinsics, frame.camera_to_world);
     view_files::check_camera(&camera, &frame.source, &format!("frame {}", frame.index))?;
-    let (mask, binary) = match (&frame.mask, photo.alpha) {
-        (Some(p), _) => {
-            let m = view_files::load_binary_mask(p)?;
-            view_files::check_size(&m, &camera, p, "mask")?;
+    let (mask, binary) = match (&frame.mask, p.photo.alpha) {
+        (Some(path), _) => {
+            let m = view_files::load_binary_mask(path)?;
+            let m = match lens
+                .distortion
+                .filter(|_| p.outcome != CacheOutcome::Pinhole)
+            {
+                Some(_) => {
+                    view_files::check_size(
+                        &m,
+                        &Camera::new(lens.intrinsics, camera.world_to_camera),
+                        path,
+                        "mask",
+                    )?;
+                    view_files::binarize(&crate::distortion::undistort_image(
+                        &m,
+                        &lens,
+                        &p.intrinsics,
+                    ))
+                }
+                None => m,
+            };
+            view_files::check_size(&m, &camera, path, "mask")?;
             (Some(m), true)
         }
         (None, alpha) => (alpha, false),
@@ -262,20 +314,43 @@ fn load_frame(frame: &Frame, background: [f32; 3], k: u32) -> Result<View> {
         Some(m) => Some(view_files::downscale_mask(&m, k, binary, &frame.image)?),
         None => None,
     };
+    let valid = match p.valid {
+        Some(v) => Some(view_files::downscale_mask(&v, k, true, &frame.image)?),
+        None => None,
+    };
     let mask_is_alpha = mask.is_some() && !binary;
-    Ok(View {
+    let view = View {
         name: view_files::stem(&frame.image),
         camera: view_files::downscale_camera(&camera, k),
-        image: view_files::downscale_image(&photo.rgb, k, &frame.image)?,
+        image: view_files::downscale_image(&p.photo.rgb, k, &frame.image)?,
         mask,
         mask_is_alpha,
+        valid,
         depth_bounds: None,
         source_index: frame.index,
-    })
+    };
+    Ok((view, p.outcome))
 }
 
-fn load_frames(frames: &[&Frame], background: [f32; 3], k: u32) -> Result<Vec<View>> {
-    view_files::first_error_in_order(frames.par_iter().map(|f| load_frame(f, background, k)))
+fn load_frames(
+    frames: &[&Frame],
+    background: [f32; 3],
+    opts: &LoadOptions,
+    root: &Path,
+    report: &mut LoadReport,
+) -> Result<Vec<View>> {
+    let loaded = view_files::first_error_in_order(
+        frames
+            .par_iter()
+            .map(|f| load_frame(f, background, opts, root)),
+    )?;
+    Ok(loaded
+        .into_iter()
+        .map(|(view, outcome)| {
+            report.record(&outcome);
+            view
+        })
+        .collect())
 }
 
 /// Loads NeRF-synthetic data. Training views are the first `n_train` (default 8) entries of the
@@ -283,7 +358,7 @@ fn load_frames(frames: &[&Frame], background: [f32; 3], k: u32) -> Result<Vec<Vi
 /// frames of `transforms_train.json`, in that order; test views are all frames of
 /// `transforms_test.json`. Only these are loaded: `views` holds the training views, then the
 /// test views; `train_views` / `test_views` index the frames of the respective files.
-pub fn load_blender(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
+pub fn load_blender(root: &Path, opts: &LoadOptions, report: &mut LoadReport) -> Result<Dataset> {
     let train_path = root.join("transforms_train.json");
     let test_path = root.join("transforms_test.json");
     let train_frames = read_transforms(&train_path)?;
@@ -309,7 +384,7 @@ pub fn load_blender(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
         .map(|&i| &train_frames[i])
         .chain(test_ids.iter().map(|&i| &test_frames[i]))
         .collect();
-    let views = load_frames(&chosen, background, opts.downscale)?;
+    let views = load_frames(&chosen, background, opts, root, report)?;
     let n_train = train_ids.len();
     Ok(Dataset {
         name: view_files::scene_name(root),
@@ -327,15 +402,45 @@ pub fn load_blender(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
 /// `holdout_every`-th frame is a test view, `n_train` spread evenly over the rest, default all).
 /// The poses are kept in the file's world frame: nerfstudio's automatic re-orientation and
 /// scaling are not applied.
-pub fn load_nerfstudio(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
+pub fn load_nerfstudio(
+    root: &Path,
+    opts: &LoadOptions,
+    report: &mut LoadReport,
+) -> Result<Dataset> {
     let path = root.join("transforms.json");
     let mut frames = read_transforms(&path)?;
     frames.sort_by(|a, b| a.image.cmp(&b.image));
+    let listed = frames.len();
+    let first_missing = frames
+        .iter()
+        .find(|f| !f.image.exists())
+        .map(|f| f.image.clone());
+    frames.retain(|f| f.image.exists());
+    if let Some(first) = first_missing {
+        if frames.is_empty() {
+            return Err(SceneError::invalid(
+                &path,
+                format!(
+                    "none of the {listed} frames has its image file (first missing: {})",
+                    first.display()
+                ),
+            ));
+        }
+        report.missing_frames = listed - frames.len();
+        report.warnings.push(format!(
+            "{}: skipped {} of {listed} frames whose image files are missing (first: {})",
+            path.display(),
+            report.missing_frames,
+            first.display()
+        ));
+    }
     let background = opts.background.unwrap_or([1.0; 3]);
     let views = load_frames(
         &frames.iter().collect::<Vec<_>>(),
         background,
-        opts.downscale,
+        opts,
+        root,
+        report,
     )?;
     let n_views = views.len();
     let (train, test) = view_files::choose_split(
@@ -372,7 +477,6 @@ fn gl_matrix(c2w_cv: &Se3) -> [[f64; 4]; 4] {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::image::Image;
     use nalgebra::Vector3;
     use serde_json::json;
 
@@ -503,24 +607,20 @@ pub(crate) mod tests {
     #[test]
     fn bad_transforms_are_one_line_errors() {
         let dir = tempfile::tempdir().unwrap();
-        write_blender(dir.path(), 100, 2, json!({ "k1": 0.01 }));
-        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.contains("transforms_train.json") && e.contains("distortion k1 = 0.01"),
-            "{e}"
-        );
         write_blender(
             dir.path(),
             100,
             2,
-            json!({ "camera_model": "OPENCV_FISHEYE" }),
+            json!({ "camera_model": "EQUIRECTANGULAR" }),
         );
         let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
-        assert!(e.contains("not a pinhole model"), "{e}");
+        assert!(
+            e.contains("transforms_train.json")
+                && e.contains("camera_model EQUIRECTANGULAR is not supported"),
+            "{e}"
+        );
         write_blender(dir.path(), 100, 2, json!({ "w": 30, "fl_x": 20.0 }));
         let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()

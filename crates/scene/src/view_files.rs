@@ -8,6 +8,8 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 
 use crate::camera::{Camera, Intrinsics};
+use crate::distortion::LensCamera;
+use crate::distortion::cache::{self, CacheOutcome};
 use crate::error::{Result, SceneError};
 use crate::image::Image;
 use crate::load_options::LoadOptions;
@@ -81,7 +83,12 @@ pub(crate) struct Photo {
 /// Loads a photo as RGB (grey is replicated; RGBA is composited over `background`, the alpha
 /// returned separately).
 pub(crate) fn load_photo(path: &Path, background: [f32; 3]) -> Result<Photo> {
-    let img = Image::load(path)?;
+    split_photo(Image::load(path)?, background, path)
+}
+
+/// A decoded photo (1, 3 or 4 channels) as RGB and alpha, as [`load_photo`]; `path` names it
+/// in errors.
+pub(crate) fn split_photo(img: Image, background: [f32; 3], path: &Path) -> Result<Photo> {
     Ok(match img.channels {
         1 => Photo {
             rgb: Image::from_vec(
@@ -106,6 +113,39 @@ pub(crate) fn load_photo(path: &Path, background: [f32; 3]) -> Result<Photo> {
                 format!("unsupported image with {c} channels"),
             ));
         }
+    })
+}
+
+/// A photo taken through `lens`, loaded as RGB + alpha for its undistorted pinhole camera
+/// (or as it is, when `opts` ignores distortion), with its validity mask; the cache's outcome
+/// goes into `report`. `source` (the camera file) and `what` (the view) name errors.
+pub(crate) struct LensPhoto {
+    pub photo: Photo,
+    pub intrinsics: Intrinsics,
+    pub valid: Option<Image>,
+    pub outcome: CacheOutcome,
+}
+
+pub(crate) fn load_lens_photo(
+    path: &Path,
+    lens: &LensCamera,
+    opts: &LoadOptions,
+    root: &Path,
+    background: [f32; 3],
+    (source, what): (&Path, &str),
+) -> Result<LensPhoto> {
+    let lens = match opts.undistort.fit() {
+        Some(_) => *lens,
+        None => LensCamera::new(lens.intrinsics, None),
+    };
+    let fit = opts.undistort.fit().unwrap_or_default();
+    let dir = cache::cache_dir(root, opts.cache_dir.as_deref());
+    let u = cache::load_undistorted(path, &lens, fit, &dir, source, what)?;
+    Ok(LensPhoto {
+        photo: split_photo(u.image, background, path)?,
+        intrinsics: u.intrinsics,
+        valid: u.valid,
+        outcome: u.outcome,
     })
 }
 

@@ -71,24 +71,46 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
     if n == 0 { f64::NAN } else { s / n as f64 }
 }
 
-/// Scores one render against a view's image (and mask).
+/// The product of two masks of one size (both must hold for a pixel to count).
+fn intersect(a: &Image, b: &Image) -> Image {
+    let data = a.data.iter().zip(&b.data).map(|(x, y)| x * y).collect();
+    Image::from_vec(a.width, a.height, 1, data)
+}
+
+/// Scores one render against a view's image (and mask). A view with a validity mask (the
+/// blank border of an undistorted photo) is scored on its valid pixels only, the masked
+/// scores on the pixels both masks keep.
 pub fn score(
     name: &str,
     rendered: &Image,
     view: &View,
 ) -> Result<ViewScore, fewview_metrics::error::MetricsError> {
     let opts = SsimOptions::default();
-    let (mp, ms) = match &view.mask {
+    let mask = match (&view.mask, &view.valid) {
+        (Some(m), Some(v)) if m.data.len() == v.data.len() => Some(intersect(m, v)),
+        (m, _) => m.clone(),
+    };
+    let (mp, ms) = match &mask {
         Some(mask) => (
             Some(psnr_masked(rendered, &view.image, mask)?),
             Some(ssim_masked(rendered, &view.image, mask, &opts)?),
         ),
         None => (None, None),
     };
+    let (p, s) = match &view.valid {
+        Some(valid) => (
+            psnr_masked(rendered, &view.image, valid)?,
+            ssim_masked(rendered, &view.image, valid, &opts)?,
+        ),
+        None => (
+            psnr(rendered, &view.image)?,
+            ssim_with(rendered, &view.image, &opts)?,
+        ),
+    };
     Ok(ViewScore {
         name: name.to_string(),
-        psnr: psnr(rendered, &view.image)?,
-        ssim: ssim_with(rendered, &view.image, &opts)?,
+        psnr: p,
+        ssim: s,
         masked_psnr: mp,
         masked_ssim: ms,
     })
@@ -146,4 +168,49 @@ pub fn evaluate(
         views: scores,
     };
     Ok((report, renders))
+}
+
+#[cfg(test)]
+mod tests {
+    use fewview_scene::{Camera, Intrinsics, Se3};
+
+    use super::*;
+
+    /// Pixels outside a view's validity mask (the blank border of an undistorted photo) do not
+    /// count: an error of 0.1 inside gives exactly 20 dB whatever the border holds.
+    #[test]
+    fn the_blank_border_is_not_scored() {
+        let (w, h) = (24, 20);
+        let target = Image::filled(w, h, &[0.5, 0.5, 0.5]);
+        let mut valid = Image::filled(w, h, &[1.0]);
+        let mut rendered = Image::filled(w, h, &[0.6, 0.6, 0.6]);
+        for y in 0..h {
+            for x in 0..3 {
+                valid.set(x, y, 0, 0.0);
+                for c in 0..3 {
+                    rendered.set(x, y, c, 1.0);
+                }
+            }
+        }
+        let view = View {
+            name: "v".into(),
+            camera: Camera::new(
+                Intrinsics::centered(20.0, w as u32, h as u32),
+                Se3::identity(),
+            ),
+            image: target,
+            mask: None,
+            mask_is_alpha: false,
+            valid: Some(valid),
+            depth_bounds: None,
+            source_index: 0,
+        };
+        let s = score("v", &rendered, &view).unwrap();
+        assert!((s.psnr - 20.0).abs() < 1e-4, "{}", s.psnr);
+        let unmasked = View {
+            valid: None,
+            ..view
+        };
+        assert!(score("v", &rendered, &unmasked).unwrap().psnr < 19.0);
+    }
 }

@@ -450,6 +450,10 @@ pub fn train_run_with(
         .train_views()
         .map(|v| {
             let view = TrainView::new(&v.name, RenderCamera::from(&v.camera), &v.image, &device);
+            let view = match &v.valid {
+                Some(valid) => view.with_valid(valid, &device),
+                None => view,
+            };
             match v.mask.as_ref().filter(|_| v.mask_is_alpha) {
                 Some(a) => match AlphaImage::new(&v.image, a, ds.background) {
                     Some(alpha) => view.with_alpha(alpha),

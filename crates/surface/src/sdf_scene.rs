@@ -331,6 +331,7 @@ pub fn sdf_dataset(opts: &SdfSceneOptions) -> Dataset {
                 mask: Some(mask),
                 depth_bounds: None,
                 mask_is_alpha: false,
+                valid: None,
                 source_index: i,
             }
         })

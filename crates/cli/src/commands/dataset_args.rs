@@ -6,7 +6,7 @@ use anyhow::Context;
 use clap::Args;
 use fewview_scene::load::LoadOptions;
 use fewview_scene::split::parse_view_list;
-use fewview_scene::{Dataset, DatasetFormat, load_dataset};
+use fewview_scene::{Dataset, DatasetFormat, UndistortMode, load_dataset_with_report};
 
 /// A list of view indices (one flag value, so clap does not treat it as repeated values).
 #[derive(Debug, Clone, PartialEq)]
@@ -44,6 +44,13 @@ pub struct DatasetArgs {
     /// DTU: camera file inside the scene folder (e.g. `cameras_linear_init.npz`).
     #[arg(long, value_name = "FILE")]
     pub cameras_file: Option<String>,
+    /// COLMAP / nerfstudio lens distortion: `no-border` undistorts each photo into a pinhole
+    /// with no blank border (COLMAP image_undistorter's default), `all-pixels` keeps every photo
+    /// pixel and masks the blank border out of losses and metrics, `ignore` uses the photos as
+    /// if taken by a pinhole (a baseline). Undistorted photos are cached in the dataset's
+    /// `.fewview-cache/undistorted/`.
+    #[arg(long, default_value = "no-border", value_name = "MODE")]
+    pub undistort: UndistortMode,
 }
 
 impl DatasetArgs {
@@ -55,6 +62,7 @@ impl DatasetArgs {
             train_views: self.train_views.clone().map(|v| v.0),
             test_views: self.test_views.clone().map(|v| v.0),
             cameras_file: self.cameras_file.clone(),
+            undistort: self.undistort,
             ..LoadOptions::default()
         }
     }
@@ -68,8 +76,17 @@ impl DatasetArgs {
 
     pub fn load(&self) -> anyhow::Result<Dataset> {
         let folder = self.folder()?;
-        let ds = load_dataset(folder, &self.load_options())
+        let (ds, report) = load_dataset_with_report(folder, &self.load_options())
             .with_context(|| format!("cannot load dataset {}", folder.display()))?;
+        for w in &report.warnings {
+            eprintln!("warning: {w}");
+        }
+        if report.undistorted > 0 {
+            eprintln!(
+                "undistorted {} photos ({} from the cache)",
+                report.undistorted, report.cache_hits
+            );
+        }
         Ok(ds)
     }
 }

@@ -35,6 +35,61 @@ pub struct Args {
     /// Continue the run in `--out` from its last checkpoint.
     #[arg(long)]
     pub resume: bool,
+    /// Instead of training, write the demo's views as a real capture into DIR: photos ray
+    /// traced through a lens with `--capture-distortion`, a nerfstudio `transforms.json` and a
+    /// COLMAP model in `sparse/0/` (train on it with `fewview train --data DIR`).
+    #[arg(long, value_name = "DIR")]
+    pub write_capture: Option<PathBuf>,
+    /// The capture's lens: OpenCV `k1,k2,p1,p2` (phone-like by default; `0,0,0,0` for a pinhole).
+    #[arg(
+        long,
+        value_name = "K1,K2,P1,P2",
+        default_value = "0.06,-0.08,0.001,0.001",
+        value_delimiter = ','
+    )]
+    pub capture_distortion: Vec<f64>,
+    /// The capture's intrinsics `fx,fy,cx,cy,width,height` instead of the demo's (e.g. the
+    /// undistorted camera of a distorted capture, to render its exact pinhole truth).
+    #[arg(long, value_name = "FX,FY,CX,CY,W,H", value_delimiter = ',')]
+    pub capture_intrinsics: Option<Vec<f64>>,
+}
+
+/// `--write-capture`: the demo views as a capture with lens distortion.
+fn write_capture(
+    dir: &std::path::Path,
+    opts: &DemoOptions,
+    coeffs: &[f64],
+    intrinsics: Option<&[f64]>,
+) -> anyhow::Result<()> {
+    if coeffs.len() != 4 {
+        anyhow::bail!(
+            "--capture-distortion takes 4 values k1,k2,p1,p2, got {}",
+            coeffs.len()
+        );
+    }
+    let distortion = fewview_scene::distortion::Distortion::opencv(coeffs);
+    let intrinsics = match intrinsics {
+        Some(&[fx, fy, cx, cy, w, h]) if w >= 1.0 && h >= 1.0 => Some(fewview_scene::Intrinsics {
+            fx,
+            fy,
+            cx,
+            cy,
+            width: w as u32,
+            height: h as u32,
+        }),
+        Some(_) => anyhow::bail!("--capture-intrinsics takes fx,fy,cx,cy,width,height"),
+        None => None,
+    };
+    let summary =
+        fewview_scene::demo_capture::write_demo_capture(dir, opts, Some(distortion), intrinsics)?;
+    println!(
+        "wrote {} views through {:?} to {} (the demo trains on views {:?})",
+        summary.views,
+        summary.lens.distortion,
+        dir.display(),
+        summary.train
+    );
+    Ok(())
 }
 
 /// The narrowest demo view: the SSIM window and the scene's textures need a few pixels.
@@ -56,6 +111,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         height: args.width * 3 / 4,
         ..DemoOptions::default()
     };
+    if let Some(dir) = &args.write_capture {
+        return write_capture(
+            dir,
+            &opts,
+            &args.capture_distortion,
+            args.capture_intrinsics.as_deref(),
+        );
+    }
     eprintln!(
         "ray tracing {} ground-truth views at {}x{} ...",
         opts.views, opts.width, opts.height

@@ -17,10 +17,12 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
-use crate::camera::{Camera, Intrinsics, Se3};
+use crate::camera::{Camera, Se3};
 use crate::dataset::{Dataset, PointCloud, View};
+use crate::distortion::{LensCamera, camera_from_colmap};
 use crate::error::{Result, SceneError};
 use crate::load_options::LoadOptions;
+use crate::load_report::LoadReport;
 use crate::split;
 use crate::view_files;
 
@@ -65,33 +67,19 @@ pub struct ColmapCamera {
 }
 
 impl ColmapCamera {
-    /// Pinhole intrinsics, or why the camera has none (see the module docs).
-    pub fn intrinsics(&self) -> std::result::Result<Intrinsics, String> {
-        let p = &self.params;
+    /// The camera with its lens ([`crate::distortion::camera_from_colmap`]), or why it cannot
+    /// be read.
+    pub fn lens(&self) -> std::result::Result<LensCamera, String> {
         match model_param_count(&self.model) {
-            Some(n) if n == p.len() => {}
+            Some(n) if n == self.params.len() => {}
             Some(n) => {
                 return Err(format!(
                     "{} needs {n} parameters, has {}",
                     self.model,
-                    p.len()
+                    self.params.len()
                 ));
             }
             None => return Err(format!("unknown camera model {}", self.model)),
-        }
-        // (fx, fy, cx, cy) and the distortion coefficients of each accepted model.
-        let (fx, fy, cx, cy, distortion) = match self.model.as_str() {
-            "SIMPLE_PINHOLE" => (p[0], p[0], p[1], p[2], &p[3..]),
-            "PINHOLE" => (p[0], p[1], p[2], p[3], &p[4..]),
-            "SIMPLE_RADIAL" | "RADIAL" => (p[0], p[0], p[1], p[2], &p[3..]),
-            "OPENCV" | "FULL_OPENCV" => (p[0], p[1], p[2], p[3], &p[4..]),
-            m => return Err(format!("camera model {m} is not a pinhole model")),
-        };
-        if let Some(d) = distortion.iter().find(|&&d| d != 0.0) {
-            return Err(format!(
-                "{} distortion {d} is not supported: undistort the images first (colmap image_undistorter)",
-                self.model
-            ));
         }
         let (width, height) = match (u32::try_from(self.width), u32::try_from(self.height)) {
             (Ok(w), Ok(h)) if w > 0 && h > 0 => (w, h),
@@ -102,14 +90,7 @@ impl ColmapCamera {
                 ));
             }
         };
-        Ok(Intrinsics {
-            fx,
-            fy,
-            cx,
-            cy,
-            width,
-            height,
-        })
+        camera_from_colmap(&self.model, &self.params, width, height)
     }
 }
 
@@ -321,7 +302,7 @@ pub fn read_points_in(dir: &Path) -> Result<Option<Vec<ColmapPoint>>> {
 /// Views are sorted by image name (as 3DGS does); the split is LLFF-style
 /// ([`split::llff_split`]: every `holdout_every`-th view is a test view, `n_train` spread evenly
 /// over the rest, default all). The model's points become [`Dataset::points`].
-pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
+pub fn load(root: &Path, opts: &LoadOptions, report: &mut LoadReport) -> Result<Dataset> {
     let dir = find_model_dir(root).ok_or_else(|| {
         SceneError::format(
             root,
@@ -340,33 +321,57 @@ pub fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset> {
     let background = opts.background.unwrap_or([0.0; 3]);
     let image_dir = root.join("images");
     let k = opts.downscale;
-    let views = view_files::first_error_in_order(images.par_iter().map(|img| {
+    let cameras_file = ["cameras.bin", "cameras.txt"]
+        .map(|n| dir.join(n))
+        .into_iter()
+        .find(|p| p.is_file())
+        .unwrap_or_else(|| dir.clone());
+    let loaded = view_files::first_error_in_order(images.par_iter().map(|img| {
         let cam = &model.cameras[&img.camera_id];
-        let intrinsics = cam
-            .intrinsics()
-            .map_err(|m| SceneError::invalid(&dir, format!("camera {}: {m}", cam.id)))?;
+        let lens = cam
+            .lens()
+            .map_err(|m| SceneError::invalid(&cameras_file, format!("camera {}: {m}", cam.id)))?;
         let pose = img
             .world_to_camera()
             .map_err(|m| SceneError::invalid(&dir, m))?;
-        let camera = Camera::new(intrinsics, pose);
-        view_files::check_camera(&camera, &dir, &format!("image {} ({})", img.id, img.name))?;
+        let what = format!("image {} ({})", img.id, img.name);
+        view_files::check_camera(&Camera::new(lens.intrinsics, pose), &dir, &what)?;
         let file = image_dir.join(&img.name);
-        let photo = view_files::load_photo(&file, background)?;
-        view_files::check_size(&photo.rgb, &camera, &file, "image")?;
-        let mask = match photo.alpha {
+        let p = view_files::load_lens_photo(
+            &file,
+            &lens,
+            opts,
+            root,
+            background,
+            (&cameras_file, &what),
+        )?;
+        let camera = Camera::new(p.intrinsics, pose);
+        view_files::check_size(&p.photo.rgb, &camera, &file, "image")?;
+        let mask = match p.photo.alpha {
             Some(a) => Some(view_files::downscale_mask(&a, k, false, &file)?),
             None => None,
         };
-        Ok(View {
+        let valid = match p.valid {
+            Some(v) => Some(view_files::downscale_mask(&v, k, true, &file)?),
+            None => None,
+        };
+        let view = View {
             name: view_files::stem(Path::new(&img.name)),
             camera: view_files::downscale_camera(&camera, k),
-            image: view_files::downscale_image(&photo.rgb, k, &file)?,
+            image: view_files::downscale_image(&p.photo.rgb, k, &file)?,
             mask_is_alpha: mask.is_some(),
             mask,
+            valid,
             depth_bounds: None,
             source_index: img.id as usize,
-        })
+        };
+        Ok((view, p.outcome))
     }))?;
+    let mut views = Vec::with_capacity(loaded.len());
+    for (view, outcome) in loaded {
+        report.record(&outcome);
+        views.push(view);
+    }
     let n_views = views.len();
     let (train, test) = view_files::choose_split(
         opts,
@@ -511,26 +516,32 @@ pub(crate) mod tests {
         let dir = scene("text");
         let cams = dir.path().join("sparse/0/cameras.txt");
         let original = std::fs::read_to_string(&cams).unwrap();
+        // Distortion loads (undistorted into a pinhole); models outside the supported ones and
+        // unknown ones are refused.
         std::fs::write(&cams, original.replace("16.25 11.75 0", "16.25 11.75 0.01")).unwrap();
-        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.contains("sparse/0") && e.contains("SIMPLE_RADIAL distortion 0.01 is not supported"),
-            "{e}"
-        );
-        std::fs::write(
-            &cams,
-            original.replace(
+        let d = crate::load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
+        assert_eq!(d.views.len(), 4);
+        for (from, expected) in [
+            (
                 "3 SIMPLE_RADIAL 32 24 28 16.25 11.75 0",
-                "3 OPENCV_FISHEYE 32 24 28 28 16 12 0 0 0 0",
+                "FOV is not supported",
             ),
-        )
-        .unwrap();
-        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("OPENCV_FISHEYE is not a pinhole model"), "{e}");
+            (
+                "3 SIMPLE_RADIAL 32 24 28 16.25 11.75 0",
+                "unknown camera model",
+            ),
+        ] {
+            let to = if expected.starts_with("FOV") {
+                "3 FOV 32 24 28 28 16 12 0.1"
+            } else {
+                "3 KANNALA_BRANDT 32 24 28 28 16 12"
+            };
+            std::fs::write(&cams, original.replace(from, to)).unwrap();
+            let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("cameras.txt") && e.contains(expected), "{e}");
+        }
         std::fs::write(
             &cams,
             original.replace("PINHOLE 40 30 35 33", "PINHOLE 40 30 nan 33"),
@@ -539,7 +550,10 @@ pub(crate) mod tests {
         let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
             .unwrap_err()
             .to_string();
-        assert!(e.contains("intrinsics are not finite"), "{e}");
+        assert!(
+            e.contains("cameras.txt") && e.contains("PINHOLE parameter NaN is not finite"),
+            "{e}"
+        );
         std::fs::write(
             &cams,
             original.replace("PINHOLE 40 30 35 33 19.5", "PINHOLE 40 30 35 33"),

@@ -26,6 +26,9 @@ pub struct TrainView {
     pub target: Tensor<3>,
     /// The image's alpha, when it has one: lets the loop composite it over other backgrounds.
     pub alpha: Option<AlphaImage>,
+    /// `[H, W, 1]`, 1 where the image holds photo data and 0 in the blank border of an
+    /// undistorted photo; the photometric loss sees neither render nor target there.
+    pub valid: Option<Tensor<3>>,
 }
 
 /// An RGBA photograph stored composited over a known background, so that it can be
@@ -92,7 +95,19 @@ impl TrainView {
             camera,
             target,
             alpha: None,
+            valid: None,
         }
+    }
+
+    /// Attaches a validity mask (1 channel, the image's size; see [`TrainView::valid`]).
+    /// A mask of another shape is ignored.
+    pub fn with_valid(mut self, valid: &fewview_scene::Image, device: &Device) -> Self {
+        let [h, w, _] = self.target.dims();
+        if valid.channels == 1 && valid.width == w && valid.height == h {
+            let data = TensorData::new(valid.data.clone(), [h, w, 1]);
+            self.valid = Some(Tensor::<3>::from_data(data, device));
+        }
+        self
     }
 
     /// Attaches the image's alpha (see [`AlphaImage`]).
@@ -305,6 +320,10 @@ impl Trainer {
         );
         let [h, w, _] = out.image.dims();
         let rgb = out.image.clone().slice([0..h, 0..w, 0..3]);
+        let (rgb, target) = match &view.valid {
+            Some(valid) => (rgb * valid.clone(), target * valid.clone()),
+            None => (rgb, target),
+        };
         let mut loss = photometric_loss(rgb, target, cfg.lambda_dssim);
         {
             let ctx = LossContext {
