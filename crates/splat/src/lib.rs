@@ -18,3 +18,9 @@ pub mod sh;
 pub mod stereo_pair;
 pub mod stereo_start;
 pub mod train;
+
+pub use model::GaussianModel;
+pub use op::{GaussianTensors, RenderTensors, RenderView, render};
+pub use pipeline::{RunConfig, render_path, train_run};
+pub use ply::{read_ply, write_ply};
+pub use train::{TrainConfig, Trainer};
