@@ -82,10 +82,13 @@ fn write_capture(
     };
     let summary =
         fewview_scene::demo_capture::write_demo_capture(dir, opts, Some(distortion), intrinsics)?;
+    let lens = match &summary.lens.distortion {
+        Some(d) => format!("the lens ({d})"),
+        None => "a pinhole".to_string(),
+    };
     println!(
-        "wrote {} views through {:?} to {} (the demo trains on views {:?})",
+        "wrote {} views through {lens} to {} (the demo trains on views {:?})",
         summary.views,
-        summary.lens.distortion,
         dir.display(),
         summary.train
     );

@@ -48,6 +48,32 @@ pub enum Distortion {
     Fisheye { k: [f64; 4] },
 }
 
+/// As OpenCV names the coefficients: `OpenCV k1=0.06 k2=-0.08 p1=0.001 p2=0.001` (zero terms
+/// beyond `k2` left out; `k4..k6` are the rational denominator's), `fisheye k1=… k2=… k3=… k4=…`.
+impl std::fmt::Display for Distortion {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Distortion::RadialTangential {
+                radial,
+                rational,
+                tangential,
+            } => {
+                write!(f, "OpenCV k1={} k2={}", radial[0], radial[1])?;
+                write!(f, " p1={} p2={}", tangential[0], tangential[1])?;
+                let extra = [("k3", radial[2]), ("k4", rational[0]), ("k5", rational[1])];
+                let extra = extra.into_iter().chain([("k6", rational[2])]);
+                for (name, v) in extra.filter(|&(_, v)| v != 0.0) {
+                    write!(f, " {name}={v}")?;
+                }
+                Ok(())
+            }
+            Distortion::Fisheye { k } => {
+                write!(f, "fisheye k1={} k2={} k3={} k4={}", k[0], k[1], k[2], k[3])
+            }
+        }
+    }
+}
+
 /// Newton iterations before undistortion gives up (COLMAP uses 100 too).
 const MAX_ITERATIONS: usize = 100;
 

@@ -349,3 +349,21 @@ fn colmap_binary_fixture_reads_every_model() {
     assert_eq!(report.undistorted, 0);
     assert!(raw.views.iter().all(|v| v.camera.intrinsics.width == 64));
 }
+
+#[test]
+fn lenses_print_with_opencvs_coefficient_names() {
+    let phone = Distortion::opencv(&[0.06, -0.08, 0.001, 0.001]);
+    assert_eq!(
+        phone.to_string(),
+        "OpenCV k1=0.06 k2=-0.08 p1=0.001 p2=0.001"
+    );
+    let full = Distortion::opencv(&[0.1, 0.0, 0.0, 0.0, 0.2, 0.0, 0.3, 0.0]);
+    assert_eq!(
+        full.to_string(),
+        "OpenCV k1=0.1 k2=0 p1=0 p2=0 k3=0.2 k5=0.3"
+    );
+    let fisheye = Distortion::Fisheye {
+        k: [0.1, -0.01, 0.0, 0.0],
+    };
+    assert_eq!(fisheye.to_string(), "fisheye k1=0.1 k2=-0.01 k3=0 k4=0");
+}
