@@ -134,11 +134,11 @@ pub(crate) fn load_lens_photo(
     background: [f32; 3],
     (source, what): (&Path, &str),
 ) -> Result<LensPhoto> {
-    let lens = match opts.undistort.fit() {
-        Some(_) => *lens,
-        None => LensCamera::new(lens.intrinsics, None),
+    // Ignoring distortion is loading through a pinhole, whose framing does not matter.
+    let (lens, fit) = match opts.undistort.fit() {
+        Some(fit) => (*lens, fit),
+        None => (LensCamera::new(lens.intrinsics, None), Default::default()),
     };
-    let fit = opts.undistort.fit().unwrap_or_default();
     let dir = cache::cache_dir(root, opts.cache_dir.as_deref());
     let u = cache::load_undistorted(path, &lens, fit, &dir, source, what)?;
     Ok(LensPhoto {

@@ -92,18 +92,8 @@ impl Distortion {
     /// Whether the lens is an ideal pinhole: a radial–tangential one with every coefficient
     /// zero. A fisheye never is (with zero coefficients it is the equidistant projection).
     pub fn is_identity(&self) -> bool {
-        match self {
-            Distortion::RadialTangential {
-                radial,
-                rational,
-                tangential,
-            } => radial
-                .iter()
-                .chain(rational)
-                .chain(tangential)
-                .all(|&v| v == 0.0),
-            Distortion::Fisheye { .. } => false,
-        }
+        matches!(self, Distortion::RadialTangential { .. })
+            && self.coefficients().iter().all(|&v| v == 0.0)
     }
 
     /// The coefficients, for hashing and checks.
