@@ -91,6 +91,11 @@ async function main() {
     result.firstPictureMs = stats.firstPicture;
     result.fullPictureMs = stats.fullPicture;
     result.loadedMs = stats.loadedAt;
+    result.firstPictureScale = stats.firstPictureScale;
+    result.firstPictureGaussians = stats.firstPictureGaussians;
+    result.timeline = stats.timeline;
+    result.stages = { parseMs: stats.parseMs, uploadMs: stats.uploadMs, sortMs: stats.sortMs, sorts: stats.sorts };
+    result.frames = stats.frames;
     result.wallMs = Date.now() - t0;
     const shown = await page.$eval("#error", (e) => (e.hidden ? "" : e.textContent));
     check(!shown, `the page shows an error: ${shown}`);
