@@ -353,6 +353,7 @@ const QUICK_SLOW_MS = 120, QUICK_FAST_MS = 30, QUICK_MIN_SCALE = 0.25;
 const BATCH_MS = 400, FIRST_BATCH = 65536;
 
 function sortIsCurrent() {
+  if (!S.splats) return true;
   return !S.sort && S.sorted.version === S.version && S.sorted.data === S.dataVersion && S.sorted.exact === S.exactSort;
 }
 
@@ -722,6 +723,8 @@ window.fewviewView = {
   stats,
   ready,
   get cameras() { return S.manifest ? S.manifest.cameras : []; },
+  /// The colour drawn where nothing is (the run's background; grey behind a mesh).
+  get background() { return Array.from(currentView().background); },
   settled,
   /// Draws camera `i` exactly (its intrinsics, pose and resolution, no frusta, exact depth
   /// order) and returns the picture as a PNG data URL.
