@@ -262,8 +262,10 @@ uniform float u_near;
 uniform int u_shDegree;
 uniform int u_shTexels;
 uniform int u_shPerRow;
-// The depth order: entry k is the Gaussian drawn k-th.
+// The depth order: entry k is the Gaussian drawn k-th. Quad q draws entry u_from + q·u_step.
 uniform usampler2D u_order;
+uniform int u_from;
+uniform int u_step;
 out vec3 v_color;
 out vec3 v_conic;
 out vec2 v_offset;
@@ -301,8 +303,8 @@ void cull() {
 }
 
 void main() {
-  // Quad k of the sorted list has vertices 4k..4k+3 (the index buffer), corner c = (±1, ±1).
-  int k = gl_VertexID >> 2, v = gl_VertexID & 3;
+  // Quad q has vertices 4q..4q+3 (the index buffer), corner v = (±1, ±1).
+  int k = u_from + (gl_VertexID >> 2) * u_step, v = gl_VertexID & 3;
   vec2 corner = vec2(float(v & 1) * 2.0 - 1.0, float(v >> 1) * 2.0 - 1.0);
   int i = int(texelFetch(u_order, ivec2(k % ${TEX_WIDTH}, k / ${TEX_WIDTH}), 0).x);
   vec4 t0 = mainTexel(i, 0);
@@ -453,7 +455,7 @@ export class SplatRenderer {
     this.floatBlend = !!gl.getExtension("EXT_float_blend");
     this.prog = compile(gl, SPLAT_VS, SPLAT_FS);
     this.u = uniforms(gl, this.prog, ["u_main", "u_sh", "u_order", "u_R", "u_t", "u_center", "u_intr", "u_size",
-      "u_lim", "u_near", "u_shDegree", "u_shTexels", "u_shPerRow"]);
+      "u_lim", "u_near", "u_shDegree", "u_shTexels", "u_shPerRow", "u_from", "u_step"]);
     this.composite_ = compile(gl, FULL_VS, COMPOSITE_FS);
     this.cu = uniforms(gl, this.composite_, ["u_accum", "u_background", "u_scale"]);
 
@@ -611,12 +613,14 @@ export class SplatRenderer {
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
   }
 
-  /// Blends the sorted Gaussians [from, to) into the picture begun last.
-  drawRange(from, to) {
+  /// Blends the sorted Gaussians [from, to) into the picture begun last; with `step` > 1 only
+  /// every step-th of them (a sparser, cheaper picture while the camera moves).
+  drawRange(from, to, step = 1) {
     const gl = this.gl, d = this.data, f = this.frame, view = f.view;
     to = Math.min(to, this.instances);
     if (to <= from) return;
-    this.ensureQuads(to);
+    const quads = Math.ceil((to - from) / step);
+    this.ensureQuads(quads);
     gl.bindFramebuffer(gl.FRAMEBUFFER, f.target.fbo);
     gl.viewport(0, 0, f.w, f.h);
     gl.useProgram(this.prog);
@@ -645,8 +649,10 @@ export class SplatRenderer {
     gl.uniform1i(this.u.u_shDegree, d.shDegree);
     gl.uniform1i(this.u.u_shTexels, d.shTexels || 1);
     gl.uniform1i(this.u.u_shPerRow, d.shPerRow || 1);
+    gl.uniform1i(this.u.u_from, from);
+    gl.uniform1i(this.u.u_step, step);
     gl.bindVertexArray(this.vao);
-    gl.drawElements(gl.TRIANGLES, 6 * (to - from), gl.UNSIGNED_INT, 4 * 6 * from);
+    gl.drawElements(gl.TRIANGLES, 6 * quads, gl.UNSIGNED_INT, 0);
     gl.bindVertexArray(null);
     gl.disable(gl.BLEND);
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);

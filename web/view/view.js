@@ -72,7 +72,7 @@ const S = {
   // One frame in flight: its fence, when it was submitted, and what it was.
   fence: null, submitted: null,
   // The resolution factor of quick frames, adapted to their measured time.
-  quickScale: 0.25,
+  quickScale: 0.25, quickBudget: Infinity,
 };
 // Timings (ms since the page started, as performance.now()) for tests and for the status line:
 // `timeline` marks the first of each stage; totals of parsing, uploading and sorting; the
@@ -344,12 +344,16 @@ function drawGeometry(v, item, mode, shade) {
 // --- drawing and sorting ----------------------------------------------------------------------------
 // A picture is quick or full. Quick (while the model streams in, while the camera moves, while
 // the order lags the camera): the Gaussians at a reduced resolution (quickScale, halved when a
-// quick frame is slow, doubled when it is fast), in whatever order the last sort gave. Full
+// quick frame is slow, doubled when it is fast), in whatever order the last sort gave; when
+// the camera moved and the lowest resolution is still slow (a large model on a software GPU),
+// only every step-th Gaussian of the order, at most quickBudget of them. Full
 // (the model loaded, the camera still for STILL_MS and sorted for it): the exact picture at the
 // canvas resolution, drawn in batches over several frames so that a slow software GPU stays
 // responsive; any change abandons it for a quick frame.
 const STILL_MS = 150;
 const QUICK_SLOW_MS = 120, QUICK_FAST_MS = 30, QUICK_MIN_SCALE = 0.25;
+// A sparser quick frame aims at QUICK_BUDGET_MS and draws at least QUICK_MIN_BUDGET Gaussians.
+const QUICK_BUDGET_MS = 250, QUICK_MIN_BUDGET = 16384;
 const BATCH_MS = 400, FIRST_BATCH = 65536;
 
 function sortIsCurrent() {
@@ -397,13 +401,19 @@ function submitFrame(now) {
   // A quick frame when the picture is out of date, unless a full one can start now and either
   // costs no more or shows the same camera as the picture on the canvas (new data only).
   if (!S.pass && S.shown !== S.serial && !(still && (S.quickScale === 1 || S.shownVersion === S.version))) {
-    // A quick frame: everything sorted so far, at the reduced resolution.
+    // A quick frame: everything sorted so far, at the reduced resolution (a subset of it when
+    // the camera moved).
     upload();
+    const moving = S.shownVersion !== S.version && S.shownVersion >= 0;
+    const step = moving ? Math.max(1, Math.ceil(n / S.quickBudget)) : 1;
     S.splats.begin(v, S.quickScale);
-    S.splats.drawRange(0, n);
+    S.splats.drawRange(0, n, step);
     S.splats.composite();
     drawOverlays(v);
-    return { kind: "quick", serial: S.serial, version: S.version, instances: n, drew: n > 0, scale: S.quickScale, last: true };
+    return {
+      kind: "quick", serial: S.serial, version: S.version, instances: Math.ceil(n / step), drew: n > 0,
+      scale: S.quickScale, step, last: true,
+    };
   }
   if (!S.pass && still && S.full !== S.serial) {
     upload();
@@ -427,11 +437,13 @@ function submitFrame(now) {
 function frameDone(f, ms) {
   stats.lastFrameMs = ms;
   if (stats.frames.length < 500) {
-    stats.frames.push({ at: Math.round(f.at), kind: f.kind, scale: f.scale, n: f.instances, ms: Math.round(ms) });
+    stats.frames.push({ at: Math.round(f.at), kind: f.kind, scale: f.scale, n: f.instances, step: f.step || 1, ms: Math.round(ms) });
   }
   if (f.kind === "quick") {
     if (ms > QUICK_SLOW_MS && S.quickScale > QUICK_MIN_SCALE) S.quickScale /= 2;
+    else if (ms > QUICK_SLOW_MS) S.quickBudget = Math.max(QUICK_MIN_BUDGET, Math.round(f.instances * QUICK_BUDGET_MS / ms));
     else if (ms < QUICK_FAST_MS && S.quickScale < 1) S.quickScale *= 2;
+    else if (ms < QUICK_FAST_MS) S.quickBudget *= 2;
   } else if (f.instances > 0 && !f.last) {
     S.batch = Math.max(4096, Math.round(f.instances * BATCH_MS / Math.max(ms, 1)));
   }
