@@ -78,10 +78,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (_, None) => String::new(),
     };
     let cameras = m.cameras.len();
-    if cameras == 0 && m.kind == RunKind::Splat {
-        if let Some(note) = m.notes.iter().find(|n| n.starts_with("no cameras.json")) {
-            eprintln!("note: {note}");
-        }
+    if cameras == 0
+        && m.kind == RunKind::Splat
+        && let Some(note) = m.notes.iter().find(|n| n.starts_with("no cameras.json"))
+    {
+        eprintln!("note: {note}");
     }
     let open = args.open;
     server::serve(run, SocketAddr::new(args.host, args.port), |bound| {
