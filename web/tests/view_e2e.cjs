@@ -4,6 +4,8 @@
 //   run      the page of a trained run: not blank, camera CAMERA (default 0) rendered exactly
 //            at its resolution (camera.png), a drag orbits and changes the picture
 //            (before.png, after.png), the lists of cameras, metrics, renders and videos filled;
+//   surface  the same for a surface run's mesh and cameras, plus the cameras' groups and a
+//            screenshot of the whole page (page.png);
 //   broken   the model stream ends early: the page shows a one-line error;
 //   timing   time to the first picture and to the whole model (a large PLY), and the time of a
 //            redraw after an orbit.
@@ -91,11 +93,15 @@ async function main() {
     result.firstPictureMs = stats.firstPicture;
     result.fullPictureMs = stats.fullPicture;
     result.loadedMs = stats.loadedAt;
+    result.firstPictureScale = stats.firstPictureScale;
+    result.firstPictureGaussians = stats.firstPictureGaussians;
+    result.timeline = stats.timeline;
+    result.stages = { parseMs: stats.parseMs, uploadMs: stats.uploadMs, sortMs: stats.sortMs, sorts: stats.sorts };
+    result.frames = stats.frames;
     result.wallMs = Date.now() - t0;
     const shown = await page.$eval("#error", (e) => (e.hidden ? "" : e.textContent));
     check(!shown, `the page shows an error: ${shown}`);
-    const manifest = await page.evaluate(() => fetch("/api/run").then((r) => r.json()));
-    const background = manifest.background;
+    const background = await page.evaluate(() => window.fewviewView.background);
     // The interactive canvas, then an orbit by dragging on it.
     const canvas = await page.$("#canvas");
     const box = await canvas.boundingBox();
@@ -124,6 +130,11 @@ async function main() {
     const url = await page.evaluate((i) => window.fewviewView.renderCamera(i), cameraIndex);
     result.camera = savePng(url, "camera.png");
     result.cameraStats = await compare(page, url, null, background);
+    if (mode === "surface") {
+      result.groups = await page.evaluate(() => window.fewviewView.cameras.map((c) => c.group));
+      await page.evaluate(() => window.fewviewView.capture());
+      await page.screenshot({ path: path.join(out, "page.png"), fullPage: true });
+    }
   } finally {
     result.pageErrors = consoleErrors;
     fs.writeFileSync(path.join(out, "result.json"), JSON.stringify(result, null, 2));

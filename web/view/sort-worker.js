@@ -2,9 +2,9 @@
 //   {type: "init", count}                       capacity
 //   {type: "positions", start, data}            xyz of Gaussians [start, start + data.length / 3)
 //   {type: "sort", version, R, t, near, exact}  camera (R row-major world-to-camera, t)
-// Out: {type: "order", version, order, visible}: the indices of the Gaussians in front of the
-// near plane, nearest first. The interactive sort is a 16-bit counting sort of camera z (two
-// passes over the Gaussians, no comparisons, so a million sort in tens of milliseconds);
+// Out: {type: "order", version, order, visible, ms}: the indices of the Gaussians in front of
+// the near plane, nearest first, and the milliseconds the sort took. The interactive sort is a
+// 16-bit counting sort of camera z (two passes over the Gaussians, no comparisons);
 // `exact` sorts by z and then by index, the order fewview_splat's rasterizer draws in.
 "use strict";
 
@@ -16,6 +16,7 @@ let visibleIdx = new Uint32Array(0);
 const counts = new Uint32Array(65536);
 
 function sort(msg) {
+  const started = performance.now();
   const R = msg.R, t = msg.t;
   const n = loaded;
   if (depths.length < n) {
@@ -60,7 +61,7 @@ function sort(msg) {
     }
     for (let k = 0; k < visible; k++) order[counts[keys[k]]++] = visibleIdx[k];
   }
-  postMessage({ type: "order", version: msg.version, order, visible }, [order.buffer]);
+  postMessage({ type: "order", version: msg.version, order, visible, ms: performance.now() - started }, [order.buffer]);
 }
 
 onmessage = (e) => {

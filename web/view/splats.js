@@ -12,6 +12,13 @@
 //     same bound the CPU rasterizer bins with;
 //   - front-to-back compositing sorted by camera z, into a float target (C += T α c,
 //     A += T α with T = 1 − A), then C + (1 − A)·background.
+// One difference is left: the CPU rasterizer stops a pixel before its transmittance would fall
+// below 1e-4 (that splat is not blended), the page blends every splat. The stop depends on the
+// running product of (1 − α) at that pixel, which a fragment cannot read (WebGL2 has no
+// framebuffer fetch) and the blend stage, linear in the destination, cannot test. Per-pixel
+// stop indices would need about log2(N) full passes (a binary search with the depth test). The
+// difference is at most the transmittance left at the stop, under 1e-4 / (1 − 0.99) = 0.01,
+// and only on pixels that become opaque.
 "use strict";
 
 const SH_C0 = 0.28209479177387814;
@@ -131,22 +138,57 @@ export class SplatData {
   }
 }
 
+const YIELD_MS = 12, ROWS_PER_CALL = 4096;
+const yieldChannel = new MessageChannel();
+const yieldWaiters = [];
+yieldChannel.port1.onmessage = () => { const f = yieldWaiters.shift(); if (f) f(); };
+/// Resolves in a new task (a message to itself: no timer clamping).
+function yieldTask() {
+  return new Promise((resolve) => { yieldWaiters.push(resolve); yieldChannel.port2.postMessage(0); });
+}
+
 /// Streams a Gaussian PLY whose layout the server checked (`layout`: header_bytes, stride,
-/// offsets, count). Calls `onRows(start, n, floats, strideFloats)` for each batch of whole rows
+/// offsets, count) from `request` (a fetch() promise, started as early as the caller can). Calls `onRows(start, n, floats, strideFloats)` for each batch of whole rows
 /// and `onProgress(bytes)`; rejects with a one-line message when the stream breaks or ends
 /// early.
-export async function streamPly(url, layout, onRows, onProgress) {
-  const response = await fetch(url);
+export async function streamPly(request, layout, onRows, onProgress) {
+  const response = await request;
   if (!response.ok || !response.body) {
     throw new Error(`cannot fetch the model (${response.status} ${response.statusText})`);
   }
   const reader = response.body.getReader();
   const stride = layout.stride;
+  const strideFloats = Math.ceil(stride / 4);
+  const names = Object.keys(layout.offsets);
+  // The floats of the `n` whole rows in `b` (n·stride bytes): a view of the chunk when the rows
+  // are 4-aligned, else a copy (each drawn float through a DataView for an odd stride).
+  const floatsOf = (b, n) => {
+    if (stride % 4 === 0) {
+      return b.byteOffset % 4 === 0 ? new Float32Array(b.buffer, b.byteOffset, n * strideFloats)
+        : new Float32Array(b.slice().buffer);
+    }
+    const view = new DataView(b.buffer, b.byteOffset, n * stride);
+    const floats = new Float32Array(n * strideFloats);
+    for (let r = 0; r < n; r++) {
+      for (const name of names) {
+        const off = layout.offsets[name];
+        floats[r * strideFloats + Math.floor(off / 4)] = view.getFloat32(r * stride + off, true);
+      }
+    }
+    return floats;
+  };
+  const concat = (a, b) => {
+    const c = new Uint8Array(a.length + b.length);
+    c.set(a);
+    c.set(b, a.length);
+    return c;
+  };
   let skip = layout.header_bytes;
   let pending = new Uint8Array(0);
   let rows = 0;
   let bytes = 0;
-  for (;;) {
+  let lastYield = performance.now();
+  while (rows < layout.count) {
     let chunk;
     try {
       chunk = await reader.read();
@@ -162,43 +204,40 @@ export async function streamPly(url, layout, onRows, onProgress) {
       data = data.subarray(s);
       skip -= s;
     }
-    if (data.length === 0) continue;
-    const joined = new Uint8Array(pending.length + data.length);
-    joined.set(pending);
-    joined.set(data, pending.length);
-    const n = Math.min(Math.floor(joined.length / stride), layout.count - rows);
-    if (n > 0) {
-      let floats;
-      if (stride % 4 === 0) {
-        // A copy of the whole rows, aligned for a Float32Array view (little-endian hosts).
-        floats = new Float32Array(joined.buffer.slice(0, n * stride));
-        onRows(rows, n, floats, stride / 4);
-      } else {
-        // Unaligned rows: copy each drawn float through a DataView.
-        const view = new DataView(joined.buffer, 0, n * stride);
-        const strideFloats = Math.ceil(stride / 4);
-        floats = new Float32Array(n * strideFloats);
-        const names = Object.keys(layout.offsets);
-        for (let r = 0; r < n; r++) {
-          for (const name of names) {
-            const off = layout.offsets[name];
-            floats[r * strideFloats + off / 4] = view.getFloat32(r * stride + off, true);
-          }
-        }
-        onRows(rows, n, floats, strideFloats);
+    // A row split between chunks.
+    if (pending.length > 0) {
+      const need = stride - pending.length;
+      if (data.length < need) {
+        pending = concat(pending, data);
+        continue;
       }
-      rows += n;
+      onRows(rows, 1, floatsOf(concat(pending, data.subarray(0, need)), 1), strideFloats);
+      rows++;
+      data = data.subarray(need);
     }
-    pending = joined.subarray(n * stride);
-    if (rows >= layout.count) break;
+    // The chunk's whole rows go to onRows in slices (no copy of a large chunk before the first
+    // rows are drawn), and the page gets a turn (sort results, frames, input) every few
+    // milliseconds: chunks already buffered resolve without leaving the task.
+    const n = Math.min(Math.floor(data.length / stride), layout.count - rows);
+    for (let r = 0; r < n; r += ROWS_PER_CALL) {
+      const m = Math.min(ROWS_PER_CALL, n - r);
+      onRows(rows, m, floatsOf(data.subarray(r * stride, (r + m) * stride), m), strideFloats);
+      rows += m;
+      if (performance.now() - lastYield > YIELD_MS) {
+        await yieldTask();
+        lastYield = performance.now();
+      }
+    }
+    pending = data.slice(n * stride);
   }
   if (rows < layout.count) {
     throw new Error(`the model stream ended after ${rows} of ${layout.count} Gaussians`);
   }
 }
 
-/// Float offsets of the drawn properties (the server's byte offsets / 4; a stride that is
-/// not a multiple of 4 is read through streamPly's DataView path, which keeps offset / 4).
+/// Float offsets of the drawn properties (the server's byte offsets / 4, rounded down; a stride
+/// that is not a multiple of 4 is read through streamPly's DataView path, which puts each float
+/// there).
 export function floatOffsets(layout) {
   const o = {};
   for (const [name, off] of Object.entries(layout.offsets)) o[name] = Math.floor(off / 4);
@@ -223,8 +262,10 @@ uniform float u_near;
 uniform int u_shDegree;
 uniform int u_shTexels;
 uniform int u_shPerRow;
-in vec2 a_corner;
-in uint a_index;
+// The depth order: entry k is the Gaussian drawn k-th. Quad q draws entry u_from + q·u_step.
+uniform usampler2D u_order;
+uniform int u_from;
+uniform int u_step;
 out vec3 v_color;
 out vec3 v_conic;
 out vec2 v_offset;
@@ -262,7 +303,10 @@ void cull() {
 }
 
 void main() {
-  int i = int(a_index);
+  // Quad q has vertices 4q..4q+3 (the index buffer), corner v = (±1, ±1).
+  int k = u_from + (gl_VertexID >> 2) * u_step, v = gl_VertexID & 3;
+  vec2 corner = vec2(float(v & 1) * 2.0 - 1.0, float(v >> 1) * 2.0 - 1.0);
+  int i = int(texelFetch(u_order, ivec2(k % ${TEX_WIDTH}, k / ${TEX_WIDTH}), 0).x);
   vec4 t0 = mainTexel(i, 0);
   vec4 t1 = mainTexel(i, 1);
   vec4 t2 = mainTexel(i, 2);
@@ -292,7 +336,7 @@ void main() {
   if (!(qmax > 0.0)) { cull(); return; }
   vec2 mean = vec2(fx * t.x * invz + cx, fy * t.y * invz + cy);
   vec2 half_ = vec2(sqrt(qmax * a), sqrt(qmax * c)) + 1.0;
-  vec2 offset = a_corner * half_;
+  vec2 offset = corner * half_;
   vec2 pixel = mean + offset;
   gl_Position = vec4(pixel.x / u_size.x * 2.0 - 1.0, 1.0 - pixel.y / u_size.y * 2.0, 0.0, 1.0);
   v_offset = offset;
@@ -351,9 +395,23 @@ const COMPOSITE_FS = `#version 300 es
 precision highp float;
 uniform highp sampler2D u_accum;
 uniform vec3 u_background;
+// Accumulation pixels per canvas pixel: 1 reads the pixel itself (the exact picture); below 1
+// (a reduced-resolution frame) interpolates the four nearest accumulation pixels bilinearly.
+uniform float u_scale;
 out vec4 out_color;
 void main() {
-  vec4 a = texelFetch(u_accum, ivec2(gl_FragCoord.xy), 0);
+  vec4 a;
+  if (u_scale == 1.0) {
+    a = texelFetch(u_accum, ivec2(gl_FragCoord.xy), 0);
+  } else {
+    ivec2 size = textureSize(u_accum, 0);
+    vec2 p = gl_FragCoord.xy * u_scale - 0.5;
+    vec2 f = fract(p);
+    ivec2 i0 = clamp(ivec2(floor(p)), ivec2(0), size - 1);
+    ivec2 i1 = clamp(i0 + 1, ivec2(0), size - 1);
+    a = mix(mix(texelFetch(u_accum, i0, 0), texelFetch(u_accum, ivec2(i1.x, i0.y), 0), f.x),
+      mix(texelFetch(u_accum, ivec2(i0.x, i1.y), 0), texelFetch(u_accum, i1, 0), f.x), f.y);
+  }
   out_color = vec4(a.rgb + (1.0 - a.a) * u_background, 1.0);
 }
 `;
@@ -382,7 +440,11 @@ function uniforms(gl, prog, names) {
   return u;
 }
 
-/// Draws a SplatData with the order a sort worker returned.
+/// Draws a SplatData with the order a sort worker returned. A picture is one pass: begin()
+/// clears an accumulation target (at a fraction of the canvas resolution for a quick frame),
+/// drawRange() blends a consecutive range of the sorted Gaussians into it (a pass may be split
+/// over several frames: front-to-back blending in the same order gives the same picture), and
+/// composite() puts it on the canvas over the background.
 export class SplatRenderer {
   constructor(gl, data) {
     this.gl = gl;
@@ -392,27 +454,23 @@ export class SplatRenderer {
     }
     this.floatBlend = !!gl.getExtension("EXT_float_blend");
     this.prog = compile(gl, SPLAT_VS, SPLAT_FS);
-    this.u = uniforms(gl, this.prog, ["u_main", "u_sh", "u_R", "u_t", "u_center", "u_intr", "u_size", "u_lim",
-      "u_near", "u_shDegree", "u_shTexels", "u_shPerRow"]);
-    this.composite = compile(gl, FULL_VS, COMPOSITE_FS);
-    this.cu = uniforms(gl, this.composite, ["u_accum", "u_background"]);
+    this.u = uniforms(gl, this.prog, ["u_main", "u_sh", "u_order", "u_R", "u_t", "u_center", "u_intr", "u_size",
+      "u_lim", "u_near", "u_shDegree", "u_shTexels", "u_shPerRow", "u_from", "u_step"]);
+    this.composite_ = compile(gl, FULL_VS, COMPOSITE_FS);
+    this.cu = uniforms(gl, this.composite_, ["u_accum", "u_background", "u_scale"]);
 
+    // One indexed quad per Gaussian, not an instanced quad: software WebGL (SwiftShader) sets
+    // up each instance as a draw of its own, which made instanced quads several times slower.
     this.vao = gl.createVertexArray();
     gl.bindVertexArray(this.vao);
-    const corners = gl.createBuffer();
-    gl.bindBuffer(gl.ARRAY_BUFFER, corners);
-    gl.bufferData(gl.ARRAY_BUFFER, new Float32Array([-1, -1, 1, -1, -1, 1, 1, 1]), gl.STATIC_DRAW);
-    const ac = gl.getAttribLocation(this.prog, "a_corner");
-    gl.enableVertexAttribArray(ac);
-    gl.vertexAttribPointer(ac, 2, gl.FLOAT, false, 0, 0);
-    this.orderBuffer = gl.createBuffer();
-    gl.bindBuffer(gl.ARRAY_BUFFER, this.orderBuffer);
-    gl.bufferData(gl.ARRAY_BUFFER, 4, gl.DYNAMIC_DRAW);
-    const ai = gl.getAttribLocation(this.prog, "a_index");
-    gl.enableVertexAttribArray(ai);
-    gl.vertexAttribIPointer(ai, 1, gl.UNSIGNED_INT, 0, 0);
-    gl.vertexAttribDivisor(ai, 1);
+    this.indices = gl.createBuffer();
+    gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, this.indices);
     gl.bindVertexArray(null);
+    this.quads = 0;
+    this.orderTex = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_2D, this.orderTex);
+    gl.texStorage2D(gl.TEXTURE_2D, 1, gl.R32UI, TEX_WIDTH, Math.ceil(data.count / TEX_WIDTH));
+    this.nearest();
     this.instances = 0;
 
     this.mainTex = gl.createTexture();
@@ -425,8 +483,47 @@ export class SplatRenderer {
       gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA32UI, data.shWidth, data.shRows);
       this.nearest();
     }
-    this.fbo = null;
-    this.fboSize = [0, 0];
+    // Gaussians [0, uploaded) are in the textures.
+    this.uploaded = 0;
+    // Accumulation targets by size ("w×h" → {fbo, tex}); the canvas size and one reduced size.
+    this.targets = new Map();
+    this.frame = null;
+    this.warmUp();
+  }
+
+  /// Makes the index buffer hold at least `n` quads (doubling, so that a model streaming in
+  /// does not pay for the whole index buffer before its first picture).
+  ensureQuads(n) {
+    if (n <= this.quads) return;
+    const gl = this.gl;
+    const cap = Math.min(this.data.count, Math.max(n, 2 * this.quads, 65536));
+    const quads = new Uint32Array(6 * cap);
+    for (let k = 0; k < cap; k++) {
+      const v = 4 * k, q = 6 * k;
+      quads[q] = v; quads[q + 1] = v + 1; quads[q + 2] = v + 2;
+      quads[q + 3] = v + 2; quads[q + 4] = v + 1; quads[q + 5] = v + 3;
+    }
+    gl.bindVertexArray(this.vao);
+    gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, quads, gl.STATIC_DRAW);
+    gl.bindVertexArray(null);
+    this.quads = cap;
+  }
+
+  /// Draws one invisible quad (an all-zero Gaussian has opacity 0 and is culled) into a 1×1
+  /// target, so that a software GPU compiles the splat and composite programs while the model
+  /// is still on its way, not during the first picture.
+  warmUp() {
+    const view = {
+      R: new Float32Array([1, 0, 0, 0, 1, 0, 0, 0, 1]), t: new Float32Array(3), center: new Float32Array(3),
+      fx: 1, fy: 1, cx: 0.5, cy: 0.5, width: 1, height: 1, near: 0.2, background: new Float32Array(3),
+    };
+    this.instances = 1;
+    this.begin(view, 1);
+    this.drawRange(0, 1);
+    this.instances = 0;
+    const gl = this.gl;
+    this.composite();
+    gl.flush();
   }
 
   nearest() {
@@ -437,9 +534,12 @@ export class SplatRenderer {
     gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
   }
 
-  /// Uploads the texture rows that hold Gaussians [start, end).
-  upload(start, end) {
+  /// Uploads the Gaussians that arrived since the last upload (one call per texture, however
+  /// many stream chunks they came in). Returns the number uploaded.
+  upload() {
     const gl = this.gl, d = this.data;
+    const start = this.uploaded, end = d.loaded;
+    if (end <= start) return 0;
     const r0 = Math.floor(start / d.perRow), r1 = Math.floor((end - 1) / d.perRow);
     gl.bindTexture(gl.TEXTURE_2D, this.mainTex);
     gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, r0, TEX_WIDTH, r1 - r0 + 1, gl.RGBA, gl.FLOAT,
@@ -450,78 +550,125 @@ export class SplatRenderer {
       gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, s0, d.shWidth, s1 - s0 + 1, gl.RGBA_INTEGER, gl.UNSIGNED_INT,
         d.sh.subarray(s0 * d.shWidth * 4, (s1 + 1) * d.shWidth * 4));
     }
+    this.uploaded = end;
+    return end - start;
   }
 
   setOrder(order, count) {
     const gl = this.gl;
-    gl.bindBuffer(gl.ARRAY_BUFFER, this.orderBuffer);
-    gl.bufferData(gl.ARRAY_BUFFER, order, gl.DYNAMIC_DRAW);
+    gl.bindTexture(gl.TEXTURE_2D, this.orderTex);
+    const rows = Math.floor(count / TEX_WIDTH), rest = count - rows * TEX_WIDTH;
+    if (rows > 0) {
+      gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, TEX_WIDTH, rows, gl.RED_INTEGER, gl.UNSIGNED_INT,
+        order.subarray(0, rows * TEX_WIDTH));
+    }
+    if (rest > 0) {
+      gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, rows, rest, 1, gl.RED_INTEGER, gl.UNSIGNED_INT,
+        order.subarray(rows * TEX_WIDTH, count));
+    }
     this.instances = count;
   }
 
-  ensureTarget(w, h) {
+  target(w, h) {
     const gl = this.gl;
-    if (this.fbo && this.fboSize[0] === w && this.fboSize[1] === h) return;
-    if (this.fbo) { gl.deleteFramebuffer(this.fbo); gl.deleteTexture(this.accum); }
-    this.accum = gl.createTexture();
-    gl.bindTexture(gl.TEXTURE_2D, this.accum);
+    const key = `${w}x${h}`;
+    let t = this.targets.get(key);
+    if (t) return t;
+    if (this.targets.size >= 2) {
+      for (const old of this.targets.values()) { gl.deleteFramebuffer(old.fbo); gl.deleteTexture(old.tex); }
+      this.targets.clear();
+    }
+    const tex = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_2D, tex);
     gl.texStorage2D(gl.TEXTURE_2D, 1, this.floatBlend ? gl.RGBA32F : gl.RGBA16F, w, h);
     this.nearest();
-    this.fbo = gl.createFramebuffer();
-    gl.bindFramebuffer(gl.FRAMEBUFFER, this.fbo);
-    gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, this.accum, 0);
+    const fbo = gl.createFramebuffer();
+    gl.bindFramebuffer(gl.FRAMEBUFFER, fbo);
+    gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, tex, 0);
     if (gl.checkFramebufferStatus(gl.FRAMEBUFFER) !== gl.FRAMEBUFFER_COMPLETE) {
       throw new Error("cannot render to a float target here");
     }
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
-    this.fboSize = [w, h];
+    t = { fbo, tex, w, h };
+    this.targets.set(key, t);
+    return t;
   }
 
-  /// Draws into the current canvas framebuffer (background included). `view`: R (row-major 9),
-  /// t, center, fx, fy, cx, cy, width, height, near, background.
-  draw(view) {
-    const gl = this.gl, d = this.data;
-    const w = view.width, h = view.height;
-    this.ensureTarget(w, h);
-    gl.bindFramebuffer(gl.FRAMEBUFFER, this.fbo);
+  /// Starts a picture of `view` (R row-major 9, t, center, fx, fy, cx, cy, width, height, near,
+  /// background) at `scale` (≤ 1) of its resolution: the Gaussians are projected with the
+  /// intrinsics scaled by the same factor.
+  begin(view, scale) {
+    const gl = this.gl;
+    const w = Math.max(1, Math.round(view.width * scale)), h = Math.max(1, Math.round(view.height * scale));
+    const sx = w / view.width, sy = h / view.height;
+    const t = this.target(w, h);
+    this.frame = {
+      view, target: t, w, h, scale: scale === 1 ? 1 : sx,
+      fx: view.fx * sx, fy: view.fy * sy, cx: view.cx * sx, cy: view.cy * sy,
+    };
+    gl.bindFramebuffer(gl.FRAMEBUFFER, t.fbo);
     gl.viewport(0, 0, w, h);
     gl.clearColor(0, 0, 0, 0);
     gl.clear(gl.COLOR_BUFFER_BIT);
-    if (this.instances > 0) {
-      gl.useProgram(this.prog);
-      gl.enable(gl.BLEND);
-      gl.disable(gl.DEPTH_TEST);
-      gl.blendEquation(gl.FUNC_ADD);
-      gl.blendFuncSeparate(gl.ONE_MINUS_DST_ALPHA, gl.ONE, gl.ONE_MINUS_DST_ALPHA, gl.ONE);
-      gl.activeTexture(gl.TEXTURE0);
-      gl.bindTexture(gl.TEXTURE_2D, this.mainTex);
-      gl.uniform1i(this.u.u_main, 0);
-      gl.activeTexture(gl.TEXTURE1);
-      gl.bindTexture(gl.TEXTURE_2D, d.shTexels > 0 ? this.shTex : null);
-      gl.uniform1i(this.u.u_sh, 1);
-      gl.uniformMatrix3fv(this.u.u_R, true, view.R);
-      gl.uniform3fv(this.u.u_t, view.t);
-      gl.uniform3fv(this.u.u_center, view.center);
-      gl.uniform4f(this.u.u_intr, view.fx, view.fy, view.cx, view.cy);
-      gl.uniform2f(this.u.u_size, w, h);
-      gl.uniform4f(this.u.u_lim, 1.3 * view.cx / view.fx, 1.3 * (w - view.cx) / view.fx,
-        1.3 * view.cy / view.fy, 1.3 * (h - view.cy) / view.fy);
-      gl.uniform1f(this.u.u_near, view.near);
-      gl.uniform1i(this.u.u_shDegree, d.shDegree);
-      gl.uniform1i(this.u.u_shTexels, d.shTexels || 1);
-      gl.uniform1i(this.u.u_shPerRow, d.shPerRow || 1);
-      gl.bindVertexArray(this.vao);
-      gl.drawArraysInstanced(gl.TRIANGLE_STRIP, 0, 4, this.instances);
-      gl.bindVertexArray(null);
-      gl.disable(gl.BLEND);
-    }
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
-    gl.viewport(0, 0, w, h);
-    gl.useProgram(this.composite);
+  }
+
+  /// Blends the sorted Gaussians [from, to) into the picture begun last; with `step` > 1 only
+  /// every step-th of them (a sparser, cheaper picture while the camera moves).
+  drawRange(from, to, step = 1) {
+    const gl = this.gl, d = this.data, f = this.frame, view = f.view;
+    to = Math.min(to, this.instances);
+    if (to <= from) return;
+    const quads = Math.ceil((to - from) / step);
+    this.ensureQuads(quads);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, f.target.fbo);
+    gl.viewport(0, 0, f.w, f.h);
+    gl.useProgram(this.prog);
+    gl.enable(gl.BLEND);
+    gl.disable(gl.DEPTH_TEST);
+    gl.blendEquation(gl.FUNC_ADD);
+    gl.blendFuncSeparate(gl.ONE_MINUS_DST_ALPHA, gl.ONE, gl.ONE_MINUS_DST_ALPHA, gl.ONE);
     gl.activeTexture(gl.TEXTURE0);
-    gl.bindTexture(gl.TEXTURE_2D, this.accum);
+    gl.bindTexture(gl.TEXTURE_2D, this.mainTex);
+    gl.uniform1i(this.u.u_main, 0);
+    gl.activeTexture(gl.TEXTURE1);
+    gl.bindTexture(gl.TEXTURE_2D, d.shTexels > 0 ? this.shTex : null);
+    gl.uniform1i(this.u.u_sh, 1);
+    gl.activeTexture(gl.TEXTURE2);
+    gl.bindTexture(gl.TEXTURE_2D, this.orderTex);
+    gl.uniform1i(this.u.u_order, 2);
+    gl.activeTexture(gl.TEXTURE0);
+    gl.uniformMatrix3fv(this.u.u_R, true, view.R);
+    gl.uniform3fv(this.u.u_t, view.t);
+    gl.uniform3fv(this.u.u_center, view.center);
+    gl.uniform4f(this.u.u_intr, f.fx, f.fy, f.cx, f.cy);
+    gl.uniform2f(this.u.u_size, f.w, f.h);
+    gl.uniform4f(this.u.u_lim, 1.3 * f.cx / f.fx, 1.3 * (f.w - f.cx) / f.fx,
+      1.3 * f.cy / f.fy, 1.3 * (f.h - f.cy) / f.fy);
+    gl.uniform1f(this.u.u_near, view.near);
+    gl.uniform1i(this.u.u_shDegree, d.shDegree);
+    gl.uniform1i(this.u.u_shTexels, d.shTexels || 1);
+    gl.uniform1i(this.u.u_shPerRow, d.shPerRow || 1);
+    gl.uniform1i(this.u.u_from, from);
+    gl.uniform1i(this.u.u_step, step);
+    gl.bindVertexArray(this.vao);
+    gl.drawElements(gl.TRIANGLES, 6 * quads, gl.UNSIGNED_INT, 0);
+    gl.bindVertexArray(null);
+    gl.disable(gl.BLEND);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+  }
+
+  /// Puts the picture begun last on the canvas (the default framebuffer), over the background.
+  composite() {
+    const gl = this.gl, f = this.frame, view = f.view;
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    gl.viewport(0, 0, view.width, view.height);
+    gl.useProgram(this.composite_);
+    gl.activeTexture(gl.TEXTURE0);
+    gl.bindTexture(gl.TEXTURE_2D, f.target.tex);
     gl.uniform1i(this.cu.u_accum, 0);
     gl.uniform3fv(this.cu.u_background, view.background);
+    gl.uniform1f(this.cu.u_scale, f.scale);
     gl.drawArrays(gl.TRIANGLES, 0, 3);
   }
 }

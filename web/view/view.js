@@ -56,7 +56,7 @@ const cameraCenter = (cam) => scale(mulTVec(cam.rotation, cam.translation), -1);
 
 // --- state ------------------------------------------------------------------------------------
 const canvas = $("canvas");
-const gl = canvas.getContext("webgl2", { antialias: false, preserveDrawingBuffer: true, alpha: false, premultipliedAlpha: false });
+let gl = null;
 const S = {
   manifest: null, splats: null, data: null, worker: null, mesh: null, lines: null,
   R: [1, 0, 0, 0, 1, 0, 0, 0, 1], c: [0, 0, -3],
@@ -64,13 +64,29 @@ const S = {
   target: [0, 0, 0], up: [0, -1, 0], sceneScale: 1,
   mode: "orbit", fixed: null, overlays: true, exactSort: false, selected: -1,
   version: 0, dataVersion: 0, sort: null, sorted: { version: -1, data: -1, exact: false },
-  dirty: true, loadedAll: false, lastSortAt: 0, fence: null, drawStart: 0, keys: new Set(), waiters: [], placed: false,
+  loadedAll: false, lastSortAt: 0, keys: new Set(), waiters: [], placed: false,
+  // Pictures: `serial` counts the changes that call for a new one (view, order, size, overlays,
+  // mesh); `shown` is the serial of the picture on the canvas, `full` the serial of the last
+  // full-quality one; `pass` a full-quality picture being drawn over several frames.
+  serial: 0, shown: -1, shownVersion: -1, full: -1, pass: null, lastChangeAt: 0,
+  // One frame in flight: its fence, when it was submitted, and what it was.
+  fence: null, submitted: null,
+  // The resolution factor of quick frames, adapted to their measured time.
+  quickScale: 0.25, quickBudget: Infinity,
 };
-const stats = { firstPicture: null, fullPicture: null, loadedAt: null, gaussians: 0, lastFrameMs: 0 };
+// Timings (ms since the page started, as performance.now()) for tests and for the status line:
+// `timeline` marks the first of each stage; totals of parsing, uploading and sorting; the
+// frames drawn (scale, Gaussians, milliseconds).
+const stats = {
+  firstPicture: null, fullPicture: null, loadedAt: null, gaussians: 0, lastFrameMs: 0,
+  timeline: {}, parseMs: 0, uploadMs: 0, sortMs: 0, sorts: 0, frames: [],
+};
+function mark(name) { if (!(name in stats.timeline)) stats.timeline[name] = performance.now(); }
 let resolveReady;
 const ready = new Promise((r) => { resolveReady = r; });
 
-function changed() { S.version++; S.dirty = true; }
+function changed() { S.version++; S.serial++; S.lastChangeAt = performance.now(); }
+function redraw() { S.serial++; }
 
 function currentView() {
   const w = canvas.width, h = canvas.height;
@@ -91,7 +107,7 @@ function resize() {
   if (canvas.width !== w || canvas.height !== h) {
     canvas.width = w;
     canvas.height = h;
-    S.dirty = true;
+    redraw();
   }
 }
 
@@ -213,7 +229,7 @@ function installControls() {
     else if ("wasdqe".includes(k) && k.length === 1) S.keys.add(k);
   });
   window.addEventListener("keyup", (e) => S.keys.delete(e.key.toLowerCase()));
-  window.addEventListener("resize", () => { S.dirty = true; });
+  window.addEventListener("resize", redraw);
   $("mode").addEventListener("click", () => setMode(S.mode === "orbit" ? "fly" : "orbit"));
   $("reset").addEventListener("click", () => { S.fixed = null; S.overlays = true; initialView(); });
 }
@@ -271,7 +287,7 @@ function buildFrusta() {
     }
   });
   S.lines = { vao: geomBuffers({ a_pos: new Float32Array(pos), a_color: new Float32Array(col) }), count: pos.length / 3 };
-  S.dirty = true;
+  redraw();
 }
 
 async function loadMesh() {
@@ -307,7 +323,7 @@ async function loadMesh() {
   $("status").textContent = `mesh: ${nv} vertices, ${nf} triangles`;
   S.loadedAll = true;
   stats.loadedAt = performance.now();
-  S.dirty = true;
+  redraw();
 }
 
 function drawGeometry(v, item, mode, shade) {
@@ -326,12 +342,28 @@ function drawGeometry(v, item, mode, shade) {
 }
 
 // --- drawing and sorting ----------------------------------------------------------------------------
-function draw() {
-  resize();
-  const v = currentView();
-  if (S.splats) {
-    S.splats.draw(v);
-  } else {
+// A picture is quick or full. Quick (while the model streams in, while the camera moves, while
+// the order lags the camera): the Gaussians at a reduced resolution (quickScale, halved when a
+// quick frame is slow, doubled when it is fast), in whatever order the last sort gave; when
+// the camera moved and the lowest resolution is still slow (a large model on a software GPU),
+// only every step-th Gaussian of the order, at most quickBudget of them. Full
+// (the model loaded, the camera still for STILL_MS and sorted for it): the exact picture at the
+// canvas resolution, drawn in batches over several frames so that a slow software GPU stays
+// responsive; any change abandons it for a quick frame.
+const STILL_MS = 150;
+const QUICK_SLOW_MS = 120, QUICK_FAST_MS = 30, QUICK_MIN_SCALE = 0.25;
+// A sparser quick frame aims at QUICK_BUDGET_MS and draws at least QUICK_MIN_BUDGET Gaussians.
+const QUICK_BUDGET_MS = 250, QUICK_MIN_BUDGET = 16384;
+const BATCH_MS = 400, FIRST_BATCH = 65536;
+
+function sortIsCurrent() {
+  if (!S.splats) return true;
+  return !S.sort && S.sorted.version === S.version && S.sorted.data === S.dataVersion && S.sorted.exact === S.exactSort;
+}
+
+/// Mesh and frusta over the canvas (after the splats, or over the background).
+function drawOverlays(v) {
+  if (!S.splats) {
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
     gl.viewport(0, 0, v.width, v.height);
     gl.clearColor(v.background[0], v.background[1], v.background[2], 1);
@@ -344,57 +376,159 @@ function draw() {
     gl.disable(gl.DEPTH_TEST);
   }
   if (S.overlays && S.lines) drawGeometry(v, S.lines, gl.LINES, false);
-  const drewSomething = (S.splats && S.splats.instances > 0) || S.mesh;
-  S.drewSomething = !!drewSomething;
 }
 
+function upload() {
+  const t = performance.now();
+  const n = S.splats.upload();
+  if (n) { stats.uploadMs += performance.now() - t; mark("firstUpload"); }
+}
+
+/// Submits the next frame's work; returns what it was, or null when there is nothing to do.
+function submitFrame(now) {
+  resize();
+  const still = S.loadedAll && sortIsCurrent() && now - S.lastChangeAt >= STILL_MS;
+  if (S.pass && S.pass.serial !== S.serial) S.pass = null;
+  const v = currentView();
+  if (!S.splats) {
+    if (S.shown === S.serial) return null;
+    drawOverlays(v);
+    return { kind: "full", serial: S.serial, version: S.version, instances: 0, drew: !!S.mesh, scale: 1, last: true };
+  }
+  const n = S.splats.instances;
+  // Nothing to show before the first Gaussians are sorted (the first picture is theirs).
+  if (n === 0 && !S.loadedAll) return null;
+  // A quick frame when the picture is out of date, unless a full one can start now and either
+  // costs no more or shows the same camera as the picture on the canvas (new data only).
+  if (!S.pass && S.shown !== S.serial && !(still && (S.quickScale === 1 || S.shownVersion === S.version))) {
+    // A quick frame: everything sorted so far, at the reduced resolution (a subset of it when
+    // the camera moved).
+    upload();
+    const moving = S.shownVersion !== S.version && S.shownVersion >= 0;
+    const step = moving ? Math.max(1, Math.ceil(n / S.quickBudget)) : 1;
+    S.splats.begin(v, S.quickScale);
+    S.splats.drawRange(0, n, step);
+    S.splats.composite();
+    drawOverlays(v);
+    return {
+      kind: "quick", serial: S.serial, version: S.version, instances: Math.ceil(n / step), drew: n > 0,
+      scale: S.quickScale, step, last: true,
+    };
+  }
+  if (!S.pass && still && S.full !== S.serial) {
+    upload();
+    S.splats.begin(v, 1);
+    S.pass = { serial: S.serial, version: S.version, from: 0, whole: S.quickScale === 1 };
+  }
+  if (!S.pass) return null;
+  const p = S.pass, from = p.from, to = p.whole ? n : Math.min(n, from + (S.batch || FIRST_BATCH));
+  S.splats.drawRange(from, to);
+  p.from = to;
+  const last = to >= n;
+  if (last) {
+    S.splats.composite();
+    drawOverlays(v);
+    S.pass = null;
+  }
+  return { kind: "full", serial: p.serial, version: p.version, instances: to - from, drew: n > 0, scale: 1, last };
+}
+
+/// A frame has finished on the GPU: record it, adapt the quick scale and the batch size.
+function frameDone(f, ms) {
+  stats.lastFrameMs = ms;
+  if (stats.frames.length < 500) {
+    stats.frames.push({ at: Math.round(f.at), kind: f.kind, scale: f.scale, n: f.instances, step: f.step || 1, ms: Math.round(ms) });
+  }
+  if (f.kind === "quick") {
+    if (ms > QUICK_SLOW_MS && S.quickScale > QUICK_MIN_SCALE) S.quickScale /= 2;
+    else if (ms > QUICK_SLOW_MS) S.quickBudget = Math.max(QUICK_MIN_BUDGET, Math.round(f.instances * QUICK_BUDGET_MS / ms));
+    else if (ms < QUICK_FAST_MS && S.quickScale < 1) S.quickScale *= 2;
+    else if (ms < QUICK_FAST_MS) S.quickBudget *= 2;
+  } else if (f.instances > 0 && !f.last) {
+    S.batch = Math.max(4096, Math.round(f.instances * BATCH_MS / Math.max(ms, 1)));
+  }
+  if (f.last) {
+    S.shown = f.serial;
+    S.shownVersion = f.version;
+    if (f.kind === "full") S.full = f.serial;
+    if (f.drew && stats.firstPicture === null) {
+      stats.firstPicture = performance.now();
+      stats.firstPictureScale = f.scale;
+      stats.firstPictureGaussians = f.instances;
+    }
+  }
+}
+
+/// Asks the worker for the depth order of the current camera.
 function requestSort() {
   const v = currentView();
+  S.lastSortAt = performance.now();
   S.sort = { version: S.version, data: S.dataVersion, exact: S.exactSort };
   S.worker.postMessage({ type: "sort", version: S.version, R: Array.from(S.R), t: Array.from(v.t), near: v.near, exact: S.exactSort });
 }
 
+/// The first picture's order, sorted here rather than in the worker (no round trip): the first
+/// FIRST_PICTURE_MAX Gaussians of the file in front of the near plane, by camera z. It counts
+/// as out of date, so the worker sorts everything loaded right after.
+function firstOrder() {
+  const t0 = performance.now();
+  const n = Math.min(S.data.loaded, FIRST_PICTURE_MAX), p = S.data.positions, v = currentView(), R = S.R;
+  const z = new Float32Array(n), idx = [];
+  for (let i = 0; i < n; i++) {
+    z[i] = R[6] * p[3 * i] + R[7] * p[3 * i + 1] + R[8] * p[3 * i + 2] + v.t[2];
+    if (z[i] >= v.near) idx.push(i);
+  }
+  idx.sort((a, b) => z[a] - z[b] || a - b);
+  S.splats.setOrder(Uint32Array.from(idx), idx.length);
+  S.sorted = { version: S.version, data: -2, exact: false };
+  stats.sortMs += performance.now() - t0;
+  mark("firstOrder");
+  redraw();
+  tick(performance.now());
+}
+
 function isSettled() {
-  if (!S.loadedAll || S.dirty) return false;
-  if (!S.splats) return true;
-  return !S.sort && S.sorted.version === S.version && S.sorted.data === S.dataVersion && S.sorted.exact === S.exactSort;
+  return S.loadedAll && sortIsCurrent() && S.full === S.serial && !S.fence && !S.pass;
 }
 
 const LOADING_SORT_MS = 500;
+// The first picture draws at most this many Gaussians (the first of the file), so that it
+// comes quickly whatever the size of the first chunk of the stream.
+const FIRST_PICTURE_MAX = 16384;
 let last = performance.now();
 function frame(now) {
   requestAnimationFrame(frame);
+  tick(now);
+}
+
+function tick(now) {
   const dt = Math.min(0.1, (now - last) / 1000);
   last = now;
   if (S.keys.size) fly(dt);
   // While the model streams in, new Gaussians join the picture with the next sort, at most
-  // every LOADING_SORT_MS (each sort is followed by a redraw of everything loaded so far).
+  // every LOADING_SORT_MS (each sort is followed by a quick frame of everything loaded so far).
   const viewChanged = S.sorted.version !== S.version || S.sorted.exact !== S.exactSort;
   const dataChanged = S.sorted.data !== S.dataVersion;
   const loadingWait = !S.loadedAll && S.sorted.data >= 0 &&
     now - S.lastSortAt < Math.max(LOADING_SORT_MS, 2 * stats.lastFrameMs);
-  if (S.splats && !S.sort && (viewChanged || (dataChanged && !loadingWait))) {
-    S.lastSortAt = now;
-    requestSort();
-  }
+  if (S.splats && S.data.loaded > 0 && !S.sort && (viewChanged || (dataChanged && !loadingWait))) requestSort();
   if (canvas.clientWidth && !S.fixed) {
     const dpr = window.devicePixelRatio || 1;
-    if (canvas.width !== Math.round(canvas.clientWidth * dpr) || canvas.height !== Math.round(canvas.clientHeight * dpr)) S.dirty = true;
+    if (canvas.width !== Math.round(canvas.clientWidth * dpr) || canvas.height !== Math.round(canvas.clientHeight * dpr)) redraw();
   }
   // One frame in flight: a software GPU (SwiftShader) can take seconds for a million splats,
-  // and queued frames would hold up the texture uploads of the stream and the controls.
+  // and queued frames would hold up the stream's uploads and the controls.
   if (S.fence) {
     if (gl.getSyncParameter(S.fence, gl.SYNC_STATUS) !== gl.SIGNALED) return;
     gl.deleteSync(S.fence);
     S.fence = null;
-    stats.lastFrameMs = now - S.drawStart;
-    // The first frame with something in it, once the GPU has finished it.
-    if (S.drewSomething && stats.firstPicture === null) stats.firstPicture = performance.now();
+    frameDone(S.submitted, performance.now() - S.submitted.at);
   }
-  if (S.dirty) {
-    S.dirty = false;
-    S.drawStart = now;
-    draw();
+  const f = submitFrame(now);
+  if (f) {
+    f.at = performance.now();
+    if (f.drew) mark("firstDraw");
+    S.submitted = f;
     S.fence = gl.fenceSync(gl.SYNC_GPU_COMMANDS_COMPLETE, 0);
     gl.flush();
     return;
@@ -403,7 +537,7 @@ function frame(now) {
     if (stats.fullPicture === null) { stats.fullPicture = performance.now(); resolveReady(); }
     const w = S.waiters;
     S.waiters = [];
-    w.forEach((f) => f());
+    w.forEach((fn) => fn());
   }
 }
 
@@ -530,27 +664,37 @@ function fillPanels(m) {
   $("videos-section").hidden = m.videos.length === 0;
 }
 
-async function loadSplats(model) {
-  S.data = new SplatData(model.count, model.sh_degree);
-  S.splats = new SplatRenderer(gl, S.data);
+function startWorker(count) {
   S.worker = new Worker("/sort-worker.js");
-  S.worker.postMessage({ type: "init", count: model.count });
+  S.worker.postMessage({ type: "init", count });
   S.worker.onmessage = (e) => {
     const msg = e.data;
     S.splats.setOrder(msg.order, msg.visible);
     S.sorted = S.sort;
     S.sort = null;
-    S.dirty = true;
+    stats.sortMs += msg.ms;
+    stats.sorts++;
+    redraw();
   };
+}
+
+/// Streams the model from `request` (its fetch, started with the worker before the context).
+async function loadSplats(model, request) {
+  S.data = new SplatData(model.count, model.sh_degree);
+  S.splats = new SplatRenderer(gl, S.data);
+  mark("renderer");
   const offsets = floatOffsets(model);
   const progress = $("progress");
-  await streamPly(model.url, model, (start, n, floats, strideFloats) => {
+  await streamPly(request, model, (start, n, floats, strideFloats) => {
+    mark("firstRows");
+    const t = performance.now();
     S.data.addRows(start, n, floats, strideFloats, offsets);
-    S.splats.upload(start, start + n);
+    stats.parseMs += performance.now() - t;
     const p = S.data.positions.slice(3 * start, 3 * (start + n));
     S.worker.postMessage({ type: "positions", start, data: p }, [p.buffer]);
     S.dataVersion++;
     if (!S.placed) initialView();
+    if (!S.sort && S.sorted.data === -1) firstOrder();
     $("status").textContent = `${(start + n).toLocaleString()} of ${model.count.toLocaleString()} Gaussians`;
   }, (bytes) => { progress.value = bytes / model.file_bytes; });
   stats.loadedAt = performance.now();
@@ -561,20 +705,28 @@ async function loadSplats(model) {
 }
 
 async function main() {
+  mark("script");
+  const r = await fetch("/api/run");
+  if (!r.ok) throw new Error(`cannot read the run (${r.status})`);
+  const m = await r.json();
+  mark("manifest");
+  S.manifest = m;
+  // The model's stream and its sort worker start before the WebGL context, whose creation
+  // (the start of a software GPU) is the slowest step before the first picture.
+  const request = m.model ? fetch(m.model.url) : null;
+  if (m.model) startWorker(m.model.count);
+  gl = canvas.getContext("webgl2", { antialias: false, preserveDrawingBuffer: true, alpha: false, premultipliedAlpha: false });
   if (!gl) throw new Error("this browser has no WebGL2, which the viewer needs");
   geomProg = compile(gl, GEOM_VS, GEOM_FS);
   geomU = {};
   for (const n of ["u_R", "u_t", "u_intr", "u_size", "u_clip", "u_center", "u_shade"]) geomU[n] = gl.getUniformLocation(geomProg, n);
-  const r = await fetch("/api/run");
-  if (!r.ok) throw new Error(`cannot read the run (${r.status})`);
-  const m = await r.json();
-  S.manifest = m;
+  mark("context");
   fillPanels(m);
   installControls();
   setMode("orbit");
   if (m.cameras.length) initialView();
   requestAnimationFrame(frame);
-  if (m.model) await loadSplats(m.model);
+  if (m.model) await loadSplats(m.model, request);
   else if (m.has_mesh) await loadMesh();
   else S.loadedAll = true;
 }
@@ -583,6 +735,8 @@ window.fewviewView = {
   stats,
   ready,
   get cameras() { return S.manifest ? S.manifest.cameras : []; },
+  /// The colour drawn where nothing is (the run's background; grey behind a mesh).
+  get background() { return Array.from(currentView().background); },
   settled,
   /// Draws camera `i` exactly (its intrinsics, pose and resolution, no frusta, exact depth
   /// order) and returns the picture as a PNG data URL.

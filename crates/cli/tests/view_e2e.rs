@@ -1,10 +1,15 @@
-//! `fewview view` end to end in headless Chromium (WebGL2 on SwiftShader here): a small trained
-//! demo run in the page is not blank, its picture of a training camera matches `fewview render`
-//! of that camera (PSNR ≥ 30 dB), a drag orbits and changes the picture; a PLY or run folder the
-//! viewer cannot read is a one-line error before serving, and a model stream that breaks is a
-//! one-line error in the page. A third test, ignored by default, prints the time to the first
-//! picture of a million random Gaussians (measured, not asserted). Needs `scripts/setup.sh` (the test command runs
-//! it). The pictures are kept under `target/tmp/view_e2e/`.
+//! `fewview view` end to end in headless Chromium (WebGL2 on SwiftShader here):
+//! - a small trained demo run in the page is not blank, its picture of a training camera matches
+//!   `fewview render` of that camera (PSNR ≥ 30 dB), a drag orbits and changes the picture;
+//! - a hand-written surface run shows its mesh and its initial and refined cameras;
+//! - a run without `cameras.json` reads them from its dataset with `--data` (no browser);
+//! - a PLY or run folder the viewer cannot read is a one-line error before serving, and a model
+//!   stream that breaks is a one-line error in the page;
+//! - ignored by default: the time to the first picture of a million random Gaussians and to its
+//!   full-quality picture, with the time of each stage (measured, not asserted).
+//!
+//! Needs `scripts/setup.sh` (the test command runs it). The pictures are kept under
+//! `target/tmp/view_e2e/`.
 
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
@@ -70,12 +75,18 @@ fn serve(args: &[&str]) -> Viewer {
 
 /// Runs the page script in `mode`; returns its result.json.
 fn page(url: &str, out: &Path, mode: &str) -> serde_json::Value {
+    page_with(url, out, mode, &[])
+}
+
+/// [`page`] with more environment for the script (`CAMERA`).
+fn page_with(url: &str, out: &Path, mode: &str, env: &[(&str, &str)]) -> serde_json::Value {
     let status = Command::new("node")
         .arg(repo().join("web/tests/view_e2e.cjs"))
         .env("NODE_PATH", browser())
         .env("VIEW_URL", url)
         .env("VIEW_OUT", out)
         .env("VIEW_MODE", mode)
+        .envs(env.iter().copied())
         .status()
         .unwrap();
     let result = std::fs::read_to_string(out.join("result.json")).unwrap_or_default();
@@ -252,7 +263,7 @@ fn bad_input_is_a_one_line_error_in_the_cli_and_in_the_page() {
 }
 
 #[test]
-#[ignore = "a measurement, not a check: about 3 minutes of software WebGL; run with --ignored"]
+#[ignore = "a measurement, not a check: about a minute of software WebGL; run with --ignored"]
 fn a_million_gaussians_time_to_first_picture() {
     browser();
     let dir = tempfile::tempdir().unwrap();
@@ -265,15 +276,269 @@ fn a_million_gaussians_time_to_first_picture() {
     let ms = |k: &str| result[k].as_f64().unwrap_or(f64::NAN);
     println!(
         "1M Gaussians (SH degree 3, {} MB), headless Chromium on SwiftShader: first picture \
-         {:.0} ms, whole model loaded {:.0} ms, whole model drawn {:.0} ms, redraw after an \
-         orbit {:.0} ms; pictures in {}",
+         {:.0} ms ({} Gaussians at {} of the resolution), whole model loaded {:.0} ms, \
+         full-quality picture {:.0} ms, redraw after an orbit {:.0} ms; pictures in {}",
         std::fs::metadata(&ply).unwrap().len() / 1_000_000,
         ms("firstPictureMs"),
+        result["firstPictureGaussians"],
+        result["firstPictureScale"],
         ms("loadedMs"),
         ms("fullPictureMs"),
         ms("orbitRedrawMs"),
         out.display()
     );
+    // Where the time goes: the first time each stage happened (ms after navigation), the
+    // totals of parsing, uploading and sorting, and the frames (kind, scale, Gaussians, ms).
+    println!("stages: {} {}", result["timeline"], result["stages"]);
+    let frames: Vec<String> = result["frames"]
+        .as_array()
+        .map(|f| {
+            f.iter()
+                .map(|f| {
+                    format!(
+                        "{}@{}:{}x{}={}ms",
+                        f["kind"], f["at"], f["n"], f["scale"], f["ms"]
+                    )
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    println!("frames: {}", frames.join(" "));
+    println!(
+        "machine load (1, 5, 15 min): {}",
+        std::fs::read_to_string("/proc/loadavg")
+            .unwrap_or_default()
+            .trim()
+    );
     let lit = result["interactive"]["litFraction"].as_f64().unwrap();
     assert!(lit > 0.05, "the canvas is blank: {lit}");
+}
+
+/// The body of `GET {url}{path}` (HTTP/1.1, one request per connection).
+fn http_get(url: &str, path: &str) -> String {
+    use std::io::Read;
+    let addr = url.trim_start_matches("http://");
+    let mut stream = std::net::TcpStream::connect(addr).unwrap();
+    write!(
+        stream,
+        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut response = String::new();
+    stream.read_to_string(&mut response).unwrap();
+    let (head, body) = response.split_once("\r\n\r\n").unwrap();
+    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    body.to_string()
+}
+
+fn manifest_cameras(viewer: &Viewer) -> Vec<serde_json::Value> {
+    let m: serde_json::Value = serde_json::from_str(&http_get(&viewer.1, "/api/run")).unwrap();
+    m["cameras"].as_array().unwrap().clone()
+}
+
+#[test]
+fn a_run_without_cameras_json_reads_them_from_its_dataset() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("capture");
+    fewview_ok(&["demo", "--width", "32", "--write-capture", s(&data)]);
+    let run = dir.path().join("run");
+    fewview_ok(&[
+        "train",
+        "--data",
+        s(&data),
+        "--downscale",
+        "2",
+        "--iterations",
+        "2",
+        "--init",
+        "box",
+        "--checkpoint-every",
+        "0",
+        "--out",
+        s(&run),
+    ]);
+    let with_file = manifest_cameras(&serve(&[s(&run)]));
+    assert!(!with_file.is_empty());
+    std::fs::remove_file(run.join("cameras.json")).unwrap();
+    assert!(
+        manifest_cameras(&serve(&[s(&run)])).is_empty(),
+        "no cameras.json, no --data: no frusta"
+    );
+    // Loaded at full size, resized to the run's half size: the same cameras.
+    let from_data = manifest_cameras(&serve(&[s(&run), "--data", s(&data)]));
+    assert_eq!(from_data.len(), with_file.len());
+    for (a, b) in with_file.iter().zip(&from_data) {
+        assert_eq!((&a["name"], &a["group"]), (&b["name"], &b["group"]));
+        assert_eq!((&a["width"], &a["height"]), (&b["width"], &b["height"]));
+        for key in ["fx", "fy", "cx", "cy", "rotation", "translation"] {
+            let flat = |v: &serde_json::Value| -> Vec<f64> {
+                match v.as_array() {
+                    Some(a) => a.iter().map(|x| x.as_f64().unwrap()).collect(),
+                    None => vec![v.as_f64().unwrap()],
+                }
+            };
+            for (x, y) in flat(&a[key]).iter().zip(flat(&b[key])) {
+                assert!((x - y).abs() < 1e-6, "{key}: {} vs {}", a[key], b[key]);
+            }
+        }
+    }
+
+    // Bad --data: one line naming the problem, nothing served.
+    let missing = dir.path().join("no_such_dataset");
+    assert_clean_error(
+        &fewview(&["view", s(&run), "--data", s(&missing)]),
+        &["no_such_dataset"],
+    );
+    let config = run.join("config.json");
+    let text = std::fs::read_to_string(&config).unwrap();
+    let first = with_file[0]["name"].as_str().unwrap();
+    std::fs::write(&config, text.replace(first, "view_99")).unwrap();
+    assert_clean_error(
+        &fewview(&["view", s(&run), "--data", s(&data)]),
+        &["no view `view_99`"],
+    );
+    std::fs::remove_file(&config).unwrap();
+    assert_clean_error(
+        &fewview(&["view", s(&run), "--data", s(&data)]),
+        &["config.json", "--data needs it"],
+    );
+}
+
+/// A camera file entry (the friendly form of `fewview_geom::io::cameras`) for a 64×48 camera
+/// at `centre` looking at `target`, world z up.
+fn camera_json(centre: [f64; 3], target: [f64; 3]) -> serde_json::Value {
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let unit = |a: [f64; 3]| {
+        let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+        [a[0] / n, a[1] / n, a[2] / n]
+    };
+    // OpenCV axes: z forward, x right, y down.
+    let z = unit(sub(target, centre));
+    let x = unit(cross(z, [0.0, 0.0, 1.0]));
+    let y = cross(z, x);
+    let t = |r: [f64; 3]| -(r[0] * centre[0] + r[1] * centre[1] + r[2] * centre[2]);
+    serde_json::json!({
+        "intrinsics": {"fx": 60.0, "fy": 60.0, "cx": 32.0, "cy": 24.0, "width": 64, "height": 48},
+        "world_to_camera": [
+            [x[0], x[1], x[2], t(x)],
+            [y[0], y[1], y[2], t(y)],
+            [z[0], z[1], z[2], t(z)],
+            [0.0, 0.0, 0.0, 1.0]
+        ]
+    })
+}
+
+/// A minimal surface run as `fewview surface` writes it: `mesh.ply` (an icosahedron),
+/// `poses_initial.json` and `poses_refined.json` (three cameras, the initial ones turned by
+/// about 10°) and `metrics.json`.
+fn write_surface_run(dir: &Path) {
+    std::fs::create_dir_all(dir).unwrap();
+    let g = (1.0 + 5f32.sqrt()) / 2.0;
+    let vertices = vec![
+        [-1.0, g, 0.0],
+        [1.0, g, 0.0],
+        [-1.0, -g, 0.0],
+        [1.0, -g, 0.0],
+        [0.0, -1.0, g],
+        [0.0, 1.0, g],
+        [0.0, -1.0, -g],
+        [0.0, 1.0, -g],
+        [g, 0.0, -1.0],
+        [g, 0.0, 1.0],
+        [-g, 0.0, -1.0],
+        [-g, 0.0, 1.0],
+    ];
+    let faces = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    let mesh = fewview_geom::Mesh {
+        vertices: vertices
+            .iter()
+            .map(|v: &[f32; 3]| [v[0] * 0.5, v[1] * 0.5, v[2] * 0.5])
+            .collect(),
+        faces,
+        colors: None,
+        normals: None,
+    };
+    fewview_geom::io::write_mesh(&dir.join("mesh.ply"), &mesh).unwrap();
+    let ring = |turn: f64| -> serde_json::Value {
+        (0..3)
+            .map(|i| {
+                let a = turn + i as f64 * 0.5;
+                camera_json([3.0 * a.cos(), 3.0 * a.sin(), 1.0], [0.0; 3])
+            })
+            .collect()
+    };
+    std::fs::write(dir.join("poses_initial.json"), ring(0.17).to_string()).unwrap();
+    std::fs::write(dir.join("poses_refined.json"), ring(0.0).to_string()).unwrap();
+    std::fs::write(
+        dir.join("metrics.json"),
+        r#"{"chamfer": 0.01, "rotation_error_deg": {"initial": 10.0, "refined": 1.0}}"#,
+    )
+    .unwrap();
+}
+
+#[test]
+fn a_surface_run_shows_its_mesh_and_both_camera_sets_in_the_browser() {
+    browser();
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("surface");
+    write_surface_run(&run);
+    let viewer = serve(&[s(&run)]);
+    let out = artefacts("surface");
+    let result = page_with(&viewer.1, &out, "surface", &[("CAMERA", "3")]);
+    println!("page result: {result}");
+    let groups: Vec<&str> = result["groups"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|g| g.as_str().unwrap())
+        .collect();
+    assert_eq!(
+        groups,
+        ["initial"; 3]
+            .iter()
+            .chain(&["refined"; 3])
+            .copied()
+            .collect::<Vec<_>>()
+    );
+    assert_eq!(result["cameras"], 6);
+    assert!(result["metricsRows"].as_u64().unwrap() >= 3);
+    let lit = result["interactive"]["litFraction"].as_f64().unwrap();
+    assert!(lit > 0.01, "the mesh and frusta are not drawn: {lit}");
+    let orbit = result["orbit"]["meanDiff"].as_f64().unwrap();
+    assert!(orbit > 0.5, "orbiting did not change the picture: {orbit}");
+    // Looking through a refined camera at the mesh it points at: the mesh fills its middle.
+    let through = result["cameraStats"]["litFraction"].as_f64().unwrap();
+    assert!(
+        through > 0.1,
+        "the mesh is not in front of the camera: {through}"
+    );
+    assert!(out.join("page.png").is_file());
 }

@@ -14,6 +14,9 @@ pub enum ViewError {
     /// A mesh or camera file of the run could not be read.
     #[error(transparent)]
     Geom(#[from] fewview_geom::GeomError),
+    /// The dataset given for the run's cameras could not be read.
+    #[error(transparent)]
+    Scene(#[from] fewview_scene::SceneError),
     /// The web server could not start or stopped with an error.
     #[error("{0}")]
     Server(String),

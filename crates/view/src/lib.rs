@@ -15,4 +15,4 @@ pub mod run;
 pub mod server;
 
 pub use error::ViewError;
-pub use run::{Run, RunKind};
+pub use run::{OpenOptions, Run, RunKind};

@@ -15,6 +15,7 @@
 use std::path::{Path, PathBuf};
 
 use fewview_scene::Camera;
+use fewview_scene::load::LoadOptions;
 use serde::Serialize;
 
 use crate::error::{Result, ViewError};
@@ -132,6 +133,17 @@ pub struct Run {
     pub mesh: Option<MeshBuffers>,
 }
 
+/// How to open a run.
+#[derive(Clone, Debug, Default)]
+pub struct OpenOptions {
+    /// The dataset the run was trained on, to read its cameras from when the run has no
+    /// `cameras.json` (runs from before it was written): the views `config.json` names, their
+    /// intrinsics resized to the run's image size.
+    pub data: Option<PathBuf>,
+    /// How to load that dataset (format, downscale, lens handling).
+    pub load: LoadOptions,
+}
+
 /// Defaults of `fewview_splat::raster::RenderSettings` for runs that lack a `config.json`.
 const DEFAULT_NEAR_PLANE: f64 = 0.2;
 
@@ -147,6 +159,11 @@ impl Run {
 
     /// The run in `dir`, its kind detected from its files.
     pub fn open(dir: &Path) -> Result<Self> {
+        Self::open_with(dir, &OpenOptions::default())
+    }
+
+    /// [`Run::open`], with the cameras of a run without `cameras.json` read from a dataset.
+    pub fn open_with(dir: &Path, opts: &OpenOptions) -> Result<Self> {
         let meta = std::fs::metadata(dir).map_err(|e| ViewError::io(dir, e))?;
         if !meta.is_dir() {
             return Err(ViewError::format(
@@ -155,7 +172,12 @@ impl Run {
             ));
         }
         if dir.join("point_cloud.ply").is_file() {
-            Self::open_splat(dir)
+            Self::open_splat(dir, opts)
+        } else if opts.data.is_some() {
+            Err(ViewError::format(
+                dir,
+                "--data reads the cameras of a train, demo or fusion run (no point_cloud.ply here)",
+            ))
         } else if dir.join("mesh.ply").is_file() {
             Self::open_surface(dir)
         } else {
@@ -191,7 +213,7 @@ impl Run {
         format!("/files/{}", self.files.len() - 1)
     }
 
-    fn open_splat(dir: &Path) -> Result<Self> {
+    fn open_splat(dir: &Path, opts: &OpenOptions) -> Result<Self> {
         let ply = dir.join("point_cloud.ply");
         let layout = check_gaussian_ply(&ply)?;
         let mut run = Run::empty(RunKind::Splat, display_name(dir));
@@ -228,8 +250,33 @@ impl Run {
                 .push("no config.json: drawn over black".into()),
         }
         let cams_path = dir.join("cameras.json");
-        if cams_path.is_file() {
-            let cams = fewview_geom::io::cameras::read_cameras(&cams_path)?;
+        let cams = if cams_path.is_file() {
+            if opts.data.is_some() {
+                run.manifest
+                    .notes
+                    .push("cameras from the run's cameras.json (--data not needed)".into());
+            }
+            Some(fewview_geom::io::cameras::read_cameras(&cams_path)?)
+        } else if let Some(data) = &opts.data {
+            let config = config.as_ref().ok_or_else(|| {
+                ViewError::format(
+                    dir.join("config.json"),
+                    "missing: --data needs it to know which views the run used",
+                )
+            })?;
+            run.manifest
+                .notes
+                .push(format!("cameras from the dataset {}", data.display()));
+            Some(dataset_cameras(config, &train, &test, data, &opts.load)?)
+        } else {
+            run.manifest.notes.push(
+                "no cameras.json (a run from before it was written): no camera frusta; \
+                 `fewview view RUN_DIR --data DATASET` reads them from the dataset"
+                    .into(),
+            );
+            None
+        };
+        if let Some(cams) = cams {
             for (i, c) in cams.iter().enumerate() {
                 let (name, group) = if i < train.len() {
                     (train[i].clone(), "train")
@@ -240,10 +287,6 @@ impl Run {
                 };
                 run.manifest.cameras.push(PageCamera::new(name, group, c));
             }
-        } else {
-            run.manifest.notes.push(
-                "no cameras.json (a run from before it was written): no camera frusta".into(),
-            );
         }
         run.manifest.metrics = read_json(&dir.join("metrics.json"))?;
         let truth_dir = dir.join("ground_truth");
@@ -308,6 +351,56 @@ impl Run {
         }
         Ok(())
     }
+}
+
+/// The cameras of the views `train` then `test` (names from the run's `config.json`) in the
+/// dataset at `data`, resized by the factor between the run's image size (`config.json`'s
+/// `width`, `height`: its first training view's) and the dataset's first training view.
+fn dataset_cameras(
+    config: &serde_json::Value,
+    train: &[String],
+    test: &[String],
+    data: &Path,
+    load: &LoadOptions,
+) -> Result<Vec<Camera>> {
+    let names: Vec<&String> = train.iter().chain(test).collect();
+    let Some(first) = names.first() else {
+        return Err(ViewError::format(
+            data,
+            "the run's config.json names no views to look up in the dataset",
+        ));
+    };
+    let ds = fewview_scene::load_dataset(data, load)?;
+    let find = |name: &str| {
+        ds.views
+            .iter()
+            .find(|v| v.name == name)
+            .map(|v| &v.camera)
+            .ok_or_else(|| {
+                ViewError::format(
+                    data,
+                    format!(
+                        "has no view `{name}`, which the run's config.json names (another dataset?)"
+                    ),
+                )
+            })
+    };
+    let scale = match config["width"].as_f64() {
+        Some(w) if w > 0.0 => w / f64::from(find(first)?.width()),
+        _ => 1.0,
+    };
+    names
+        .iter()
+        .map(|name| {
+            let c = find(name)?;
+            let size = |n: u32| ((f64::from(n) * scale).round() as u32).max(1);
+            Ok(if scale == 1.0 {
+                c.clone()
+            } else {
+                c.resized(size(c.width()), size(c.height()))
+            })
+        })
+        .collect()
 }
 
 fn display_name(path: &Path) -> String {

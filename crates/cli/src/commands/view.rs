@@ -5,7 +5,9 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args as ClapArgs;
-use fewview_view::{Run, RunKind, server};
+use fewview_scene::DatasetFormat;
+use fewview_scene::load::LoadOptions;
+use fewview_view::{OpenOptions, Run, RunKind, server};
 
 /// Look at a run in the browser: an interactive 3D viewer served on loopback.
 ///
@@ -31,6 +33,17 @@ pub struct Args {
     /// A Gaussian PLY (Inria 3DGS layout, binary little-endian) to look at without its run.
     #[arg(long, value_name = "FILE")]
     pub ply: Option<PathBuf>,
+    /// The dataset the run was trained on: its cameras are drawn when the run has no
+    /// `cameras.json` (runs from before it was written), the views `config.json` names.
+    #[arg(long, value_name = "DIR", conflicts_with = "ply")]
+    pub data: Option<PathBuf>,
+    /// With --data: force the dataset format (llff, blender, nerfstudio, dtu, colmap).
+    #[arg(long, value_name = "NAME", requires = "data")]
+    pub format: Option<DatasetFormat>,
+    /// With --data: load the dataset downscaled by this factor (faster; the cameras are resized
+    /// to the run's image size either way).
+    #[arg(long, default_value_t = 1, value_name = "K", requires = "data")]
+    pub downscale: u32,
     /// Port to listen on; 0 picks a free one (the URL is printed).
     #[arg(long, default_value_t = 0)]
     pub port: u16,
@@ -45,7 +58,17 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let run = match (&args.run, &args.ply) {
         (_, Some(ply)) => Run::from_ply(ply).context("cannot view the PLY")?,
-        (Some(dir), None) => Run::open(dir).context("cannot view the run")?,
+        (Some(dir), None) => {
+            let opts = OpenOptions {
+                data: args.data.clone(),
+                load: LoadOptions {
+                    format: args.format,
+                    downscale: args.downscale,
+                    ..LoadOptions::default()
+                },
+            };
+            Run::open_with(dir, &opts).context("cannot view the run")?
+        }
         (None, None) => anyhow::bail!("give RUN_DIR or --ply FILE"),
     };
     let m = &run.manifest;
@@ -55,6 +78,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (_, None) => String::new(),
     };
     let cameras = m.cameras.len();
+    if cameras == 0
+        && m.kind == RunKind::Splat
+        && let Some(note) = m.notes.iter().find(|n| n.starts_with("no cameras.json"))
+    {
+        eprintln!("note: {note}");
+    }
     let open = args.open;
     server::serve(run, SocketAddr::new(args.host, args.port), |bound| {
         let url = format!("http://{bound}/");
