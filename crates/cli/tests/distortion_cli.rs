@@ -61,6 +61,15 @@ fn missing_frames_are_skipped_with_one_warning() {
         err.contains("undistorted 22 photos (22 from the cache)"),
         "{err}"
     );
+    // Bicubic resampling has cache entries of its own.
+    for (run, cached) in [("run-cubic", 0), ("run-cubic2", 22)] {
+        let out = train(&data, &dir.path().join(run), &["--resample", "bicubic"]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        let want = format!("undistorted 22 photos ({cached} from the cache)");
+        assert!(err.contains(&want), "{err}");
+    }
+    let out = train(&data, &dir.path().join("run4"), &["--resample", "lanczos"]);
+    assert_clean_error(&out, &["--resample", "expected bilinear or bicubic"]);
     // No photo left: an error.
     for entry in std::fs::read_dir(data.join("images")).unwrap() {
         std::fs::remove_file(entry.unwrap().path()).unwrap();

@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
+use fewview_scene::distortion::Resample;
 use fewview_scene::load::LoadOptions;
 use fewview_scene::split::parse_view_list;
 use fewview_scene::{Dataset, DatasetFormat, UndistortMode, load_dataset_with_report};
@@ -51,6 +52,11 @@ pub struct DatasetArgs {
     /// `.fewview-cache/undistorted/`.
     #[arg(long, default_value = "no-border", value_name = "MODE")]
     pub undistort: UndistortMode,
+    /// How undistortion resamples the photos: `bilinear` (what COLMAP's image_undistorter and
+    /// OpenCV's cv2.undistort use) or `bicubic` (Keys' kernel with a = -0.75, as OpenCV's
+    /// INTER_CUBIC: sharper, slight ringing at hard edges). Each kernel has its own cache entries.
+    #[arg(long, default_value = "bilinear", value_name = "KERNEL")]
+    pub resample: Resample,
 }
 
 impl DatasetArgs {
@@ -63,6 +69,7 @@ impl DatasetArgs {
             test_views: self.test_views.clone().map(|v| v.0),
             cameras_file: self.cameras_file.clone(),
             undistort: self.undistort,
+            resample: self.resample,
             ..LoadOptions::default()
         }
     }
