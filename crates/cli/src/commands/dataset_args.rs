@@ -90,10 +90,31 @@ impl DatasetArgs {
         }
         if report.undistorted > 0 {
             eprintln!(
-                "undistorted {} photos ({} from the cache)",
-                report.undistorted, report.cache_hits
+                "undistorted {} photos ({} from the cache){}",
+                report.undistorted,
+                report.cache_hits,
+                undistorted_cameras(&ds)
             );
         }
         Ok(ds)
+    }
+}
+
+/// The pinhole camera undistorted views share, as `fx,fy,cx,cy,w,h` (the form
+/// `demo --capture-intrinsics` takes, to render a capture's exact pinhole truth), or how many
+/// different ones there are.
+fn undistorted_cameras(ds: &Dataset) -> String {
+    let mut seen = Vec::new();
+    for k in ds.views.iter().map(|v| v.camera.intrinsics) {
+        if !seen.contains(&k) {
+            seen.push(k);
+        }
+    }
+    match seen.as_slice() {
+        [k] => format!(
+            " to the pinhole {},{},{},{},{},{}",
+            k.fx, k.fy, k.cx, k.cy, k.width, k.height
+        ),
+        _ => format!(" to {} pinhole cameras", seen.len()),
     }
 }
