@@ -8,6 +8,12 @@ References come from OpenCV (the same equations as COLMAP's camera models):
   1e-14 tolerance; `<model>_source.npy`, a 64x48 smooth float32 image, and
   `<model>_undistorted.npy`, it undistorted with `cv2.initUndistortRectifyMap` +
   `cv2.remap` (INTER_LINEAR) to the same camera matrix.
+* `detail_source.npy`, a 64x48 float32 image with detail near the pixel scale (sinusoids of
+  5-7 px wavelength and a 0/1 checkerboard whose edges make the cubic kernel overshoot), and
+  `<model>_undistorted_cubic.npy`, it undistorted by the same maps with `cv2.remap`
+  (INTER_CUBIC, BORDER_REPLICATE, as fewview repeats the edge pixel) and clipped to [0, 1] (as
+  fewview clamps, and as OpenCV saturates 8- and 16-bit images). On this image bilinear and
+  bicubic resampling differ by far more than the tests' tolerance.
 * `colmap_binary/`: a COLMAP binary model (cameras.bin, images.bin, points3D.bin, written as
   COLMAP's `WriteCamerasBinary` etc. document the layout) with one camera of each supported
   model, and `colmap_binary.json` with what each holds.
@@ -59,6 +65,17 @@ def smooth_image():
     return np.stack([r, g, b], axis=-1).astype(np.float32)
 
 
+def detail_image():
+    y, x = np.mgrid[0:H, 0:W].astype(np.float64)
+    r = 0.5 + 0.35 * np.sin(2 * np.pi * x / 5.0 + 0.3) * np.cos(2 * np.pi * y / 6.5)
+    g = 0.5 + 0.35 * np.cos(2 * np.pi * (x + y) / 5.5)
+    b = 0.5 + 0.35 * np.sin(2 * np.pi * (x - 0.5 * y) / 7.0)
+    checker = ((x // 4 + y // 4) % 2).astype(np.float64)
+    corner = (x < W / 2) & (y < H / 2)
+    r[corner] = checker[corner]
+    return np.stack([r, g, b], axis=-1).astype(np.float32)
+
+
 def case_fixture(name, model, params, dist, fisheye):
     fx, fy, cx, cy = intrinsics(model, params)
     K = np.array([[fx, 0, cx - 0.5], [0, fy, cy - 0.5], [0, 0, 1]], dtype=np.float64)
@@ -89,6 +106,8 @@ def case_fixture(name, model, params, dist, fisheye):
     else:
         m1, m2 = cv2.initUndistortRectifyMap(K, D, np.eye(3), K, (W, H), cv2.CV_32FC1)
     out = cv2.remap(img, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+    cubic = cv2.remap(detail_image(), m1, m2, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
+    cubic = np.clip(cubic, 0.0, 1.0)
     return {
         "name": name,
         "model": model,
@@ -99,7 +118,7 @@ def case_fixture(name, model, params, dist, fisheye):
         "D": dist,
         "undistort": {"distorted_px": px.tolist(), "normalized": und.tolist()},
         "distort": {"normalized": ideal.tolist(), "distorted_px": dist_px.tolist()},
-    }, img, out
+    }, img, out, cubic
 
 
 MODEL_IDS = {"SIMPLE_PINHOLE": 0, "PINHOLE": 1, "SIMPLE_RADIAL": 2, "RADIAL": 3, "OPENCV": 4,
@@ -134,11 +153,13 @@ def write_colmap_binary(folder, cameras):
 
 def main():
     os.makedirs(OUT, exist_ok=True)
+    np.save(os.path.join(OUT, "detail_source.npy"), detail_image())
     cases = []
     for c in CASES:
-        case, img, out = case_fixture(*c)
+        case, img, out, cubic = case_fixture(*c)
         np.save(os.path.join(OUT, case["name"] + "_source.npy"), img)
         np.save(os.path.join(OUT, case["name"] + "_undistorted.npy"), out)
+        np.save(os.path.join(OUT, case["name"] + "_undistorted_cubic.npy"), cubic)
         cases.append(case)
     with open(os.path.join(OUT, "points.json"), "w") as f:
         json.dump({"opencv": cv2.__version__, "cases": cases}, f, indent=1)

@@ -54,6 +54,33 @@ fn missing_frames_are_skipped_with_one_warning() {
         err.contains("undistorted 22 photos (0 from the cache)"),
         "{err}"
     );
+    // The undistorted camera, in the form `demo --capture-intrinsics` takes: COLMAP's framing
+    // scales the principal point with the size (the capture's is the 32×24 image's centre).
+    let camera = err
+        .split(" to the pinhole ")
+        .nth(1)
+        .expect("camera printed");
+    let k: Vec<f64> = camera
+        .lines()
+        .next()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let config: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("run/config.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        [k[4], k[5]],
+        [
+            config["width"].as_f64().unwrap(),
+            config["height"].as_f64().unwrap()
+        ]
+    );
+    assert!(
+        (k[2] - 16.0 * k[4] / 32.0).abs() < 1e-9 && (k[3] - 12.0 * k[5] / 24.0).abs() < 1e-9,
+        "{k:?}"
+    );
     // The second load reads every undistorted photo from the dataset's cache.
     let out = train(&data, &dir.path().join("run2"), &[]);
     let err = String::from_utf8_lossy(&out.stderr);
@@ -61,6 +88,15 @@ fn missing_frames_are_skipped_with_one_warning() {
         err.contains("undistorted 22 photos (22 from the cache)"),
         "{err}"
     );
+    // Bicubic resampling has cache entries of its own.
+    for (run, cached) in [("run-cubic", 0), ("run-cubic2", 22)] {
+        let out = train(&data, &dir.path().join(run), &["--resample", "bicubic"]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        let want = format!("undistorted 22 photos ({cached} from the cache)");
+        assert!(err.contains(&want), "{err}");
+    }
+    let out = train(&data, &dir.path().join("run4"), &["--resample", "lanczos"]);
+    assert_clean_error(&out, &["--resample", "expected bilinear or bicubic"]);
     // No photo left: an error.
     for entry in std::fs::read_dir(data.join("images")).unwrap() {
         std::fs::remove_file(entry.unwrap().path()).unwrap();

@@ -8,7 +8,7 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-use crate::distortion::UndistortFit;
+use crate::distortion::{Resample, UndistortFit};
 use crate::error::{Result, SceneError};
 
 /// What loading does with a camera's lens distortion.
@@ -145,6 +145,9 @@ pub struct LoadOptions {
     pub holdout_every: usize,
     /// COLMAP / nerfstudio: what to do with lens distortion (undistort on load by default).
     pub undistort: UndistortMode,
+    /// COLMAP / nerfstudio: the kernel undistortion resamples photos with (bilinear by default,
+    /// as COLMAP's `image_undistorter` and `cv2.undistort`; bicubic keeps finer detail).
+    pub resample: Resample,
     /// Where undistorted photos are cached; `None` = `.fewview-cache/undistorted/` in the
     /// dataset folder ([`crate::distortion::cache`]).
     pub cache_dir: Option<PathBuf>,
@@ -164,6 +167,7 @@ impl Default for LoadOptions {
             llff_normalize: true,
             holdout_every: 8,
             undistort: UndistortMode::default(),
+            resample: Resample::default(),
             cache_dir: None,
         }
     }

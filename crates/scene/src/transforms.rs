@@ -297,10 +297,12 @@ fn load_frame(
                         path,
                         "mask",
                     )?;
+                    // Bilinear whatever the photos' kernel: the mask is thresholded anyway.
                     view_files::binarize(&crate::distortion::undistort_image(
                         &m,
                         &lens,
                         &p.intrinsics,
+                        crate::distortion::Resample::Bilinear,
                     ))
                 }
                 None => m,

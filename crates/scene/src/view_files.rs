@@ -139,8 +139,12 @@ pub(crate) fn load_lens_photo(
         Some(fit) => (*lens, fit),
         None => (LensCamera::new(lens.intrinsics, None), Default::default()),
     };
+    let how = cache::UndistortHow {
+        fit,
+        resample: opts.resample,
+    };
     let dir = cache::cache_dir(root, opts.cache_dir.as_deref());
-    let u = cache::load_undistorted(path, &lens, fit, &dir, source, what)?;
+    let u = cache::load_undistorted(path, &lens, how, &dir, source, what)?;
     Ok(LensPhoto {
         photo: split_photo(u.image, background, path)?,
         intrinsics: u.intrinsics,

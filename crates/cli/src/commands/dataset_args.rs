@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
+use fewview_scene::distortion::Resample;
 use fewview_scene::load::LoadOptions;
 use fewview_scene::split::parse_view_list;
 use fewview_scene::{Dataset, DatasetFormat, UndistortMode, load_dataset_with_report};
@@ -51,6 +52,11 @@ pub struct DatasetArgs {
     /// `.fewview-cache/undistorted/`.
     #[arg(long, default_value = "no-border", value_name = "MODE")]
     pub undistort: UndistortMode,
+    /// How undistortion resamples the photos: `bilinear` (what COLMAP's image_undistorter and
+    /// OpenCV's cv2.undistort use) or `bicubic` (Keys' kernel with a = -0.75, as OpenCV's
+    /// INTER_CUBIC: sharper, slight ringing at hard edges). Each kernel has its own cache entries.
+    #[arg(long, default_value = "bilinear", value_name = "KERNEL")]
+    pub resample: Resample,
 }
 
 impl DatasetArgs {
@@ -63,6 +69,7 @@ impl DatasetArgs {
             test_views: self.test_views.clone().map(|v| v.0),
             cameras_file: self.cameras_file.clone(),
             undistort: self.undistort,
+            resample: self.resample,
             ..LoadOptions::default()
         }
     }
@@ -83,10 +90,31 @@ impl DatasetArgs {
         }
         if report.undistorted > 0 {
             eprintln!(
-                "undistorted {} photos ({} from the cache)",
-                report.undistorted, report.cache_hits
+                "undistorted {} photos ({} from the cache){}",
+                report.undistorted,
+                report.cache_hits,
+                undistorted_cameras(&ds)
             );
         }
         Ok(ds)
+    }
+}
+
+/// The pinhole camera undistorted views share, as `fx,fy,cx,cy,w,h` (the form
+/// `demo --capture-intrinsics` takes, to render a capture's exact pinhole truth), or how many
+/// different ones there are.
+fn undistorted_cameras(ds: &Dataset) -> String {
+    let mut seen = Vec::new();
+    for k in ds.views.iter().map(|v| v.camera.intrinsics) {
+        if !seen.contains(&k) {
+            seen.push(k);
+        }
+    }
+    match seen.as_slice() {
+        [k] => format!(
+            " to the pinhole {},{},{},{},{},{}",
+            k.fx, k.fy, k.cx, k.cy, k.width, k.height
+        ),
+        _ => format!(" to {} pinhole cameras", seen.len()),
     }
 }

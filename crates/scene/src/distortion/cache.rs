@@ -3,7 +3,8 @@
 //! The cache lives in the dataset folder, `<dataset>/.fewview-cache/undistorted/` (or the
 //! folder [`crate::LoadOptions::cache_dir`] names), one 16-bit PNG per photo, named after the
 //! photo and a 64-bit FNV-1a hash of everything the result depends on: the photo's path, size
-//! in bytes and modification time, the lens, the framing and the output camera. A changed
+//! in bytes and modification time, the lens, the framing, the resampling kernel and the output
+//! camera. A changed
 //! photo or camera therefore misses and is undistorted again; stale entries are never read.
 //! A dataset folder that cannot be written is not an error: the photo is undistorted in memory
 //! and the load report says the cache could not be written.
@@ -11,7 +12,7 @@
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
-use super::remap::{UndistortFit, undistort_image, undistorted_intrinsics, valid_mask};
+use super::remap::{Resample, UndistortFit, undistort_image, undistorted_intrinsics, valid_mask};
 use super::{Distortion, LensCamera};
 use crate::camera::Intrinsics;
 use crate::error::{Result, SceneError};
@@ -65,11 +66,18 @@ impl Fnv {
     }
 }
 
-/// The cache file name of `photo` undistorted from `lens` to `out` with `fit`.
+/// How a photo is undistorted: the framing of the output camera and the resampling kernel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct UndistortHow {
+    pub fit: UndistortFit,
+    pub resample: Resample,
+}
+
+/// The cache file name of `photo` undistorted from `lens` to `out` as `how` says.
 fn cache_key(
     photo: &Path,
     lens: &LensCamera,
-    fit: UndistortFit,
+    how: UndistortHow,
     out: &Intrinsics,
 ) -> Result<String> {
     let meta = std::fs::metadata(photo).map_err(|e| SceneError::io(photo, e))?;
@@ -95,12 +103,23 @@ fn cache_key(
     if let Some(d) = &lens.distortion {
         h.f64s(&d.coefficients());
     }
-    h.bytes(&[fit as u8]);
+    h.bytes(&[how.fit as u8]);
+    h.bytes(how.resample.name().as_bytes());
     let stem = photo
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
     Ok(format!("{stem}-{:016x}.png", h.0))
+}
+
+/// The image with every value rounded as [`encode_png16`] stores it, so that the run that
+/// writes a cache entry trains on exactly what later runs read back from it (the same seed then
+/// gives the same result whether the cache was warm or not).
+fn quantize16(mut img: Image) -> Image {
+    for v in &mut img.data {
+        *v = (v.clamp(0.0, 1.0) * 65535.0).round() as u16 as f32 / 65535.0;
+    }
+    img
 }
 
 /// Encodes an image (1, 3 or 4 channels) as a 16-bit PNG.
@@ -143,14 +162,14 @@ fn read_cached(path: &Path, out: &Intrinsics, channels: Option<usize>) -> Option
     shape_ok.then_some(img)
 }
 
-/// The photo at `path`, taken through `lens`, as an ideal pinhole image framed by `fit`, read
-/// from `cache_dir` when an entry for exactly this photo and camera is there, else undistorted
-/// and written there. `lens` must hold the photo's full-resolution size; a lens that does not
+/// The photo at `path`, taken through `lens`, as an ideal pinhole image framed and resampled as
+/// `how` says, read from `cache_dir` when an entry for exactly this photo, camera and kernel is
+/// there, else undistorted and written there. `lens` must hold the photo's full-resolution size; a lens that does not
 /// invert inside the image is an error naming `source` (the camera file).
 pub fn load_undistorted(
     path: &Path,
     lens: &LensCamera,
-    fit: UndistortFit,
+    how: UndistortHow,
     cache_dir: &Path,
     source: &Path,
     what: &str,
@@ -165,14 +184,14 @@ pub fn load_undistorted(
     }
     lens.check_invertible()
         .map_err(|m| SceneError::invalid(source, format!("{what}: {m}")))?;
-    let out = undistorted_intrinsics(lens, fit).ok_or_else(|| {
+    let out = undistorted_intrinsics(lens, how.fit).ok_or_else(|| {
         SceneError::invalid(
             source,
             format!("{what}: the lens distortion does not invert at the image border"),
         )
     })?;
     let valid = valid_mask(lens, &out);
-    let entry = cache_dir.join(cache_key(path, lens, fit, &out)?);
+    let entry = cache_dir.join(cache_key(path, lens, how, &out)?);
     if let Some(image) = read_cached(&entry, &out, None) {
         return Ok(UndistortedPhoto {
             image,
@@ -193,7 +212,7 @@ pub fn load_undistorted(
             ),
         ));
     }
-    let image = undistort_image(&photo, lens, &out);
+    let image = quantize16(undistort_image(&photo, lens, &out, how.resample));
     let written = std::fs::create_dir_all(cache_dir)
         .map_err(|e| SceneError::io(cache_dir, e))
         .and_then(|()| {

@@ -32,7 +32,7 @@ use serde::{Deserialize, Serialize};
 use crate::camera::Intrinsics;
 
 pub use models::{camera_from_colmap, camera_from_transforms};
-pub use remap::{UndistortFit, undistort_image, undistorted_intrinsics, valid_mask};
+pub use remap::{Resample, UndistortFit, undistort_image, undistorted_intrinsics, valid_mask};
 
 /// Distortion of normalised image coordinates (see the module docs for the equations).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -83,7 +83,7 @@ fn images_match_opencv_remap() {
         let lens = lens_of(&case);
         let source = npy_image(&format!("{name}_source.npy"));
         let reference = npy_image(&format!("{name}_undistorted.npy"));
-        let out = undistort_image(&source, &lens, &lens.intrinsics);
+        let out = undistort_image(&source, &lens, &lens.intrinsics, Resample::Bilinear);
         let (w, h) = (out.width, out.height);
         let (mut worst, mut compared) = (0.0f32, 0);
         for y in 0..h {
@@ -105,6 +105,70 @@ fn images_match_opencv_remap() {
         );
         assert!(worst < 1e-3, "{name}: image off by {worst}");
     }
+}
+
+/// The largest absolute difference between two images of the same shape.
+fn max_abs_diff(a: &Image, b: &Image) -> f32 {
+    assert_eq!(
+        (a.width, a.height, a.channels),
+        (b.width, b.height, b.channels)
+    );
+    a.data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max)
+}
+
+/// `cv2.remap` with `INTER_CUBIC` and `BORDER_REPLICATE` of an image with pixel-scale detail and
+/// hard edges, clipped to [0, 1], to 1e-3 on every pixel (both repeat the edge pixel). Bilinear
+/// resampling of the same image is far off the reference, so the fixture tells the kernels
+/// apart.
+#[test]
+fn bicubic_images_match_opencv_remap() {
+    let source = npy_image("detail_source.npy");
+    for case in cases() {
+        let name = case["name"].as_str().unwrap();
+        let lens = lens_of(&case);
+        let reference = npy_image(&format!("{name}_undistorted_cubic.npy"));
+        let cubic = undistort_image(&source, &lens, &lens.intrinsics, Resample::Bicubic);
+        let worst = max_abs_diff(&cubic, &reference);
+        assert!(worst < 1e-3, "{name}: bicubic image off by {worst}");
+        let linear = undistort_image(&source, &lens, &lens.intrinsics, Resample::Bilinear);
+        let apart = max_abs_diff(&linear, &reference);
+        assert!(apart > 0.05, "{name}: bilinear only {apart} from bicubic");
+    }
+}
+
+/// Degenerate inputs give an image of the asked size, never a panic: an empty photo, and
+/// positions far outside the photo or not a number clamp to the edge.
+#[test]
+fn resampling_degenerate_inputs() {
+    let lens = lens_of(&cases()[2]);
+    let out = lens.intrinsics;
+    for resample in [Resample::Bilinear, Resample::Bicubic] {
+        let empty = Image::from_vec(0, 0, 3, Vec::new());
+        let img = undistort_image(&empty, &lens, &out, resample);
+        assert_eq!(
+            (img.width, img.height),
+            (out.width as usize, out.height as usize)
+        );
+        let wild = LensCamera::new(
+            lens.intrinsics,
+            Some(Distortion::opencv(&[f64::NAN, 1e30, 0.0, 0.0])),
+        );
+        let photo = npy_image("detail_source.npy");
+        let img = undistort_image(&photo, &wild, &out, resample);
+        assert!(img.data.iter().all(|v| (0.0..=1.0).contains(v)));
+    }
+    assert_eq!("bicubic".parse(), Ok(Resample::Bicubic));
+    assert_eq!("bilinear".parse(), Ok(Resample::Bilinear));
+    assert!(
+        "lanczos"
+            .parse::<Resample>()
+            .unwrap_err()
+            .contains("bilinear or bicubic")
+    );
 }
 
 #[test]
@@ -318,16 +382,25 @@ fn colmap_binary_fixture_reads_every_model() {
         (5, 0, 5)
     );
     assert_eq!(stamps(&cache), before);
+    // Bit for bit: the first load trains on the values the cache stores.
     for (a, b) in d.views.iter().zip(&again.views) {
-        let diff = a
-            .image
-            .data
-            .iter()
-            .zip(&b.image.data)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0f32, f32::max);
-        assert!(diff < 1e-4, "{}: cached image differs by {diff}", a.name);
+        assert_eq!(
+            a.image.data, b.image.data,
+            "{}: cached image differs",
+            a.name
+        );
     }
+    // Another kernel is another cache entry, and another image.
+    let bicubic = LoadOptions {
+        resample: Resample::Bicubic,
+        ..opts.clone()
+    };
+    let (sharp, report) = load_dataset_with_report(dir.path(), &bicubic).unwrap();
+    assert_eq!((report.cache_writes, report.cache_hits), (5, 0));
+    assert!(max_abs_diff(&sharp.views[4].image, &d.views[4].image) > 1e-3);
+    let (_, report) = load_dataset_with_report(dir.path(), &bicubic).unwrap();
+    assert_eq!((report.cache_writes, report.cache_hits), (0, 5));
+    assert_eq!(stamps(&cache).len(), 10);
     // All pixels kept: a validity mask where the border is blank; ignored: the photos as they are.
     let (all, _) = load_dataset_with_report(
         dir.path(),
