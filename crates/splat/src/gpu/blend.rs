@@ -129,8 +129,9 @@ pub fn blend_forward(
     tiles_x: u32,
 ) {
     let tile = (CUBE_POS_Y * tiles_x + CUBE_POS_X) as usize;
-    let px = CUBE_POS_X * TILE as u32 + UNIT_POS_X;
-    let py = CUBE_POS_Y * TILE as u32 + UNIT_POS_Y;
+    // One-dimensional cubes (subgroup builtins require them): unit u is pixel (u mod 16, u / 16).
+    let px = CUBE_POS_X * TILE as u32 + UNIT_POS % TILE as u32;
+    let py = CUBE_POS_Y * TILE as u32 + UNIT_POS / TILE as u32;
     let inside = px < width && py < height;
     let unit = UNIT_POS as usize;
     let mut cache = Shared::<[f32]>::new_slice(TILE_UNITS * SPLAT_FLOATS);
@@ -274,8 +275,9 @@ pub fn blend_backward(
     #[comptime] plane: bool,
 ) {
     let tile = (CUBE_POS_Y * tiles_x + CUBE_POS_X) as usize;
-    let px = CUBE_POS_X * TILE as u32 + UNIT_POS_X;
-    let py = CUBE_POS_Y * TILE as u32 + UNIT_POS_Y;
+    // One-dimensional cubes (subgroup builtins require them): unit u is pixel (u mod 16, u / 16).
+    let px = CUBE_POS_X * TILE as u32 + UNIT_POS % TILE as u32;
+    let py = CUBE_POS_Y * TILE as u32 + UNIT_POS / TILE as u32;
     let inside = px < width && py < height;
     let unit = UNIT_POS as usize;
     let mut cache = Shared::<[f32]>::new_slice(TILE_UNITS * SPLAT_FLOATS);

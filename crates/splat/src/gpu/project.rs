@@ -622,6 +622,42 @@ pub fn project_backward(
     d_means[3 * i + 1] = dm_y;
     d_means[3 * i + 2] = dm_z;
 
+    scale_rotation_backward(
+        f,
+        ds00,
+        ds01,
+        ds02,
+        ds10,
+        ds11,
+        ds12,
+        ds20,
+        ds21,
+        ds22,
+        d_log_scales,
+        d_quats,
+        i,
+    );
+}
+
+/// The 3D covariance's gradient `dΣ` (row-major) through `Σ = M Mᵀ`, `M = R(q) diag(s)`, to the
+/// log-scales and the (unnormalised) quaternion of Gaussian `i`.
+#[cube]
+#[allow(clippy::too_many_arguments)]
+fn scale_rotation_backward(
+    f: Fwd,
+    ds00: f32,
+    ds01: f32,
+    ds02: f32,
+    ds10: f32,
+    ds11: f32,
+    ds12: f32,
+    ds20: f32,
+    ds21: f32,
+    ds22: f32,
+    d_log_scales: &mut [f32],
+    d_quats: &mut [f32],
+    i: usize,
+) {
     // Σ = M Mᵀ, M = R S: dL/dM = 2 sym(dΣ) M; dL/ds_k = Σ_a R_ak dL/dM_ak; dL/dR = dL/dM S.
     let y01 = (ds01 + ds10) * 0.5;
     let y02 = (ds02 + ds20) * 0.5;

@@ -235,7 +235,7 @@ fn tile_cubes(s: &GpuState) -> (CubeCount, CubeDim) {
     let (tiles_x, tiles_y) = s.tiles();
     (
         CubeCount::Static(tiles_x as u32, tiles_y as u32, 1),
-        CubeDim::new_2d(TILE as u32, TILE as u32),
+        CubeDim::new_1d(TILE_UNITS as u32),
     )
 }
 
@@ -261,8 +261,13 @@ fn blend(s: &GpuState, image: &Handle) {
     );
 }
 
-/// Whether the blend backward reduces with plane (subgroup) sums on this device.
+/// Whether the blend backward reduces with plane (subgroup) sums on this device: where it has
+/// them with one fixed plane size, unless `FEWVIEW_GPU_REDUCTION=tree` asks for the
+/// shared-memory tree (both give the same sums up to rounding; the switch is for comparing them).
 fn plane_reduction(client: &Client) -> bool {
+    if std::env::var("FEWVIEW_GPU_REDUCTION").is_ok_and(|v| v == "tree") {
+        return false;
+    }
     let props = client.properties();
     let sizes = props.hardware.plane_size_min..=props.hardware.plane_size_max;
     client.features().plane.contains(Plane::Ops)

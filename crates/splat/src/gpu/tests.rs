@@ -89,7 +89,7 @@ fn tensors(s: &[Vec<f32>; 5], n: usize, k: usize, device: &Device) -> GaussianTe
 }
 
 fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data().convert::<f32>().to_vec::<f32>().unwrap()
+    t.into_data().convert::<f32>().try_to_vec::<f32>().unwrap()
 }
 
 /// How closely the device must match the CPU rasterizer.
