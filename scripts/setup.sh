@@ -7,6 +7,9 @@
 #   chromium, node, npm  Debian packages, and `playwright-core` from npm (no browser download of
 #                        its own) in the git-ignored .cache/browser/: the user-study end-to-end
 #                        test (crates/cli/tests/study_e2e.rs)
+#   lavapipe             Debian `mesa-vulkan-drivers` (Mesa's software Vulkan driver) and the
+#                        Vulkan loader `libvulkan1`: the GPU rasterizer's tests (feature `gpu`)
+#                        run on it where the machine has no GPU
 #   LPIPS weights        the PyPI wheels lpips 0.1.4 and stlpips-pytorch 0.0.2 (BSD-2-Clause),
 #                        their weight files unpacked into the git-ignored .cache/lpips-weights/
 #                        (not needed at run time: fewview embeds the ST-LPIPS AlexNet):
@@ -37,6 +40,8 @@ need_apt=()
 command -v chromium >/dev/null 2>&1 || need_apt+=(chromium fonts-dejavu-core)
 command -v node >/dev/null 2>&1 || need_apt+=(nodejs)
 command -v npm >/dev/null 2>&1 || need_apt+=(npm)
+ls /usr/share/vulkan/icd.d/lvp_icd.*.json >/dev/null 2>&1 || need_apt+=(mesa-vulkan-drivers)
+ldconfig -p | grep -q 'libvulkan\.so\.1' || need_apt+=(libvulkan1)
 if lpips_missing && ! python3 -m pip --version >/dev/null 2>&1; then need_apt+=(python3-pip); fi
 if [ ${#need_apt[@]} -gt 0 ]; then
   echo "setup: apt-get install ${need_apt[*]}"

@@ -20,3 +20,9 @@ else
 fi
 
 cargo test --release --workspace -- "${extra[@]}" "$@"
+
+# The GPU rasterizer (feature `gpu`, off in the workspace build): its parity tests against the
+# CPU rasterizer and a GPU training run, on the first adapter wgpu finds (Mesa's lavapipe on a
+# machine without a GPU).
+echo "GPU tests: feature gpu, splat crate"
+cargo test --release -p fewview-splat --features gpu -- --include-ignored gpu "$@"

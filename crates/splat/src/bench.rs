@@ -75,6 +75,18 @@ impl SyntheticScene {
         s
     }
 
+    /// The scene as a model (to write it as a PLY).
+    pub fn to_model(&self) -> crate::GaussianModel {
+        crate::GaussianModel {
+            means: self.means.clone(),
+            log_scales: self.log_scales.clone(),
+            quats: self.quats.clone(),
+            opacity_logits: self.opacity_logits.clone(),
+            sh: self.sh.clone(),
+            sh_coeffs: 16,
+        }
+    }
+
     pub fn refs(&self) -> GaussianRefs<'_, f32> {
         GaussianRefs {
             means: &self.means,
@@ -269,9 +281,11 @@ pub struct TrainStepBench {
 pub fn train_step_bench(
     ds: &fewview_scene::Dataset,
     iterations: usize,
+    device: crate::ComputeDevice,
 ) -> Result<TrainStepBench, crate::pipeline::PipelineError> {
     let mut cfg = crate::pipeline::RunConfig::new(crate::train::TrainConfig::sparse_view(3000));
     cfg.train.background = ds.background;
+    cfg.device = device;
     train_step_bench_with(ds, &cfg, Vec::new(), iterations)
 }
 
@@ -286,7 +300,7 @@ pub fn train_step_bench_with(
     use crate::raster::RenderCamera;
     use crate::train::{TrainView, Trainer};
     let model = initial_model(ds, cfg)?;
-    let device = burn::tensor::Device::flex().autodiff();
+    let device = cfg.device.open()?.autodiff();
     let views: Vec<TrainView> = ds
         .train_views()
         .map(|v| TrainView::new(&v.name, RenderCamera::from(&v.camera), &v.image, &device))

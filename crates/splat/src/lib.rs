@@ -4,8 +4,13 @@
 //! sparse-view training.
 
 pub mod bench;
+#[cfg(feature = "gpu")]
+pub mod bench_gpu;
 pub use fewview_scene::cputime;
+pub mod device;
 pub mod eval;
+#[cfg(feature = "gpu")]
+pub mod gpu;
 pub mod init;
 pub mod loss;
 pub mod model;
@@ -19,6 +24,7 @@ pub mod stereo_pair;
 pub mod stereo_start;
 pub mod train;
 
+pub use device::{ComputeDevice, DeviceError};
 pub use model::GaussianModel;
 pub use op::{GaussianTensors, RenderTensors, RenderView, render};
 pub use pipeline::{RunConfig, render_path, train_run};

@@ -13,8 +13,10 @@ use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Dispatch, Flex, TensorMetadata, backend_extension};
+use burn::tensor::module::conv2d;
+use burn::tensor::ops::ConvOptions;
 use burn::tensor::{Shape, Tensor, TensorData};
-use fewview_metrics::ssim::{SsimOptions, SsimWorkspace};
+use fewview_metrics::ssim::{SsimBorder, SsimOptions, SsimWorkspace};
 use fewview_optim::flex_f32;
 use fewview_scene::Image;
 
@@ -146,12 +148,65 @@ impl<B: SsimKernels, C: CheckpointStrategy> SsimBackend for Autodiff<B, C> {
 }
 
 /// Mean SSIM of `[H, W, C]` tensors (`opts` chooses the metric or the 3DGS-loss border variant).
+///
+/// On the CPU this is the custom op above (the metrics crate's exact gradient); on other
+/// devices, the training-loss variant composed from Burn convolutions ([`ssim_mean_composed`]),
+/// differentiated by Burn.
 pub fn ssim_mean(rendered: Tensor<3>, target: Tensor<3>, opts: SsimOptions) -> Tensor<1> {
+    if rendered.device() != burn::tensor::Device::flex() && opts.border == SsimBorder::ZeroSame {
+        return ssim_mean_composed(rendered, target, &opts);
+    }
     Tensor::from_dispatch(<Dispatch as SsimBackend>::ssim_mean(
         rendered.into_dispatch(),
         target.into_dispatch(),
         opts,
     ))
+}
+
+/// The zero-padded ("same") separable Gaussian filter of each channel of `x` (`[1, C, H, W]`).
+fn gaussian_filter(x: Tensor<4>, opts: &SsimOptions) -> Tensor<4> {
+    let [_, c, _, _] = x.dims();
+    let r = opts.radius();
+    let taps = 2 * r + 1;
+    let window: Vec<f32> = (0..taps)
+        .map(|i| {
+            let k = i as f64 - r as f64;
+            (-k * k / (2.0 * opts.sigma * opts.sigma)).exp()
+        })
+        .collect::<Vec<f64>>()
+        .iter()
+        .map(|&w| w as f32)
+        .collect();
+    let sum: f32 = window.iter().sum();
+    let weights: Vec<f32> = (0..c)
+        .flat_map(|_| window.iter().map(move |w| w / sum))
+        .collect();
+    let device = x.device();
+    let row = Tensor::<4>::from_data(TensorData::new(weights.clone(), [c, 1, 1, taps]), &device);
+    let col = Tensor::<4>::from_data(TensorData::new(weights, [c, 1, taps, 1]), &device);
+    let opt = |pad: [usize; 2]| ConvOptions::new([1, 1], pad, [1, 1], c);
+    let x = conv2d(x, row, None, opt([0, r]));
+    conv2d(x, col, None, opt([r, 0]))
+}
+
+/// Mean SSIM with zero padding over all pixels (the 3DGS training loss, [`SsimBorder::ZeroSame`])
+/// from Burn convolutions: the same definition as `fewview_metrics::ssim`, on any device, with
+/// Burn's autodiff for the gradient (to both images).
+pub fn ssim_mean_composed(rendered: Tensor<3>, target: Tensor<3>, opts: &SsimOptions) -> Tensor<1> {
+    let to_nchw = |t: Tensor<3>| t.permute([2, 0, 1]).unsqueeze::<4>();
+    let (x, y) = (to_nchw(rendered), to_nchw(target.detach()));
+    let c1 = ((opts.k1 * opts.data_range).powi(2)) as f32;
+    let c2 = ((opts.k2 * opts.data_range).powi(2)) as f32;
+    let mu_x = gaussian_filter(x.clone(), opts);
+    let mu_y = gaussian_filter(y.clone(), opts);
+    let xx = gaussian_filter(x.clone() * x.clone(), opts) - mu_x.clone() * mu_x.clone();
+    let yy = gaussian_filter(y.clone() * y.clone(), opts) - mu_y.clone() * mu_y.clone();
+    let xy = gaussian_filter(x * y, opts) - mu_x.clone() * mu_y.clone();
+    let a1 = mu_x.clone() * mu_y.clone() * 2.0 + c1;
+    let a2 = xy * 2.0 + c2;
+    let b1 = mu_x.clone() * mu_x + mu_y.clone() * mu_y + c1;
+    let b2 = xx + yy + c2;
+    ((a1 * a2) / (b1 * b2)).mean()
 }
 
 /// The 3DGS photometric loss `(1 − λ)·L1 + λ·(1 − SSIM)` (Eq. 7 of Kerbl et al., λ = 0.2),
@@ -197,6 +252,40 @@ mod tests {
             .unwrap();
         for (x, y) in g.iter().zip(&want_grad) {
             assert!((x - 3.0 * y).abs() < 1e-7, "{x} vs {}", 3.0 * y);
+        }
+    }
+
+    /// The convolution form used off the CPU, run on the CPU backend: the metrics crate's value
+    /// and exact gradient are the reference.
+    #[test]
+    fn composed_ssim_matches_the_metrics_crate() {
+        let (h, w) = (19, 26);
+        let a: Vec<f32> = (0..h * w * 3)
+            .map(|i| ((i * 7919) % 101) as f32 / 100.0)
+            .collect();
+        let b: Vec<f32> = (0..h * w * 3)
+            .map(|i| ((i * 104_729) % 97) as f32 / 96.0)
+            .collect();
+        let device = Device::flex().autodiff();
+        let ta =
+            Tensor::<3>::from_data(TensorData::new(a.clone(), [h, w, 3]), &device).require_grad();
+        let tb = Tensor::<3>::from_data(TensorData::new(b.clone(), [h, w, 3]), &device);
+        let opts = SsimOptions::training_loss();
+        let s = ssim_mean_composed(ta.clone(), tb, &opts);
+        let grads = s.clone().backward();
+        let (ia, ib) = (Image::from_vec(w, h, 3, a), Image::from_vec(w, h, 3, b));
+        let (want, want_grad) = fewview_metrics::ssim::ssim_with_grad(&ia, &ib, &opts).unwrap();
+        let got = s.into_data().try_to_vec::<f32>().unwrap()[0];
+        assert!((got as f64 - want).abs() < 1e-5, "{got} vs {want}");
+        let g = ta
+            .grad(&grads)
+            .unwrap()
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
+        let scale = want_grad.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        for (x, y) in g.iter().zip(&want_grad) {
+            assert!((x - y).abs() < 1e-3 * scale, "{x} vs {y}");
         }
     }
 

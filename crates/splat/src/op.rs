@@ -61,7 +61,7 @@ pub struct RenderView {
 }
 
 /// The differentiable Gaussian rasterizer as a Burn backend extension.
-#[backend_extension(Flex, Autodiff)]
+#[backend_extension(Flex, Cube: cfg(feature = "gpu"), Autodiff)]
 pub trait SplatBackend: Backend {
     fn splat_render(
         #[extension_type] inputs: SplatInputs<Self>,
@@ -187,6 +187,51 @@ impl SplatBackend for Flex {
     fn splat_render(inputs: SplatInputs<Self>, view: RenderView) -> SplatOutput<Self> {
         let (image, radii, _) = Self::splat_forward(inputs, &view);
         SplatOutput { image, radii }
+    }
+}
+
+#[cfg(feature = "gpu")]
+mod cube {
+    //! The op on Burn's cube backend (feature `gpu`): the kernels of [`crate::gpu`].
+    use std::sync::Arc;
+
+    use burn::backend::Cube;
+    use burn_cubecl::tensor::CubeTensor;
+
+    use super::{RenderView, SplatBackend, SplatInputs, SplatKernels, SplatOutput, SplatState};
+    use crate::gpu::{self, GpuState};
+
+    impl SplatKernels for Cube {
+        fn splat_forward(
+            inputs: SplatInputs<Self>,
+            view: &RenderView,
+        ) -> (CubeTensor, CubeTensor, SplatState) {
+            let tensors = [
+                inputs.means,
+                inputs.log_scales,
+                inputs.quats,
+                inputs.opacity_logits,
+                inputs.sh,
+                inputs.means2d,
+            ];
+            let (image, radii, state) = gpu::forward(tensors, view);
+            (image, radii, SplatState(Arc::new(state)))
+        }
+
+        fn splat_backward(state: &SplatState, grad_image: CubeTensor) -> [CubeTensor; 6] {
+            let s = state
+                .0
+                .downcast_ref::<GpuState>()
+                .expect("Cube splat state comes from the Cube forward");
+            gpu::backward(s, grad_image)
+        }
+    }
+
+    impl SplatBackend for Cube {
+        fn splat_render(inputs: SplatInputs<Self>, view: RenderView) -> SplatOutput<Self> {
+            let (image, radii, _) = Self::splat_forward(inputs, &view);
+            SplatOutput { image, radii }
+        }
     }
 }
 

@@ -15,7 +15,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use burn::tensor::Device;
+use crate::device::{ComputeDevice, DeviceError};
 use fewview_scene::{Camera, Dataset, Image, SceneError};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -63,6 +63,10 @@ pub struct RunConfig {
     pub init_points: usize,
     /// How the stereo start is built, when the run uses it.
     pub stereo: StereoInit,
+    /// Where training runs. Not part of a checkpoint's identity: a run may resume on another
+    /// device.
+    #[serde(default)]
+    pub device: ComputeDevice,
 }
 
 /// The most random initial points a run accepts. Each Gaussian costs about 1 KB while training
@@ -77,6 +81,7 @@ impl RunConfig {
             init: InitStrategy::Auto,
             init_points: 20_000,
             stereo: StereoInit::default(),
+            device: ComputeDevice::Cpu,
         }
     }
 }
@@ -94,6 +99,8 @@ pub enum PipelineError {
     Init(String),
     #[error("evaluation: {0}")]
     Eval(String),
+    #[error(transparent)]
+    Device(#[from] DeviceError),
 }
 
 /// Paths inside a run directory.
@@ -439,7 +446,7 @@ pub fn train_run_with(
     for v in ds.test_views() {
         check_scorable(v).map_err(PipelineError::Eval)?;
     }
-    let device = Device::flex().autodiff();
+    let device = cfg.device.open()?.autodiff();
     let (_, extent) = ds.camera_extent();
     let resolved = ResolvedConfig {
         data: RunData::of(ds)?,

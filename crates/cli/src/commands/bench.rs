@@ -56,6 +56,17 @@ pub struct Args {
     /// Repetitions of each rasterizer measurement (median reported; at least 1).
     #[arg(long, default_value_t = 5, value_parser = positive_count)]
     pub runs: usize,
+    /// Where the rasterizer and training steps run: `cpu`, or `gpu` (builds with `--features
+    /// gpu`; the rasterizer's CPU figures are then measured on the same scene as the yardstick).
+    #[arg(long, value_enum, default_value_t = super::train_args::DeviceArg::Cpu)]
+    pub device: super::train_args::DeviceArg,
+    /// Image size of the rasterizer benchmark, `WIDTHxHEIGHT`.
+    #[arg(long, default_value = "504x378", value_parser = parse_size, value_name = "WxH")]
+    pub raster_size: (usize, usize),
+    /// Also write the rasterizer benchmark's scene as `DIR/scene.ply` and `DIR/cameras.json`
+    /// (for timing other rasterizers on the same Gaussians).
+    #[arg(long, value_name = "DIR")]
+    pub write_scene: Option<PathBuf>,
     /// Measure only these sections, e.g. `--only human,ssim` (default: all).
     #[arg(long, value_enum, value_delimiter = ',', value_name = "SECTION")]
     pub only: Vec<Section>,
@@ -88,6 +99,14 @@ impl Args {
     }
 }
 
+/// `--raster-size`: `WIDTHxHEIGHT`, each 1 to 16384.
+fn parse_size(s: &str) -> Result<(usize, usize), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{s}`: expected WIDTHxHEIGHT, e.g. 1024x1024"))?;
+    Ok((count_in(w, 1, 16384)?, count_in(h, 1, 16384)?))
+}
+
 /// `--gaussians`: at least one, and no more than training may start from
 /// ([`MAX_INIT_POINTS`], about 1 KB each): 10¹² aborted on allocation.
 fn gaussian_count(s: &str) -> Result<usize, String> {
@@ -100,6 +119,9 @@ struct Report {
     machine: Machine,
     #[serde(skip_serializing_if = "Option::is_none")]
     raster: Option<fewview_splat::bench::RasterBench>,
+    #[cfg(feature = "gpu")]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    raster_gpu: Option<fewview_splat::bench_gpu::GpuRasterBench>,
     #[serde(skip_serializing_if = "Option::is_none")]
     train_demo: Option<fewview_splat::bench::TrainStepBench>,
     /// Demo training steps with the gradient-domain fusion term on every step.
@@ -156,10 +178,35 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         threads: rayon::current_num_threads(),
         avx2_fma,
     };
-    let raster = args.wants(Section::Raster).then(|| {
-        eprintln!("rasterizer: {} Gaussians at 504x378 ...", args.gaussians);
-        fewview_splat::bench::raster_bench(args.gaussians, 504, 378, args.runs.max(1))
+    let device = fewview_splat::ComputeDevice::from(args.device);
+    let (width, height) = args.raster_size;
+    if let Some(dir) = &args.write_scene {
+        write_scene(dir, args.gaussians, width, height)?;
+    }
+    let on_cpu = device == fewview_splat::ComputeDevice::Cpu;
+    let raster = (on_cpu && args.wants(Section::Raster)).then(|| {
+        eprintln!(
+            "rasterizer: {} Gaussians at {width}x{height} ...",
+            args.gaussians
+        );
+        fewview_splat::bench::raster_bench(args.gaussians, width, height, args.runs.max(1))
     });
+    #[cfg(feature = "gpu")]
+    let raster_gpu = match !on_cpu && args.wants(Section::Raster) {
+        true => {
+            eprintln!(
+                "rasterizer on the GPU: {} Gaussians at {width}x{height} ...",
+                args.gaussians
+            );
+            let scene = fewview_splat::bench::SyntheticScene::new(args.gaussians, width, height, 1);
+            let gpu = device.open()?;
+            Some(
+                fewview_splat::bench_gpu::gpu_raster_bench(&gpu, &scene, args.runs)
+                    .map_err(anyhow::Error::msg)?,
+            )
+        }
+        false => None,
+    };
     let demo = (args.wants(Section::Train) || args.wants(Section::Fusion))
         .then(|| demo_dataset(&DemoOptions::default()));
     let train_demo = match (&demo, args.wants(Section::Train)) {
@@ -168,6 +215,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Some(fewview_splat::bench::train_step_bench(
                 demo,
                 args.train_steps,
+                device,
             )?)
         }
         _ => None,
@@ -218,6 +266,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let report = Report {
         machine,
         raster,
+        #[cfg(feature = "gpu")]
+        raster_gpu,
         train_demo,
         fusion_demo,
         train_fern,
@@ -237,6 +287,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Writes the rasterizer benchmark's scene as a 3DGS PLY and its camera as JSON.
+fn write_scene(dir: &std::path::Path, n: usize, width: usize, height: usize) -> anyhow::Result<()> {
+    let scene = fewview_splat::bench::SyntheticScene::new(n, width, height, 1);
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let model = scene.to_model();
+    fewview_splat::write_ply(&dir.join("scene.ply"), &model)?;
+    let c = &scene.camera;
+    let r = &c.rotation;
+    let t = &c.translation;
+    // The friendly camera form of `cameras.json` (what `fewview render --cameras` reads).
+    let camera = serde_json::json!([{
+        "intrinsics": {"fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy,
+                       "width": c.width, "height": c.height},
+        "world_to_camera": [
+            [r[0][0], r[0][1], r[0][2], t[0]],
+            [r[1][0], r[1][1], r[1][2], t[1]],
+            [r[2][0], r[2][1], r[2][2], t[2]],
+            [0.0, 0.0, 0.0, 1.0],
+        ],
+    }]);
+    fewview_scene::atomic::write_bytes(
+        &dir.join("cameras.json"),
+        &serde_json::to_vec_pretty(&camera)?,
+    )?;
+    eprintln!("scene written to {}", dir.display());
+    Ok(())
+}
+
 /// Training steps on LLFF fern, when its folder is given or under `FEWVIEW_DATA`.
 fn fern_train_bench(args: &Args) -> anyhow::Result<Option<fewview_splat::bench::TrainStepBench>> {
     let fern_dir = args
@@ -251,6 +329,7 @@ fn fern_train_bench(args: &Args) -> anyhow::Result<Option<fewview_splat::bench::
             Ok(Some(fewview_splat::bench::train_step_bench(
                 &ds,
                 args.train_steps,
+                args.device.into(),
             )?))
         }
         _ => {

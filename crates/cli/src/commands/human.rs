@@ -111,6 +111,10 @@ pub struct TrainArgs {
     /// before `--iterations`: a training budget; `--resume` continues later.
     #[arg(long, value_name = "MINUTES")]
     pub max_minutes: Option<f64>,
+    /// Where to train: `cpu` (every build) or `gpu` (the network's convolutions and the splat
+    /// rasterizer on the first GPU wgpu finds; builds with `--features gpu`).
+    #[arg(long, value_enum, default_value_t = super::train_args::DeviceArg::Cpu)]
+    pub device: super::train_args::DeviceArg,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -142,7 +146,9 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
     let (_, capture) = fewview_human::capture::open(&args.capture.data, &args.capture.sequence)?;
     let split = Split::for_capture(&*capture, args.input_cameras, args.train_frames)?;
     let view = TrainingView::new(&*capture, &split)?;
-    let device = fewview_human::train::default_device();
+    let device = fewview_splat::ComputeDevice::from(args.device)
+        .open()?
+        .autodiff();
     let frames = split.train_frames.clone();
     let out = &args.capture.out;
     let started = Instant::now();

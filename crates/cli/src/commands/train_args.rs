@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 use clap::{Args, ValueEnum};
+use fewview_splat::ComputeDevice;
 use fewview_splat::pipeline::{InitStrategy, MAX_INIT_POINTS, RunConfig};
 use fewview_splat::stereo_start::{DepthFrom, StereoInit};
 use fewview_splat::train::TrainConfig;
@@ -56,6 +57,26 @@ pub struct TrainArgs {
     /// Save a checkpoint every N iterations (0: never).
     #[arg(long, default_value_t = 500)]
     pub checkpoint_every: usize,
+    /// Where to train: `cpu` (every build) or `gpu` (the first GPU wgpu finds: Vulkan, Metal or
+    /// DX12; builds with `--features gpu`). The two agree to rounding, not bit for bit.
+    #[arg(long, value_enum, default_value_t = DeviceArg::Cpu)]
+    pub device: DeviceArg,
+}
+
+/// `--device`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum DeviceArg {
+    Cpu,
+    Gpu,
+}
+
+impl From<DeviceArg> for ComputeDevice {
+    fn from(d: DeviceArg) -> Self {
+        match d {
+            DeviceArg::Cpu => Self::Cpu,
+            DeviceArg::Gpu => Self::Gpu,
+        }
+    }
 }
 
 impl TrainArgs {
@@ -95,6 +116,7 @@ impl TrainArgs {
             init,
             init_points: self.init_points,
             stereo,
+            device: self.device.into(),
         })
     }
 }

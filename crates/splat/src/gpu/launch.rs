@@ -1,0 +1,45 @@
+//! Buffers and launch sizes shared by the kernels: typed uploads and read-backs of plain
+//! `u32`/`f32` device buffers, and the kernel arguments that view them.
+
+use cubecl::prelude::*;
+use cubecl::server::Handle;
+
+/// A device buffer as a kernel argument of `len` elements.
+///
+/// Every buffer the rasterizer passes was allocated by this module with at least `len` elements
+/// of 4 bytes, which is what makes the unchecked construction sound.
+pub fn arg(handle: &Handle, len: usize) -> BufferArg {
+    debug_assert!(
+        handle.size() as usize >= len * 4,
+        "buffer shorter than its argument"
+    );
+    // SAFETY: the buffer holds at least `len` 4-byte elements (checked above in debug builds,
+    // and guaranteed by the allocations of this module).
+    unsafe { BufferArg::from_raw_parts(handle.clone(), len.max(1)) }
+}
+
+/// Uploads `u32` values.
+pub fn upload_u32(client: &Client, values: &[u32]) -> Handle {
+    client.create_from_slice(u32::as_bytes(values))
+}
+
+/// Uploads `f32` values.
+pub fn upload_f32(client: &Client, values: &[f32]) -> Handle {
+    client.create_from_slice(f32::as_bytes(values))
+}
+
+/// A buffer of `len` 4-byte elements (at least one, so that an empty render still binds).
+pub fn alloc(client: &Client, len: usize) -> Handle {
+    client.empty(len.max(1) * 4)
+}
+
+/// Reads the first `len` `u32` values of a buffer back to the host (waits for the device).
+pub fn read_u32(client: &Client, handle: &Handle, len: usize) -> Vec<u32> {
+    let bytes = client.read_one_unchecked(handle.clone());
+    u32::from_bytes(&bytes)[..len].to_vec()
+}
+
+/// Cubes of `units` units covering `n` elements, one element per unit.
+pub fn cubes_for(n: usize, units: usize) -> CubeCount {
+    CubeCount::Static(n.div_ceil(units).max(1) as u32, 1, 1)
+}

@@ -1,0 +1,351 @@
+//! The device rasterizer's host side: the order of the kernel launches for one render and its
+//! backward pass, and the buffers the backward pass keeps (the twin of
+//! [`crate::raster::render`]). One value comes back to the host per render, the number of
+//! (tile, Gaussian) pairs, which sizes the pair buffers.
+
+use burn::backend::TensorMetadata;
+use burn::tensor::{DType, Shape};
+use burn_cubecl::CubeDevice;
+use burn_cubecl::kernel::into_contiguous;
+use burn_cubecl::tensor::CubeTensor;
+use cubecl::features::Plane;
+use cubecl::prelude::*;
+use cubecl::server::Handle;
+
+use super::blend::{TILE_UNITS, blend_backward, blend_forward};
+use super::launch::{alloc, arg, cubes_for, read_u32, upload_f32, upload_u32};
+use super::project::{CameraBuffer, GRAD_FLOATS, SPLAT_FLOATS, project_backward, project_forward};
+use super::scan::exclusive_scan;
+use super::sort::{bits_for, sort_pairs};
+use super::tiles::{emit_pairs, gather_pair_grads, tile_counts, tile_ranges};
+use crate::op::RenderView;
+use crate::raster::render::OUT_CHANNELS;
+use crate::raster::{TILE, sh_degree_of};
+use crate::sh;
+
+/// Units per cube of the per-Gaussian and per-pair kernels.
+const LINEAR_UNITS: usize = 256;
+
+/// A float input as a contiguous device buffer.
+struct Input {
+    handle: Handle,
+    shape: Shape,
+}
+
+fn input(tensor: CubeTensor, name: &str) -> Input {
+    assert!(
+        tensor.dtype == DType::F32,
+        "the GPU rasterizer takes f32 tensors; {name} is {:?}",
+        tensor.dtype
+    );
+    let shape = tensor.shape();
+    let tensor = into_contiguous(tensor);
+    Input {
+        handle: tensor.handle,
+        shape,
+    }
+}
+
+/// Everything one render leaves for its backward pass.
+pub struct GpuState {
+    client: Client,
+    device: CubeDevice,
+    /// means, log_scales, quats, opacity_logits, sh, means2d
+    inputs: [Input; 6],
+    camera: Handle,
+    background: Handle,
+    n: usize,
+    sh_coeffs: usize,
+    k_used: usize,
+    width: usize,
+    height: usize,
+    rects: Handle,
+    splats: Handle,
+    order: Handle,
+    offsets: Handle,
+    pairs: usize,
+    sorted_slots: Handle,
+    slot_gaussian: Handle,
+    ranges: Handle,
+    final_t: Handle,
+    last: Handle,
+}
+
+impl GpuState {
+    fn tiles(&self) -> (usize, usize) {
+        (self.width.div_ceil(TILE), self.height.div_ceil(TILE))
+    }
+
+    fn tensor(&self, handle: Handle, shape: Shape) -> CubeTensor {
+        CubeTensor::new_contiguous(
+            self.client.clone(),
+            self.device.clone(),
+            shape,
+            handle,
+            DType::F32,
+        )
+    }
+}
+
+/// Renders on the device: `(image [H, W, 5], radii [N], state)`.
+pub fn forward(tensors: [CubeTensor; 6], view: &RenderView) -> (CubeTensor, CubeTensor, GpuState) {
+    let client = tensors[0].client.clone();
+    let device = tensors[0].device.clone();
+    let names = [
+        "means",
+        "log_scales",
+        "quats",
+        "opacity_logits",
+        "sh",
+        "means2d",
+    ];
+    let mut i = 0;
+    let inputs = tensors.map(|t| {
+        i += 1;
+        input(t, names[i - 1])
+    });
+    let n = inputs[3].shape.num_elements();
+    let sh_coeffs = if n == 0 {
+        1
+    } else {
+        inputs[4].shape.num_elements() / (n * 3)
+    };
+    let degree = view.settings.sh_degree.min(sh_degree_of(sh_coeffs));
+    let cam = &view.camera;
+    let mut state = GpuState {
+        camera: upload_f32(
+            &client,
+            &CameraBuffer::values(cam, view.settings.near_plane),
+        ),
+        background: upload_f32(&client, &view.settings.background),
+        client: client.clone(),
+        device,
+        inputs,
+        n,
+        sh_coeffs,
+        k_used: sh::num_coeffs(degree),
+        width: cam.width,
+        height: cam.height,
+        rects: alloc(&client, 4 * n),
+        splats: alloc(&client, SPLAT_FLOATS * n),
+        order: alloc(&client, n),
+        offsets: alloc(&client, n + 1),
+        pairs: 0,
+        sorted_slots: alloc(&client, 1),
+        slot_gaussian: alloc(&client, 1),
+        ranges: alloc(&client, 1),
+        final_t: alloc(&client, cam.num_pixels()),
+        last: alloc(&client, cam.num_pixels()),
+    };
+    let radii = alloc(&client, n);
+    project(&mut state, &radii);
+    bin(&mut state);
+    let image = alloc(&client, cam.num_pixels() * OUT_CHANNELS);
+    blend(&state, &image);
+    let image = state.tensor(image, Shape::new([cam.height, cam.width, OUT_CHANNELS]));
+    let radii = state.tensor(radii, Shape::new([n]));
+    (image, radii, state)
+}
+
+/// Projection and the depth sort: fills `splats`, `rects`, `radii` and `order`.
+fn project(s: &mut GpuState, radii: &Handle) {
+    let (client, n) = (&s.client, s.n);
+    if n == 0 {
+        return;
+    }
+    let depth_keys = alloc(client, n);
+    let [means, scales, quats, opacity, sh, _] = &s.inputs;
+    project_forward::launch(
+        client,
+        cubes_for(n, LINEAR_UNITS),
+        CubeDim::new_1d(LINEAR_UNITS as u32),
+        arg(&means.handle, 3 * n),
+        arg(&scales.handle, 3 * n),
+        arg(&quats.handle, 4 * n),
+        arg(&opacity.handle, n),
+        arg(&sh.handle, 3 * s.sh_coeffs * n),
+        arg(&s.camera, CameraBuffer::LEN),
+        arg(&s.splats, SPLAT_FLOATS * n),
+        arg(&s.rects, 4 * n),
+        arg(radii, n),
+        arg(&depth_keys, n),
+        n as u32,
+        s.sh_coeffs as u32,
+        s.k_used as u32,
+        s.width as u32,
+        s.height as u32,
+    );
+    let ids: Vec<u32> = (0..n as u32).collect();
+    let ids = upload_u32(client, &ids);
+    let (_, order) = sort_pairs(client, &depth_keys, &ids, n, 32);
+    s.order = order;
+}
+
+/// Tile binning: pair offsets per depth rank, the pairs sorted by tile, and each tile's range.
+fn bin(s: &mut GpuState) {
+    let (client, n) = (s.client.clone(), s.n);
+    let (tiles_x, tiles_y) = s.tiles();
+    let num_tiles = tiles_x * tiles_y;
+    let counts = alloc(&client, n + 1);
+    tile_counts::launch(
+        &client,
+        cubes_for(n + 1, LINEAR_UNITS),
+        CubeDim::new_1d(LINEAR_UNITS as u32),
+        arg(&s.order, n),
+        arg(&s.rects, 4 * n),
+        arg(&counts, n + 1),
+        n as u32,
+    );
+    s.offsets = exclusive_scan(&client, &counts, n + 1);
+    s.pairs = read_u32(&client, &s.offsets, n + 1)[n] as usize;
+    let pairs = s.pairs;
+    let (keys, slots) = (alloc(&client, pairs), alloc(&client, pairs));
+    s.slot_gaussian = alloc(&client, pairs);
+    if n > 0 && pairs > 0 {
+        emit_pairs::launch(
+            &client,
+            cubes_for(n, LINEAR_UNITS),
+            CubeDim::new_1d(LINEAR_UNITS as u32),
+            arg(&s.order, n),
+            arg(&s.rects, 4 * n),
+            arg(&s.offsets, n + 1),
+            arg(&keys, pairs),
+            arg(&slots, pairs),
+            arg(&s.slot_gaussian, pairs),
+            n as u32,
+            tiles_x as u32,
+        );
+    }
+    let (sorted_keys, sorted_slots) =
+        sort_pairs(&client, &keys, &slots, pairs, bits_for(num_tiles));
+    s.sorted_slots = sorted_slots;
+    s.ranges = alloc(&client, 2 * num_tiles);
+    tile_ranges::launch(
+        &client,
+        cubes_for(num_tiles, LINEAR_UNITS),
+        CubeDim::new_1d(LINEAR_UNITS as u32),
+        arg(&sorted_keys, pairs),
+        arg(&s.ranges, 2 * num_tiles),
+        pairs as u32,
+        num_tiles as u32,
+    );
+}
+
+fn tile_cubes(s: &GpuState) -> (CubeCount, CubeDim) {
+    let (tiles_x, tiles_y) = s.tiles();
+    (
+        CubeCount::Static(tiles_x as u32, tiles_y as u32, 1),
+        CubeDim::new_1d(TILE_UNITS as u32),
+    )
+}
+
+fn blend(s: &GpuState, image: &Handle) {
+    let (count, dim) = tile_cubes(s);
+    let (n, pairs, pixels) = (s.n, s.pairs, s.width * s.height);
+    let (tiles_x, tiles_y) = s.tiles();
+    blend_forward::launch(
+        &s.client,
+        count,
+        dim,
+        arg(&s.splats, SPLAT_FLOATS * n),
+        arg(&s.ranges, 2 * tiles_x * tiles_y),
+        arg(&s.sorted_slots, pairs),
+        arg(&s.slot_gaussian, pairs),
+        arg(&s.background, 3),
+        arg(image, pixels * OUT_CHANNELS),
+        arg(&s.final_t, pixels),
+        arg(&s.last, pixels),
+        s.width as u32,
+        s.height as u32,
+        tiles_x as u32,
+    );
+}
+
+/// Whether the blend backward reduces with plane (subgroup) sums on this device: where it has
+/// them with one fixed plane size, unless `FEWVIEW_GPU_REDUCTION=tree` asks for the
+/// shared-memory tree (both give the same sums up to rounding; the switch is for comparing them).
+fn plane_reduction(client: &Client) -> bool {
+    if std::env::var("FEWVIEW_GPU_REDUCTION").is_ok_and(|v| v == "tree") {
+        return false;
+    }
+    let props = client.properties();
+    let sizes = props.hardware.plane_size_min..=props.hardware.plane_size_max;
+    client.features().plane.contains(Plane::Ops)
+        && !sizes.is_empty()
+        && TILE_UNITS as u32 % props.hardware.plane_size_max == 0
+        && props.hardware.plane_size_min == props.hardware.plane_size_max
+}
+
+/// Gradients of `means, log_scales, quats, opacity_logits, sh, means2d` from the image gradient.
+pub fn backward(s: &GpuState, grad_image: CubeTensor) -> [CubeTensor; 6] {
+    let client = &s.client;
+    let grad_image = input(grad_image, "the image gradient");
+    let (n, pairs, pixels) = (s.n, s.pairs, s.width * s.height);
+    let (tiles_x, tiles_y) = s.tiles();
+    let pair_grads = alloc(client, GRAD_FLOATS * pairs);
+    let (count, dim) = tile_cubes(s);
+    blend_backward::launch(
+        client,
+        count,
+        dim,
+        arg(&s.splats, SPLAT_FLOATS * n),
+        arg(&s.ranges, 2 * tiles_x * tiles_y),
+        arg(&s.sorted_slots, pairs),
+        arg(&s.slot_gaussian, pairs),
+        arg(&s.background, 3),
+        arg(&s.final_t, pixels),
+        arg(&s.last, pixels),
+        arg(&grad_image.handle, pixels * OUT_CHANNELS),
+        arg(&pair_grads, GRAD_FLOATS * pairs),
+        s.width as u32,
+        s.height as u32,
+        tiles_x as u32,
+        plane_reduction(client),
+    );
+    let splat_grads = alloc(client, GRAD_FLOATS * n);
+    let k3 = 3 * s.sh_coeffs;
+    let outs = [3 * n, 3 * n, 4 * n, n, k3 * n, 2 * n].map(|len| alloc(client, len));
+    if n > 0 {
+        gather_pair_grads::launch(
+            client,
+            cubes_for(n, LINEAR_UNITS),
+            CubeDim::new_1d(LINEAR_UNITS as u32),
+            arg(&s.order, n),
+            arg(&s.offsets, n + 1),
+            arg(&pair_grads, GRAD_FLOATS * pairs),
+            arg(&splat_grads, GRAD_FLOATS * n),
+            n as u32,
+            GRAD_FLOATS,
+        );
+        let [means, scales, quats, opacity, sh, _] = &s.inputs;
+        project_backward::launch(
+            client,
+            cubes_for(n, LINEAR_UNITS),
+            CubeDim::new_1d(LINEAR_UNITS as u32),
+            arg(&means.handle, 3 * n),
+            arg(&scales.handle, 3 * n),
+            arg(&quats.handle, 4 * n),
+            arg(&opacity.handle, n),
+            arg(&sh.handle, k3 * n),
+            arg(&s.camera, CameraBuffer::LEN),
+            arg(&s.rects, 4 * n),
+            arg(&splat_grads, GRAD_FLOATS * n),
+            arg(&outs[0], 3 * n),
+            arg(&outs[1], 3 * n),
+            arg(&outs[2], 4 * n),
+            arg(&outs[3], n),
+            arg(&outs[4], k3 * n),
+            arg(&outs[5], 2 * n),
+            n as u32,
+            s.sh_coeffs as u32,
+            s.k_used as u32,
+            s.width as u32,
+            s.height as u32,
+        );
+    }
+    let mut k = 0;
+    outs.map(|h| {
+        k += 1;
+        s.tensor(h, s.inputs[k - 1].shape.clone())
+    })
+}

@@ -1,0 +1,135 @@
+//! A stable least-significant-digit radix sort of `(u32 key, u32 value)` pairs on the device.
+//!
+//! Each pass sorts by one 8-bit digit in three kernels: per-block digit histograms (laid out
+//! digit-major, so that one exclusive scan of the table gives every block's first slot for every
+//! digit), the scan ([`super::scan`]), and a stable scatter that ranks each element among the
+//! earlier elements of its block with the same digit. Stability across passes makes the result
+//! equal to a stable sort by key, so equal keys keep their input order (the CPU rasterizer breaks
+//! depth ties by Gaussian index the same way).
+
+use cubecl::prelude::*;
+use cubecl::server::Handle;
+
+use super::launch::{alloc, arg, cubes_for};
+use super::scan::exclusive_scan;
+
+/// Elements per block (one per unit).
+pub const SORT_BLOCK: usize = 256;
+/// Bits sorted per pass.
+pub const DIGIT_BITS: u32 = 8;
+const BINS: usize = 1 << DIGIT_BITS;
+const _: () = assert!(
+    BINS == 256,
+    "the scatter kernel's out-of-range digit is 256"
+);
+
+/// Counts each digit in each block into `hist[digit * blocks + block]`.
+#[cube(launch)]
+fn digit_histogram(keys: &[u32], hist: &mut [u32], len: u32, shift: u32, blocks: u32) {
+    let counts = Shared::<[Atomic<u32>]>::new_slice(BINS);
+    let unit = UNIT_POS as usize;
+    counts[unit].store(0u32);
+    sync_cube();
+    let i = ABSOLUTE_POS;
+    if i < len as usize {
+        let digit = (keys[i] >> shift) & (BINS as u32 - 1);
+        counts[digit as usize].fetch_add(1u32);
+    }
+    sync_cube();
+    hist[unit * blocks as usize + CUBE_POS as usize] = counts[unit].load();
+}
+
+/// Moves each pair to its slot: the block's first slot for its digit plus the number of earlier
+/// elements of the block with the same digit.
+#[cube(launch)]
+#[allow(clippy::too_many_arguments)]
+fn stable_scatter(
+    keys: &[u32],
+    values: &[u32],
+    starts: &[u32],
+    keys_out: &mut [u32],
+    values_out: &mut [u32],
+    len: u32,
+    shift: u32,
+    blocks: u32,
+) {
+    let mut digits = Shared::<[u32]>::new_slice(SORT_BLOCK);
+    let unit = UNIT_POS as usize;
+    let i = ABSOLUTE_POS;
+    let inside = i < len as usize;
+    let mut key = 0u32;
+    // Out-of-range units take a digit no element has, so they never count as "earlier".
+    let mut digit = 256u32;
+    if inside {
+        key = keys[i];
+        digit = (key >> shift) & (BINS as u32 - 1);
+    }
+    digits[unit] = digit;
+    sync_cube();
+    if inside {
+        let mut rank = 0u32;
+        for j in 0..unit {
+            if digits[j] == digit {
+                rank += 1;
+            }
+        }
+        let slot = starts[digit as usize * blocks as usize + CUBE_POS as usize] + rank;
+        keys_out[slot as usize] = key;
+        values_out[slot as usize] = values[i];
+    }
+}
+
+/// Sorts the first `len` pairs stably by the low `key_bits` bits of their keys. Returns the
+/// sorted `(keys, values)` as new buffers.
+pub fn sort_pairs(
+    client: &Client,
+    keys: &Handle,
+    values: &Handle,
+    len: usize,
+    key_bits: u32,
+) -> (Handle, Handle) {
+    let mut keys = keys.clone();
+    let mut values = values.clone();
+    if len <= 1 {
+        return (keys, values);
+    }
+    let blocks = len.div_ceil(SORT_BLOCK);
+    let hist = alloc(client, BINS * blocks);
+    let mut shift = 0;
+    while shift < key_bits.max(1) {
+        digit_histogram::launch(
+            client,
+            cubes_for(len, SORT_BLOCK),
+            CubeDim::new_1d(SORT_BLOCK as u32),
+            arg(&keys, len),
+            arg(&hist, BINS * blocks),
+            len as u32,
+            shift,
+            blocks as u32,
+        );
+        let starts = exclusive_scan(client, &hist, BINS * blocks);
+        let (keys_out, values_out) = (alloc(client, len), alloc(client, len));
+        stable_scatter::launch(
+            client,
+            cubes_for(len, SORT_BLOCK),
+            CubeDim::new_1d(SORT_BLOCK as u32),
+            arg(&keys, len),
+            arg(&values, len),
+            arg(&starts, BINS * blocks),
+            arg(&keys_out, len),
+            arg(&values_out, len),
+            len as u32,
+            shift,
+            blocks as u32,
+        );
+        keys = keys_out;
+        values = values_out;
+        shift += DIGIT_BITS;
+    }
+    (keys, values)
+}
+
+/// Bits needed to write every value below `n` (at least 1).
+pub fn bits_for(n: usize) -> u32 {
+    (usize::BITS - n.saturating_sub(1).leading_zeros()).max(1)
+}
