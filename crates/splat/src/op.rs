@@ -327,14 +327,21 @@ pub fn render(gaussians: &GaussianTensors, means2d: Tensor<2>, view: &RenderView
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use burn::tensor::{Device, Tensor, TensorData};
 
     use super::*;
     use crate::raster::render::{backward, forward};
     use crate::raster::tests::{Scene, camera};
 
-    fn tensors(s: &[Vec<f32>; 5], n: usize, k: usize, device: &Device) -> GaussianTensors {
+    /// Host parameters (means, log-scales, quaternions, opacity logits, SH) as tensors that
+    /// require gradients.
+    pub(crate) fn tensors(
+        s: &[Vec<f32>; 5],
+        n: usize,
+        k: usize,
+        device: &Device,
+    ) -> GaussianTensors {
         let t2 = |v: &Vec<f32>, c: usize| {
             Tensor::<2>::from_data(TensorData::new(v.clone(), [n, c]), device).require_grad()
         };
@@ -349,7 +356,7 @@ mod tests {
         }
     }
 
-    fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+    pub(crate) fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
         t.into_data().try_to_vec::<f32>().unwrap()
     }
 

@@ -11,7 +11,8 @@ use rand::{RngExt, SeedableRng};
 use super::launch::{read_u32, upload_u32};
 use super::scan::exclusive_scan;
 use super::sort::sort_pairs;
-use crate::op::{GaussianTensors, RenderView, render};
+use crate::op::tests::{tensors, values};
+use crate::op::{RenderView, render};
 use crate::raster::render::{OUT_CHANNELS, backward, forward};
 use crate::raster::tests::{Scene, camera};
 use crate::raster::{GaussianRefs, RenderCamera, RenderSettings};
@@ -72,24 +73,6 @@ fn radix_sort_is_a_stable_sort_by_key() {
 
 fn gpu() -> Device {
     Device::wgpu(DeviceKind::DefaultDevice).autodiff()
-}
-
-fn tensors(s: &[Vec<f32>; 5], n: usize, k: usize, device: &Device) -> GaussianTensors {
-    let t2 = |v: &Vec<f32>, c: usize| {
-        Tensor::<2>::from_data(TensorData::new(v.clone(), [n, c]), device).require_grad()
-    };
-    GaussianTensors {
-        means: t2(&s[0], 3),
-        log_scales: t2(&s[1], 3),
-        quats: t2(&s[2], 4),
-        opacity_logits: Tensor::<1>::from_data(TensorData::new(s[3].clone(), [n]), device)
-            .require_grad(),
-        sh: Tensor::<3>::from_data(TensorData::new(s[4].clone(), [n, k, 3]), device).require_grad(),
-    }
-}
-
-fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data().convert::<f32>().try_to_vec::<f32>().unwrap()
 }
 
 /// How closely the device must match the CPU rasterizer.
