@@ -5,6 +5,9 @@
 //! recovering the transmittance by division as the CPU code does, and reduces each splat's
 //! per-pixel gradients across the tile (plane sums where the device has them, else a
 //! shared-memory tree) into the splat's pair slot.
+// Device code: CubeCL's expanded struct types are not `Copy` (a struct passed twice is cloned)
+// and its macro cannot infer the type of a unary minus on some expressions (written as `* -1`).
+#![allow(clippy::clone_on_copy, clippy::neg_multiply)]
 
 use cubecl::prelude::*;
 

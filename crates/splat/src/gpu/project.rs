@@ -3,6 +3,9 @@
 //! operation order, so the two agree to rounding).
 //!
 //! Camera constants travel in one `f32` buffer laid out as [`CameraBuffer`] describes.
+// Device code: CubeCL's expanded struct types are not `Copy` (a struct passed twice is cloned)
+// and its macro cannot infer the type of a unary minus on some expressions (written as `* -1`).
+#![allow(clippy::clone_on_copy, clippy::neg_multiply)]
 
 use cubecl::prelude::*;
 
@@ -161,8 +164,8 @@ pub fn forward_one(
         quats[4 * i + 3],
     );
     let q_norm = (q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3).sqrt();
-    // `!(a >= b)` is true for NaN, as in the CPU code.
-    let ok = !(!(t2 >= cam_at(cam, CameraBuffer::NEAR)) || !(q_norm > 1e-12f32));
+    // False for NaN, as the CPU code's negated comparisons.
+    let ok = t2 >= cam_at(cam, CameraBuffer::NEAR) && q_norm > 1e-12f32;
     let (w, x, y, z) = (q0 / q_norm, q1 / q_norm, q2 / q_norm, q3 / q_norm);
     let r00 = 1.0 - 2.0 * (y * y + z * z);
     let r01 = 2.0 * (x * y - w * z);

@@ -272,7 +272,7 @@ fn plane_reduction(client: &Client) -> bool {
     let sizes = props.hardware.plane_size_min..=props.hardware.plane_size_max;
     client.features().plane.contains(Plane::Ops)
         && !sizes.is_empty()
-        && TILE_UNITS as u32 % props.hardware.plane_size_max == 0
+        && (TILE_UNITS as u32).is_multiple_of(props.hardware.plane_size_max)
         && props.hardware.plane_size_min == props.hardware.plane_size_max
 }
 

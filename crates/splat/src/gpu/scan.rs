@@ -43,7 +43,7 @@ fn scan_blocks(input: &[u32], output: &mut [u32], totals: &mut [u32], len: u32) 
         output[i] = inclusive - value;
     }
     if UNIT_POS == CUBE_DIM - 1 {
-        totals[CUBE_POS as usize] = inclusive;
+        totals[CUBE_POS] = inclusive;
     }
 }
 
@@ -52,7 +52,7 @@ fn scan_blocks(input: &[u32], output: &mut [u32], totals: &mut [u32], len: u32) 
 fn add_block_offsets(output: &mut [u32], offsets: &[u32], len: u32) {
     let i = ABSOLUTE_POS;
     if i < len as usize {
-        output[i] += offsets[CUBE_POS as usize];
+        output[i] += offsets[CUBE_POS];
     }
 }
 

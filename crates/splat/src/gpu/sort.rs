@@ -36,7 +36,7 @@ fn digit_histogram(keys: &[u32], hist: &mut [u32], len: u32, shift: u32, blocks:
         counts[digit as usize].fetch_add(1u32);
     }
     sync_cube();
-    hist[unit * blocks as usize + CUBE_POS as usize] = counts[unit].load();
+    hist[unit * blocks as usize + CUBE_POS] = counts[unit].load();
 }
 
 /// Moves each pair to its slot: the block's first slot for its digit plus the number of earlier
@@ -73,7 +73,7 @@ fn stable_scatter(
                 rank += 1;
             }
         }
-        let slot = starts[digit as usize * blocks as usize + CUBE_POS as usize] + rank;
+        let slot = starts[digit as usize * blocks as usize + CUBE_POS] + rank;
         keys_out[slot as usize] = key;
         values_out[slot as usize] = values[i];
     }
