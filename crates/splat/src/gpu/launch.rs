@@ -39,6 +39,13 @@ pub fn read_u32(client: &Client, handle: &Handle, len: usize) -> Vec<u32> {
     u32::from_bytes(&bytes)[..len].to_vec()
 }
 
+/// Reads the one `u32` at `index` back to the host (waits for the device), copying 4 bytes
+/// rather than the whole buffer.
+pub fn read_u32_at(client: &Client, handle: &Handle, index: usize) -> u32 {
+    let bytes = client.read_one_unchecked(handle.clone().offset_start(4 * index as u64));
+    u32::from_bytes(&bytes)[0]
+}
+
 /// Cubes of `units` units covering `n` elements, one element per unit.
 pub fn cubes_for(n: usize, units: usize) -> CubeCount {
     CubeCount::Static(n.div_ceil(units).max(1) as u32, 1, 1)

@@ -13,10 +13,10 @@ use cubecl::prelude::*;
 use cubecl::server::Handle;
 
 use super::blend::{TILE_UNITS, blend_backward, blend_forward};
-use super::launch::{alloc, arg, cubes_for, read_u32, upload_f32, upload_u32};
+use super::launch::{alloc, arg, cubes_for, read_u32_at, upload_f32};
 use super::project::{CameraBuffer, GRAD_FLOATS, SPLAT_FLOATS, project_backward, project_forward};
 use super::scan::exclusive_scan;
-use super::sort::{bits_for, sort_pairs};
+use super::sort::{bits_for, indices, sort_pairs};
 use super::tiles::{emit_pairs, gather_pair_grads, tile_counts, tile_ranges};
 use crate::op::RenderView;
 use crate::raster::render::OUT_CHANNELS;
@@ -175,9 +175,7 @@ fn project(s: &mut GpuState, radii: &Handle) {
         s.width as u32,
         s.height as u32,
     );
-    let ids: Vec<u32> = (0..n as u32).collect();
-    let ids = upload_u32(client, &ids);
-    let (_, order) = sort_pairs(client, &depth_keys, &ids, n, 32);
+    let (_, order) = sort_pairs(client, &depth_keys, &indices(client, n), n, 32);
     s.order = order;
 }
 
@@ -197,7 +195,7 @@ fn bin(s: &mut GpuState) {
         n as u32,
     );
     s.offsets = exclusive_scan(&client, &counts, n + 1);
-    s.pairs = read_u32(&client, &s.offsets, n + 1)[n] as usize;
+    s.pairs = read_u32_at(&client, &s.offsets, n) as usize;
     let pairs = s.pairs;
     let (keys, slots) = (alloc(&client, pairs), alloc(&client, pairs));
     s.slot_gaussian = alloc(&client, pairs);

@@ -79,6 +79,28 @@ fn stable_scatter(
     }
 }
 
+/// Writes `0, 1, …, len − 1`.
+#[cube(launch)]
+fn iota(out: &mut [u32], len: u32) {
+    let i = ABSOLUTE_POS;
+    if i < len as usize {
+        out[i] = i as u32;
+    }
+}
+
+/// The buffer `0, 1, …, len − 1` (the values that make a sort return its permutation).
+pub fn indices(client: &Client, len: usize) -> Handle {
+    let out = alloc(client, len);
+    iota::launch(
+        client,
+        cubes_for(len, SORT_BLOCK),
+        CubeDim::new_1d(SORT_BLOCK as u32),
+        arg(&out, len),
+        len as u32,
+    );
+    out
+}
+
 /// Sorts the first `len` pairs stably by the low `key_bits` bits of their keys. Returns the
 /// sorted `(keys, values)` as new buffers.
 pub fn sort_pairs(
