@@ -18,11 +18,6 @@ pub fn arg(handle: &Handle, len: usize) -> BufferArg {
     unsafe { BufferArg::from_raw_parts(handle.clone(), len.max(1)) }
 }
 
-/// Uploads `u32` values.
-pub fn upload_u32(client: &Client, values: &[u32]) -> Handle {
-    client.create_from_slice(u32::as_bytes(values))
-}
-
 /// Uploads `f32` values.
 pub fn upload_f32(client: &Client, values: &[f32]) -> Handle {
     client.create_from_slice(f32::as_bytes(values))
@@ -31,12 +26,6 @@ pub fn upload_f32(client: &Client, values: &[f32]) -> Handle {
 /// A buffer of `len` 4-byte elements (at least one, so that an empty render still binds).
 pub fn alloc(client: &Client, len: usize) -> Handle {
     client.empty(len.max(1) * 4)
-}
-
-/// Reads the first `len` `u32` values of a buffer back to the host (waits for the device).
-pub fn read_u32(client: &Client, handle: &Handle, len: usize) -> Vec<u32> {
-    let bytes = client.read_one_unchecked(handle.clone());
-    u32::from_bytes(&bytes)[..len].to_vec()
 }
 
 /// Reads the one `u32` at `index` back to the host (waits for the device), copying 4 bytes

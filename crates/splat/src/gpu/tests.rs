@@ -5,10 +5,11 @@
 
 use burn::tensor::{Device, DeviceKind, Tensor, TensorData};
 use burn_cubecl::CubeDevice;
+use cubecl::prelude::*;
+use cubecl::server::Handle;
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 
-use super::launch::{read_u32, upload_u32};
 use super::scan::exclusive_scan;
 use super::sort::sort_pairs;
 use crate::op::tests::{tensors, values};
@@ -17,7 +18,18 @@ use crate::raster::render::{OUT_CHANNELS, backward, forward};
 use crate::raster::tests::{Scene, camera};
 use crate::raster::{GaussianRefs, RenderCamera, RenderSettings};
 
-fn client() -> cubecl::client::Client {
+/// Uploads `u32` values.
+fn upload_u32(client: &Client, values: &[u32]) -> Handle {
+    client.create_from_slice(u32::as_bytes(values))
+}
+
+/// Reads the first `len` `u32` values of a buffer back to the host (waits for the device).
+fn read_u32(client: &Client, handle: &Handle, len: usize) -> Vec<u32> {
+    let bytes = client.read_one_unchecked(handle.clone());
+    u32::from_bytes(&bytes)[..len].to_vec()
+}
+
+fn client() -> Client {
     CubeDevice::default().client()
 }
 
