@@ -10,7 +10,7 @@ use fewview_geom::mesh::Mesh;
 use fewview_scene::{Camera, Image};
 use fewview_splat::eval::render_model;
 use fewview_splat::raster::RenderCamera;
-use fewview_splat::train::{LossContext, LossTerm, TrainConfig};
+use fewview_splat::train::{LossContext, LossTerm, TrainConfig, TrainError};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 
@@ -137,7 +137,8 @@ impl VirtualViewTerm {
             .views
             .iter()
             .map(|v| {
-                let r = render_model(ctx.model, &RenderCamera::from(&v.camera), ctx.settings);
+                let model = ctx.model().map_err(|e| e.to_string())?;
+                let r = render_model(model, &RenderCamera::from(&v.camera), ctx.settings);
                 let depth = surface_depth(&r.depth.data, &r.alpha.data, min_alpha);
                 reference_mesh(&depth, &v.camera, &v.photo).map_err(|e| e.to_string())
             })
@@ -265,15 +266,15 @@ impl LossTerm for VirtualViewTerm {
         self.config.variant.name()
     }
 
-    fn loss(&mut self, ctx: &LossContext<'_>) -> Option<Tensor<1>> {
+    fn loss(&mut self, ctx: &LossContext<'_>) -> Result<Option<Tensor<1>>, TrainError> {
         if !self.active(ctx.iteration) {
-            return None;
+            return Ok(None);
         }
         let started = Instant::now();
         let result = self.virtual_loss(ctx);
         let mut stats = self.stats_mut();
         stats.seconds += started.elapsed().as_secs_f64();
-        match result {
+        Ok(match result {
             Ok(Some((loss, coverage))) => {
                 stats.mean_coverage +=
                     (coverage - stats.mean_coverage) / (stats.applied + 1) as f64;
@@ -291,7 +292,7 @@ impl LossTerm for VirtualViewTerm {
                 stats.first_error.get_or_insert(message);
                 None
             }
-        }
+        })
     }
 }
 
@@ -328,6 +329,8 @@ impl VirtualViewTerm {
 pub struct KnnColorTerm {
     options: KnnColorOptions,
     neighbours: Vec<i64>,
+    /// `neighbours` on the compute device, uploaded once per search.
+    index: Option<Tensor<1, Int>>,
     found_for: Option<(usize, usize)>,
 }
 
@@ -336,6 +339,7 @@ impl KnnColorTerm {
         Self {
             options,
             neighbours: Vec::new(),
+            index: None,
             found_for: None,
         }
     }
@@ -372,32 +376,31 @@ impl LossTerm for KnnColorTerm {
         "knn-color"
     }
 
-    fn loss(&mut self, ctx: &LossContext<'_>) -> Option<Tensor<1>> {
-        let n = ctx.model.len();
+    fn loss(&mut self, ctx: &LossContext<'_>) -> Result<Option<Tensor<1>>, TrainError> {
+        let n = ctx.len();
         if n < 2 {
-            return None;
+            return Ok(None);
         }
         let period = (ctx.iteration - 1) / self.options.interval;
-        if self.found_for != Some((period, n)) {
-            let means: Vec<[f32; 3]> = ctx
-                .model
-                .means
-                .chunks_exact(3)
-                .map(|p| [p[0], p[1], p[2]])
-                .collect();
-            self.find(&means, period);
-        }
-        let k = self.neighbours.len() / n;
         let dc = ctx
             .gaussians
             .sh
             .clone()
             .slice([0..n, 0..1, 0..3])
             .reshape([n, 3]);
-        let index = Tensor::<1, Int>::from_data(
-            TensorData::new(self.neighbours.clone(), [n * k]),
-            &dc.device(),
-        );
+        if self.found_for != Some((period, n)) {
+            let means: Vec<[f32; 3]> = ctx
+                .model()?
+                .means
+                .chunks_exact(3)
+                .map(|p| [p[0], p[1], p[2]])
+                .collect();
+            self.find(&means, period);
+            let index = TensorData::new(self.neighbours.clone(), [self.neighbours.len()]);
+            self.index = Some(Tensor::<1, Int>::from_data(index, &dc.device()));
+        }
+        let k = self.neighbours.len() / n;
+        let index = self.index.clone().expect("found above");
         let mean = dc
             .clone()
             .select(0, index)
@@ -406,7 +409,7 @@ impl LossTerm for KnnColorTerm {
             .reshape([n, 3])
             .detach();
         let loss = (dc - mean).powi_scalar(2).sum_dim(1).mean();
-        Some(loss * self.options.weight)
+        Ok(Some(loss * self.options.weight))
     }
 }
 

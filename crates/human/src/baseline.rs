@@ -145,6 +145,7 @@ pub fn splat_per_frame(
     let mut trainer = Trainer::new(run.train.clone(), model, train_views, extent as f32, device)
         .map_err(failed)?;
     trainer.run(|_| {}, |_, _| Ok(())).map_err(failed)?;
+    let model = trainer.into_state().map_err(failed)?.model;
 
     let settings = RenderSettings {
         background: [0.0; 3],
@@ -155,12 +156,7 @@ pub fn splat_per_frame(
         .iter()
         .map(|full| {
             let camera = framing.crop(full).camera(full);
-            render_model(
-                &trainer.state.model,
-                &RenderCamera::from(&camera),
-                &settings,
-            )
-            .rgb
+            render_model(&model, &RenderCamera::from(&camera), &settings).rgb
         })
         .collect())
 }

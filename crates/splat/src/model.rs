@@ -2,6 +2,7 @@
 //! log-scales, w-first quaternions, opacity logits, SH coefficients with `f_dc = (c − 0.5)/C0`).
 
 use burn::tensor::{Device, Tensor, TensorData};
+use fewview_optim::{ReadbackError, f32_values};
 use serde::{Deserialize, Serialize};
 
 use crate::op::GaussianTensors;
@@ -181,6 +182,20 @@ impl GaussianModel {
             },
             sh: if require_grad { sh.require_grad() } else { sh },
         }
+    }
+
+    /// The parameters of `tensors` read back to the host (any device; tracked or not).
+    pub fn from_tensors(tensors: &GaussianTensors) -> Result<Self, ReadbackError> {
+        let [_, sh_coeffs, _] = tensors.sh.dims();
+        let model = Self {
+            means: f32_values(tensors.means.clone(), "means")?,
+            log_scales: f32_values(tensors.log_scales.clone(), "log-scales")?,
+            quats: f32_values(tensors.quats.clone(), "rotations")?,
+            opacity_logits: f32_values(tensors.opacity_logits.clone(), "opacity logits")?,
+            sh: f32_values(tensors.sh.clone(), "SH coefficients")?,
+            sh_coeffs,
+        };
+        Ok(model)
     }
 
     /// Axis-aligned bounds of the centres.

@@ -535,7 +535,7 @@ pub fn train_run_with(
                 extent as f32,
                 device,
             )?;
-            t.state = state;
+            t.set_state(state);
             t
         }
         (None, None) => unreachable!("one of model or state"),
@@ -543,14 +543,15 @@ pub fn train_run_with(
     for term in terms {
         trainer.add_term(term);
     }
-    let resumed_from = (trainer.state.iteration > 0).then_some(trainer.state.iteration);
+    let resumed_from = (trainer.iteration() > 0).then_some(trainer.iteration());
     let start = Instant::now();
     let ckpt_path = run.checkpoint();
     trainer.run(on_progress, |state, config| {
         save_checkpoint(&ckpt_path, config, &resolved.data, state).map_err(|e| e.to_string())
     })?;
     let train_seconds = start.elapsed().as_secs_f64();
-    let model = &trainer.state.model;
+    let iterations = trainer.iteration();
+    let model = &trainer.into_state()?.model;
     write_ply(&run.ply(), model)?;
 
     let settings = RenderSettings {
@@ -569,7 +570,7 @@ pub fn train_run_with(
     let summary = RunSummary {
         dataset: ds.name.clone(),
         init: resolve_init(ds, &cfg.init).name().to_string(),
-        iterations: trainer.state.iteration,
+        iterations,
         gaussians: model.len(),
         train_seconds,
         resumed_from,

@@ -4,6 +4,7 @@
 
 use std::path::PathBuf;
 
+use super::progress::Bar;
 use anyhow::Context;
 use clap::Args as ClapArgs;
 use fewview_metrics::pose_error::PoseError;
@@ -16,7 +17,6 @@ use fewview_surface::{
     Densify, Event, InitialPoses, LoadedInputs, LossSwitches, LossWeights, Overrides, RunConfig,
     RunReport, Scene, Schedule,
 };
-use indicatif::ProgressBar;
 
 use super::dataset_args::DatasetArgs;
 use super::number_args::{non_negative, non_negative_f32};
@@ -499,7 +499,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// Prints a pipeline event above the progress bar (or moves the bar).
-fn print_event(bar: &ProgressBar, e: Event) {
+fn print_event(bar: &Bar, e: Event) {
     match e {
         Event::Matched {
             matches,

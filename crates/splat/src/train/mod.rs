@@ -4,6 +4,7 @@
 pub use fewview_optim::adam;
 pub mod config;
 pub mod densify;
+mod resident;
 pub mod trainer;
 
 pub use config::{DensifyConfig, LearningRates, TrainConfig};

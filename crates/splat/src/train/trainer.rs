@@ -2,6 +2,8 @@
 //! pluggable [`LossTerm`]s, backward, Adam, densification — and checkpoints that resume to the
 //! same result.
 
+use std::cell::OnceCell;
+
 use burn::tensor::{Device, Tensor, TensorData};
 use fewview_optim::{ReadbackError, f32_values};
 use rand::rngs::StdRng;
@@ -9,11 +11,11 @@ use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use super::adam::AdamState;
 use super::config::TrainConfig;
 use super::densify::{DensifyReport, DensifyStats, ModelAdam, densify_and_prune, reset_opacity};
+use super::resident::{Gradients, ResidentState, StepRates};
 use crate::loss::photometric_loss;
-use crate::model::GaussianModel;
+use crate::model::{GaussianModel, inverse_sigmoid};
 use crate::op::{GaussianTensors, RenderTensors, RenderView, render};
 use crate::raster::{RenderCamera, RenderSettings};
 
@@ -126,24 +128,53 @@ pub struct LossContext<'a> {
     pub views: &'a [TrainView],
     /// The parameters being optimised (tracked: losses built from them reach the optimiser).
     pub gaussians: &'a GaussianTensors,
-    /// The same parameters on the host (for neighbour searches and the like).
-    pub model: &'a GaussianModel,
     pub settings: &'a RenderSettings,
     /// Scene extent (radius of the training cameras).
     pub extent: f32,
     /// The photometric render of this iteration.
     pub render: &'a RenderTensors,
+    host: HostModel<'a>,
+}
+
+/// The parameters on the host: at hand when training keeps them there, read back from the
+/// device on first use when it does not.
+enum HostModel<'a> {
+    Ready(&'a GaussianModel),
+    OnDemand(OnceCell<GaussianModel>),
 }
 
 impl LossContext<'_> {
+    /// Number of Gaussians.
+    pub fn len(&self) -> usize {
+        self.gaussians.opacity_logits.dims()[0]
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The same parameters on the host (for neighbour searches and the like). When training
+    /// keeps its state on the device, the first call of an iteration reads them back.
+    pub fn model(&self) -> Result<&GaussianModel, ReadbackError> {
+        match &self.host {
+            HostModel::Ready(model) => Ok(model),
+            HostModel::OnDemand(cell) => {
+                if let Some(model) = cell.get() {
+                    return Ok(model);
+                }
+                let model = GaussianModel::from_tensors(self.gaussians)?;
+                Ok(cell.get_or_init(|| model))
+            }
+        }
+    }
+
     /// Renders the current Gaussians from any camera (e.g. a virtual camera between training
     /// views); gradients flow back to the parameters.
     pub fn render(&self, camera: &RenderCamera) -> RenderTensors {
-        let n = self.model.len();
         let device = self.gaussians.means.device();
         render(
             self.gaussians,
-            Tensor::<2>::zeros([n, 2], &device),
+            Tensor::<2>::zeros([self.len(), 2], &device),
             &RenderView {
                 camera: camera.clone(),
                 settings: self.settings.clone(),
@@ -155,8 +186,9 @@ impl LossContext<'_> {
 /// An extra loss term (e.g. the fusion method of the fusion paper and its ablations).
 pub trait LossTerm: Send {
     fn name(&self) -> &str;
-    /// This term's (already weighted) loss at this iteration, or `None` to skip.
-    fn loss(&mut self, ctx: &LossContext<'_>) -> Option<Tensor<1>>;
+    /// This term's (already weighted) loss at this iteration, `None` to skip, or an error that
+    /// stops training.
+    fn loss(&mut self, ctx: &LossContext<'_>) -> Result<Option<Tensor<1>>, TrainError>;
 }
 
 /// Progress of one iteration, for progress bars and logs.
@@ -197,13 +229,22 @@ pub struct TrainState {
 }
 
 /// A training run.
+///
+/// Between iterations the state lives either on the host ([`TrainState`], the CPU default: the
+/// host kernels read it directly) or on the compute device (the GPU default: parameters, Adam
+/// moments and densification statistics stay in device memory and an iteration reads back only
+/// its loss; see [`Trainer::keep_state_on_device`]). [`Trainer::state`] reads it back either way.
 pub struct Trainer {
     pub config: TrainConfig,
-    pub state: TrainState,
     pub views: Vec<TrainView>,
     /// Scene extent (3DGS: 1.1 × the largest camera distance from their mean).
     pub extent: f32,
     pub device: Device,
+    /// The host copy: current unless `resident` is ahead of it.
+    state: TrainState,
+    /// The device copy, when the state is kept on the device.
+    resident: Option<ResidentState>,
+    keep_on_device: bool,
     terms: Vec<Box<dyn LossTerm>>,
 }
 
@@ -243,9 +284,65 @@ impl Trainer {
             state,
             views,
             extent,
+            keep_on_device: device != Device::flex(),
             device,
+            resident: None,
             terms: Vec::new(),
         })
+    }
+
+    /// Keeps the state on the compute device between iterations (`true`) or on the host
+    /// (`false`). The default is the device for a GPU and the host for the CPU, where the two
+    /// compute the same bits.
+    pub fn keep_state_on_device(&mut self, on: bool) -> Result<(), TrainError> {
+        if !on {
+            self.sync_host()?;
+            self.resident = None;
+        }
+        self.keep_on_device = on;
+        Ok(())
+    }
+
+    /// Iterations completed.
+    pub fn iteration(&self) -> usize {
+        self.state.iteration
+    }
+
+    /// The training state, read back from the device first when it is kept there.
+    pub fn state(&mut self) -> Result<&TrainState, TrainError> {
+        self.sync_host()?;
+        Ok(&self.state)
+    }
+
+    /// The training state to change in place (a device copy is uploaded again afterwards).
+    pub fn state_mut(&mut self) -> Result<&mut TrainState, TrainError> {
+        self.sync_host()?;
+        self.resident = None;
+        Ok(&mut self.state)
+    }
+
+    /// Replaces the training state (resuming from a checkpoint).
+    pub fn set_state(&mut self, state: TrainState) {
+        self.state = state;
+        self.resident = None;
+    }
+
+    /// The state without the trainer.
+    pub fn into_state(mut self) -> Result<TrainState, TrainError> {
+        self.sync_host()?;
+        Ok(self.state)
+    }
+
+    /// Brings the host copy up to date with the device copy.
+    fn sync_host(&mut self) -> Result<(), TrainError> {
+        if let Some(resident) = self.resident.as_mut().filter(|r| r.ahead_of_host) {
+            let (model, adam, stats) = resident.download()?;
+            self.state.model = model;
+            self.state.adam = adam;
+            self.state.stats = stats;
+            resident.ahead_of_host = false;
+        }
+        Ok(())
     }
 
     pub fn add_term(&mut self, term: Box<dyn LossTerm>) {
@@ -300,18 +397,61 @@ impl Trainer {
     /// Runs one iteration.
     pub fn step(&mut self) -> Result<Progress, TrainError> {
         let it = self.state.iteration + 1;
-        let cfg = self.config.clone();
+        if self.keep_on_device && self.resident.is_none() {
+            let s = &self.state;
+            let resident = ResidentState::upload(&s.model, &s.adam, &s.stats, &self.device);
+            self.resident = Some(resident);
+        }
+        let gaussians = match &self.resident {
+            Some(resident) => resident.tracked(),
+            None => self.state.model.to_tensors(&self.device, true),
+        };
+        let n = gaussians.opacity_logits.dims()[0];
+        let probe = Tensor::<2>::zeros([n, 2], &self.device).require_grad();
+        let (loss, loss_value, radii) = self.loss(it, &gaussians, &probe)?;
+        let grads = loss.backward();
+        let grads = Gradients::of(&gaussians, &probe, &grads);
+        drop(gaussians);
+        let densified = if self.resident.is_some() {
+            self.update_on_device(it, grads, radii)?
+        } else {
+            self.update_on_host(it, grads, radii)?
+        };
+        let left = self
+            .resident
+            .as_ref()
+            .map_or(self.state.model.len(), |r| r.len());
+        if left == 0 {
+            return Err(TrainError::NoGaussiansLeft {
+                iteration: it,
+                before: n,
+            });
+        }
+        self.state.iteration = it;
+        Ok(Progress {
+            iteration: it,
+            iterations: self.config.iterations,
+            loss: loss_value,
+            gaussians: left,
+            densified,
+        })
+    }
+
+    /// The iteration's loss (photometric plus the terms), its value, and the render's screen
+    /// radii. A loss that is not finite stops training.
+    fn loss(
+        &mut self,
+        it: usize,
+        gaussians: &GaussianTensors,
+        probe: &Tensor<2>,
+    ) -> Result<(Tensor<1>, f32, Tensor<1>), TrainError> {
         let view_index = self.view_of(it);
         let mut settings = self.settings(it);
         let (background, target) = self.background_and_target(it, &self.views[view_index]);
         settings.background = background;
-        let n = self.state.model.len();
-
-        let gaussians = self.state.model.to_tensors(&self.device, true);
-        let probe = Tensor::<2>::zeros([n, 2], &self.device).require_grad();
         let view = &self.views[view_index];
         let out = render(
-            &gaussians,
+            gaussians,
             probe.clone(),
             &RenderView {
                 camera: view.camera.clone(),
@@ -324,22 +464,23 @@ impl Trainer {
             Some(valid) => (rgb * valid.clone(), target * valid.clone()),
             None => (rgb, target),
         };
-        let mut loss = photometric_loss(rgb, target, cfg.lambda_dssim);
-        {
-            let ctx = LossContext {
-                iteration: it,
-                view_index,
-                views: &self.views,
-                gaussians: &gaussians,
-                model: &self.state.model,
-                settings: &settings,
-                extent: self.extent,
-                render: &out,
-            };
-            for term in &mut self.terms {
-                if let Some(extra) = term.loss(&ctx) {
-                    loss = loss + extra;
-                }
+        let mut loss = photometric_loss(rgb, target, self.config.lambda_dssim);
+        let ctx = LossContext {
+            iteration: it,
+            view_index,
+            views: &self.views,
+            gaussians,
+            settings: &settings,
+            extent: self.extent,
+            render: &out,
+            host: match self.resident {
+                Some(_) => HostModel::OnDemand(OnceCell::new()),
+                None => HostModel::Ready(&self.state.model),
+            },
+        };
+        for term in &mut self.terms {
+            if let Some(extra) = term.loss(&ctx)? {
+                loss = loss + extra;
             }
         }
         let loss_value = f32_values(loss.clone(), "loss")?
@@ -352,108 +493,129 @@ impl Trainer {
                 loss: loss_value,
             });
         }
-        let grads = loss.backward();
-        // A parameter the loss did not reach has no gradient: zeros. One that cannot be read
-        // is an error, never a silently zeroed step.
-        fn gradient<const D: usize>(
-            t: Option<Tensor<D>>,
-            len: usize,
-            what: &str,
-        ) -> Result<Vec<f32>, ReadbackError> {
-            match t {
-                Some(t) => f32_values(t, what),
-                None => Ok(vec![0.0; len]),
-            }
-        }
-        let g_means = gradient(gaussians.means.grad(&grads), n * 3, "gradient of means")?;
-        let g_scales = gradient(
-            gaussians.log_scales.grad(&grads),
-            n * 3,
-            "gradient of scales",
-        )?;
-        let g_quats = gradient(gaussians.quats.grad(&grads), n * 4, "gradient of rotations")?;
-        let g_opacity = gradient(
-            gaussians.opacity_logits.grad(&grads),
-            n,
-            "gradient of opacities",
-        )?;
-        let k3 = self.state.model.sh_coeffs * 3;
-        let g_sh = gradient(gaussians.sh.grad(&grads), n * k3, "gradient of SH")?;
-        let g_probe = gradient(probe.grad(&grads), n * 2, "screen-space gradient")?;
-        let radii = f32_values(out.radii, "screen radii")?;
-        if [&g_means, &g_scales, &g_quats, &g_opacity, &g_sh]
-            .iter()
-            .any(|g| g.iter().any(|v| !v.is_finite()))
-        {
+        Ok((loss, loss_value, out.radii))
+    }
+
+    /// Densification and Adam on the host state. A gradient that is not finite stops training.
+    fn update_on_host(
+        &mut self,
+        it: usize,
+        grads: Gradients,
+        radii: Tensor<1>,
+    ) -> Result<Option<DensifyReport>, TrainError> {
+        let host = HostGradients::read(grads)?;
+        if host.any_not_finite() {
             return Err(TrainError::Diverged {
                 iteration: it,
                 loss: f32::NAN,
             });
         }
-
-        // Densification (before the optimiser step, as the reference code; an iteration that
-        // densifies skips the step because its gradients belong to the old set).
-        let d = &cfg.densify;
+        let radii = f32_values(radii, "screen radii")?;
+        let d = &self.config.densify;
         let mut densified = None;
         if it < d.until_iter {
-            self.state.stats.record(&radii, &g_probe);
-            if it > d.from_iter && it.is_multiple_of(d.interval) {
-                let screen = (it > d.opacity_reset_interval).then_some(d.max_screen_size);
-                let mut rng = self.rng(it, 2);
-                densified = Some(densify_and_prune(
-                    &mut self.state.model,
-                    &mut self.state.adam,
-                    &mut self.state.stats,
-                    d,
-                    self.extent,
-                    screen,
-                    &mut rng,
-                ));
-            }
-            if it.is_multiple_of(d.opacity_reset_interval) {
-                reset_opacity(&mut self.state.model, &mut self.state.adam);
-            }
+            self.state.stats.record(&radii, &host.means2d);
+            densified = self.densify_on_host(it)?;
         }
-        if self.state.model.is_empty() {
-            return Err(TrainError::NoGaussiansLeft {
-                iteration: it,
-                before: n,
-            });
+        if densified.is_none() && !self.state.model.is_empty() {
+            let rates = self.rates(it);
+            let (m, a, cfg) = (
+                &mut self.state.model,
+                &mut self.state.adam,
+                &self.config.adam,
+            );
+            a.means.step(&mut m.means, &host.means, rates.means, cfg);
+            a.log_scales
+                .step(&mut m.log_scales, &host.log_scales, rates.log_scales, cfg);
+            a.quats.step(&mut m.quats, &host.quats, rates.quats, cfg);
+            a.opacity_logits.step(
+                &mut m.opacity_logits,
+                &host.opacity_logits,
+                rates.opacity_logits,
+                cfg,
+            );
+            let sh_rate = |col: usize| if col < 3 { rates.sh_dc } else { rates.sh_rest };
+            a.sh.step_per_column(&mut m.sh, &host.sh, sh_rate, cfg);
         }
-        if densified.is_none() {
-            self.adam_step(it, &g_means, &g_scales, &g_quats, &g_opacity, &g_sh);
-        }
-        self.state.iteration = it;
-        Ok(Progress {
-            iteration: it,
-            iterations: cfg.iterations,
-            loss: loss_value,
-            gaussians: self.state.model.len(),
-            densified,
-        })
+        Ok(densified)
     }
 
-    fn adam_step(
+    /// Densification and Adam on the device state; densification itself goes through the host
+    /// (see [`super::resident`]). Gradients are not read back: one that is not finite makes the
+    /// next iteration's loss non-finite, which stops training there.
+    fn update_on_device(
         &mut self,
         it: usize,
-        gm: &[f32],
-        gs: &[f32],
-        gq: &[f32],
-        go: &[f32],
-        gsh: &[f32],
-    ) {
-        let cfg = &self.config;
-        let lr = &cfg.lr;
-        let m = &mut self.state.model;
-        let a = &mut self.state.adam;
-        let pos_lr = cfg.position_lr(it, self.extent);
-        a.means.step(&mut m.means, gm, pos_lr, &cfg.adam);
-        a.log_scales
-            .step(&mut m.log_scales, gs, lr.scaling, &cfg.adam);
-        a.quats.step(&mut m.quats, gq, lr.rotation, &cfg.adam);
-        a.opacity_logits
-            .step(&mut m.opacity_logits, go, lr.opacity, &cfg.adam);
-        step_sh(&mut a.sh, &mut m.sh, gsh, lr.f_dc, lr.f_rest, cfg);
+        grads: Gradients,
+        radii: Tensor<1>,
+    ) -> Result<Option<DensifyReport>, TrainError> {
+        let d = &self.config.densify;
+        let mut densified = None;
+        if it < d.until_iter {
+            let resident = self.resident.as_mut().expect("called with a device state");
+            resident.record(radii, grads.means2d.clone());
+            if self.densifies_at(it) {
+                self.sync_host()?;
+                densified = self.densify_on_host(it)?;
+                let s = &self.state;
+                let resident = ResidentState::upload(&s.model, &s.adam, &s.stats, &self.device);
+                self.resident = Some(resident);
+            } else if it.is_multiple_of(d.opacity_reset_interval) {
+                let resident = self.resident.as_mut().expect("called with a device state");
+                resident.reset_opacity(inverse_sigmoid(0.01));
+            }
+        }
+        if densified.is_none() {
+            let rates = self.rates(it);
+            let resident = self.resident.as_mut().expect("called with a device state");
+            resident.adam_step(grads, &rates, &self.config.adam);
+        }
+        Ok(densified)
+    }
+
+    /// Whether iteration `it` clones, splits and prunes.
+    fn densifies_at(&self, it: usize) -> bool {
+        let d = &self.config.densify;
+        it < d.until_iter && it > d.from_iter && it.is_multiple_of(d.interval)
+    }
+
+    /// The host half of densification at iteration `it`: clone, split and prune when it is
+    /// due, then the periodic opacity reset (before the optimiser step, as the reference code;
+    /// an iteration that densifies skips the step because its gradients belong to the old set).
+    fn densify_on_host(&mut self, it: usize) -> Result<Option<DensifyReport>, TrainError> {
+        let d = &self.config.densify;
+        let mut densified = None;
+        if self.densifies_at(it) {
+            let screen = (it > d.opacity_reset_interval).then_some(d.max_screen_size);
+            let mut rng = self.rng(it, 2);
+            let s = &mut self.state;
+            densified = Some(densify_and_prune(
+                &mut s.model,
+                &mut s.adam,
+                &mut s.stats,
+                d,
+                self.extent,
+                screen,
+                &mut rng,
+            ));
+        }
+        if it.is_multiple_of(d.opacity_reset_interval) {
+            reset_opacity(&mut self.state.model, &mut self.state.adam);
+        }
+        Ok(densified)
+    }
+
+    /// The learning rates of iteration `it`.
+    fn rates(&self, it: usize) -> StepRates {
+        let lr = &self.config.lr;
+        StepRates {
+            means: self.config.position_lr(it, self.extent),
+            log_scales: lr.scaling,
+            quats: lr.rotation,
+            opacity_logits: lr.opacity,
+            sh_dc: lr.f_dc,
+            sh_rest: lr.f_rest,
+        }
     }
 
     /// Trains to the end (or until `should_stop` says so), reporting progress and saving
@@ -468,28 +630,48 @@ impl Trainer {
             on_progress(&p);
             let every = self.config.checkpoint_interval;
             if every > 0 && p.iteration % every == 0 && !self.is_done() {
+                self.sync_host()?;
                 checkpoint(&self.state, &self.config).map_err(TrainError::Invalid)?;
             }
         }
-        Ok(())
+        self.sync_host()
     }
 }
 
-/// Adam on the SH coefficients with the DC band and the higher bands at their own rates.
-fn step_sh(
-    state: &mut AdamState,
-    params: &mut [f32],
-    grads: &[f32],
-    lr_dc: f32,
-    lr_rest: f32,
-    cfg: &TrainConfig,
-) {
-    state.step_per_column(
-        params,
-        grads,
-        |col| if col < 3 { lr_dc } else { lr_rest },
-        &cfg.adam,
-    );
+/// One iteration's gradients read back to the host.
+struct HostGradients {
+    means: Vec<f32>,
+    log_scales: Vec<f32>,
+    quats: Vec<f32>,
+    opacity_logits: Vec<f32>,
+    sh: Vec<f32>,
+    means2d: Vec<f32>,
+}
+
+impl HostGradients {
+    /// Reads `grads`; one that cannot be read is an error, never a silently zeroed step.
+    fn read(grads: Gradients) -> Result<Self, ReadbackError> {
+        Ok(Self {
+            means: f32_values(grads.means, "gradient of means")?,
+            log_scales: f32_values(grads.log_scales, "gradient of scales")?,
+            quats: f32_values(grads.quats, "gradient of rotations")?,
+            opacity_logits: f32_values(grads.opacity_logits, "gradient of opacities")?,
+            sh: f32_values(grads.sh, "gradient of SH")?,
+            means2d: f32_values(grads.means2d, "screen-space gradient")?,
+        })
+    }
+
+    fn any_not_finite(&self) -> bool {
+        [
+            &self.means,
+            &self.log_scales,
+            &self.quats,
+            &self.opacity_logits,
+            &self.sh,
+        ]
+        .iter()
+        .any(|g| g.iter().any(|v| !v.is_finite()))
+    }
 }
 
 #[cfg(test)]

@@ -1,0 +1,263 @@
+//! The training state kept on the compute device between iterations: parameters, Adam moments
+//! and densification statistics as Burn tensors, so that a GPU iteration uploads nothing and
+//! reads back only the loss.
+//!
+//! The arithmetic is the host code's, operation for operation ([`fewview_optim::adam`] and
+//! [`DensifyStats::record`]), so on the CPU backend the two give the same bits. Densification
+//! itself (clone, split, prune: a few times per thousand iterations) downloads the state, runs
+//! the host step with the same random draws, and uploads the result.
+
+use burn::tensor::{Device, Tensor, TensorData};
+use fewview_optim::adam::{AdamConfig, AdamState};
+use fewview_optim::{ReadbackError, f32_values};
+
+use super::densify::{DensifyStats, ModelAdam};
+use crate::model::GaussianModel;
+use crate::op::GaussianTensors;
+
+/// Adam moments of one parameter group on the device.
+struct Moments<const D: usize> {
+    m: Tensor<D>,
+    v: Tensor<D>,
+    /// Steps taken, for bias correction (as [`AdamState::step`]).
+    step: u64,
+}
+
+impl<const D: usize> Moments<D> {
+    fn upload(state: &AdamState, shape: [usize; D], device: &Device) -> Self {
+        Self {
+            m: tensor(&state.m, shape, device),
+            v: tensor(&state.v, shape, device),
+            step: state.step,
+        }
+    }
+
+    fn download(&self, width: usize, what: &str) -> Result<AdamState, ReadbackError> {
+        Ok(AdamState {
+            width,
+            m: f32_values(self.m.clone(), &format!("Adam first moment of {what}"))?,
+            v: f32_values(self.v.clone(), &format!("Adam second moment of {what}"))?,
+            step: self.step,
+        })
+    }
+
+    /// One Adam step of `param` with gradient `grad`, written as [`AdamState::step_per_column`]
+    /// writes it so that the rounding is the same:
+    /// `m ← β₁m + (1−β₁)g`, `v ← β₂v + ((1−β₂)g)g`, `p ← p − (lr/bc₁)·m / (√v/√bc₂ + ε)`.
+    /// `scale(m, bc₁)` gives `(lr/bc₁)·m` (one rate, or one per column).
+    fn step(
+        &mut self,
+        param: Tensor<D>,
+        grad: Tensor<D>,
+        scale: impl FnOnce(Tensor<D>, f32) -> Tensor<D>,
+        cfg: &AdamConfig,
+    ) -> Tensor<D> {
+        self.step += 1;
+        let t = self.step as i32;
+        let bc1 = 1.0 - cfg.beta1.powi(t);
+        let bc2_sqrt = (1.0 - cfg.beta2.powi(t)).sqrt();
+        let m = self.m.clone() * cfg.beta1 + grad.clone() * (1.0 - cfg.beta1);
+        let v = self.v.clone() * cfg.beta2 + grad.clone() * (1.0 - cfg.beta2) * grad;
+        let denom = v.clone().sqrt() / bc2_sqrt + cfg.eps;
+        let scaled = scale(m.clone(), bc1);
+        self.m = m;
+        self.v = v;
+        param - scaled / denom
+    }
+
+    fn reset(&mut self) {
+        self.m = self.m.zeros_like();
+        self.v = self.v.zeros_like();
+    }
+}
+
+/// The gradients of one iteration, shaped as the parameters.
+pub(crate) struct Gradients {
+    pub means: Tensor<2>,
+    pub log_scales: Tensor<2>,
+    pub quats: Tensor<2>,
+    pub opacity_logits: Tensor<1>,
+    pub sh: Tensor<3>,
+    /// `[N, 2]`: the loss gradient at each projected centre (see [`crate::op::SplatInputs`]).
+    pub means2d: Tensor<2>,
+}
+
+/// Learning rates of one Adam step.
+pub(crate) struct StepRates {
+    pub means: f32,
+    pub log_scales: f32,
+    pub quats: f32,
+    pub opacity_logits: f32,
+    pub sh_dc: f32,
+    pub sh_rest: f32,
+}
+
+/// Parameters, Adam moments and densification statistics on the device.
+pub(crate) struct ResidentState {
+    params: GaussianTensors,
+    means: Moments<2>,
+    log_scales: Moments<2>,
+    quats: Moments<2>,
+    opacity_logits: Moments<1>,
+    sh: Moments<3>,
+    grad_accum: Tensor<1>,
+    denom: Tensor<1>,
+    max_radii: Tensor<1>,
+    sh_coeffs: usize,
+    /// Whether the device holds steps the host copy has not seen.
+    pub ahead_of_host: bool,
+}
+
+impl ResidentState {
+    /// Uploads the host state.
+    pub fn upload(
+        model: &GaussianModel,
+        adam: &ModelAdam,
+        stats: &DensifyStats,
+        device: &Device,
+    ) -> Self {
+        let (n, k) = (model.len(), model.sh_coeffs);
+        Self {
+            params: model.to_tensors(device, false),
+            means: Moments::upload(&adam.means, [n, 3], device),
+            log_scales: Moments::upload(&adam.log_scales, [n, 3], device),
+            quats: Moments::upload(&adam.quats, [n, 4], device),
+            opacity_logits: Moments::upload(&adam.opacity_logits, [n], device),
+            sh: Moments::upload(&adam.sh, [n, k, 3], device),
+            grad_accum: tensor(&stats.grad_accum, [n], device),
+            denom: tensor(&stats.denom, [n], device),
+            max_radii: tensor(&stats.max_radii, [n], device),
+            sh_coeffs: k,
+            ahead_of_host: false,
+        }
+    }
+
+    /// Reads everything back into host form.
+    pub fn download(&self) -> Result<(GaussianModel, ModelAdam, DensifyStats), ReadbackError> {
+        let model = GaussianModel::from_tensors(&self.params)?;
+        let k3 = self.sh_coeffs * 3;
+        let adam = ModelAdam {
+            means: self.means.download(3, "means")?,
+            log_scales: self.log_scales.download(3, "scales")?,
+            quats: self.quats.download(4, "rotations")?,
+            opacity_logits: self.opacity_logits.download(1, "opacities")?,
+            sh: self.sh.download(k3, "SH")?,
+        };
+        let stats = DensifyStats {
+            grad_accum: f32_values(self.grad_accum.clone(), "densification gradient sums")?,
+            denom: f32_values(self.denom.clone(), "densification view counts")?,
+            max_radii: f32_values(self.max_radii.clone(), "largest screen radii")?,
+        };
+        Ok((model, adam, stats))
+    }
+
+    /// Number of Gaussians.
+    pub fn len(&self) -> usize {
+        self.params.opacity_logits.dims()[0]
+    }
+
+    /// The parameters as leaves of a new autodiff graph.
+    pub fn tracked(&self) -> GaussianTensors {
+        let p = &self.params;
+        GaussianTensors {
+            means: p.means.clone().require_grad(),
+            log_scales: p.log_scales.clone().require_grad(),
+            quats: p.quats.clone().require_grad(),
+            opacity_logits: p.opacity_logits.clone().require_grad(),
+            sh: p.sh.clone().require_grad(),
+        }
+    }
+
+    /// [`DensifyStats::record`] on the device: for each Gaussian with a positive radius, the
+    /// largest radius, the sum of `‖∂L/∂μ₂ᴰ‖` and the count of renders.
+    pub fn record(&mut self, radii: Tensor<1>, means2d_grad: Tensor<2>) {
+        let visible = radii.clone().greater_elem(0.0);
+        let n = self.len();
+        let norm = (means2d_grad.clone() * means2d_grad)
+            .sum_dim(1)
+            .reshape([n])
+            .sqrt();
+        let accum = self.grad_accum.clone();
+        self.grad_accum = accum.clone().mask_where(visible.clone(), accum + norm);
+        let denom = self.denom.clone();
+        self.denom = denom.clone().mask_where(visible, denom + 1.0);
+        self.max_radii = self.max_radii.clone().max_pair(radii);
+        self.ahead_of_host = true;
+    }
+
+    /// One Adam step of every group; the SH DC band and the higher bands at their own rates.
+    pub fn adam_step(&mut self, grads: Gradients, rates: &StepRates, cfg: &AdamConfig) {
+        let p = &mut self.params;
+        let device = p.means.device();
+        p.means = self
+            .means
+            .step(p.means.clone(), grads.means, by(rates.means), cfg);
+        p.log_scales = self.log_scales.step(
+            p.log_scales.clone(),
+            grads.log_scales,
+            by(rates.log_scales),
+            cfg,
+        );
+        p.quats = self
+            .quats
+            .step(p.quats.clone(), grads.quats, by(rates.quats), cfg);
+        p.opacity_logits = self.opacity_logits.step(
+            p.opacity_logits.clone(),
+            grads.opacity_logits,
+            by(rates.opacity_logits),
+            cfg,
+        );
+        let k = self.sh_coeffs;
+        let band_rates: Vec<f32> = (0..k)
+            .flat_map(|c| [if c == 0 { rates.sh_dc } else { rates.sh_rest }; 3])
+            .collect();
+        let band_rates = tensor(&band_rates, [1, k, 3], &device);
+        p.sh = self.sh.step(
+            p.sh.clone(),
+            grads.sh,
+            |m, bc1| m * band_rates.div_scalar(bc1),
+            cfg,
+        );
+        self.ahead_of_host = true;
+    }
+
+    /// [`super::densify::reset_opacity`] on the device.
+    pub fn reset_opacity(&mut self, cap: f32) {
+        let o = self.params.opacity_logits.clone();
+        self.params.opacity_logits = o.clamp_max(cap);
+        self.opacity_logits.reset();
+        self.ahead_of_host = true;
+    }
+}
+
+impl Gradients {
+    /// The gradients of `gaussians` and of the screen-space probe in `grads`; zeros for a
+    /// parameter the loss did not reach.
+    pub fn of(
+        gaussians: &GaussianTensors,
+        means2d: &Tensor<2>,
+        grads: &burn::tensor::Gradients,
+    ) -> Self {
+        fn or_zeros<const D: usize>(g: Option<Tensor<D>>, like: &Tensor<D>) -> Tensor<D> {
+            g.unwrap_or_else(|| like.clone().detach().zeros_like())
+        }
+        let g = gaussians;
+        Self {
+            means: or_zeros(g.means.grad(grads), &g.means),
+            log_scales: or_zeros(g.log_scales.grad(grads), &g.log_scales),
+            quats: or_zeros(g.quats.grad(grads), &g.quats),
+            opacity_logits: or_zeros(g.opacity_logits.grad(grads), &g.opacity_logits),
+            sh: or_zeros(g.sh.grad(grads), &g.sh),
+            means2d: or_zeros(means2d.grad(grads), means2d),
+        }
+    }
+}
+
+/// `(lr/bc₁)·m` for a group with one learning rate.
+fn by<const D: usize>(lr: f32) -> impl FnOnce(Tensor<D>, f32) -> Tensor<D> {
+    move |m, bc1| m * (lr / bc1)
+}
+
+fn tensor<const D: usize>(values: &[f32], shape: [usize; D], device: &Device) -> Tensor<D> {
+    Tensor::<D>::from_data(TensorData::new(values.to_vec(), shape), device)
+}
