@@ -31,6 +31,16 @@ pub struct GpuRasterBench {
     pub speedup_forward_backward: f64,
     /// Bytes the device allocator held after the timed runs (an upper bound of the peak).
     pub device_bytes_reserved: Option<u64>,
+    /// Median seconds of each stage of a forward+backward pass, in separate runs that wait for
+    /// the device after every stage (so their sum exceeds `forward_backward_seconds`).
+    pub stages: Vec<StageTime>,
+}
+
+/// One rasterizer stage's median wall time.
+#[derive(Clone, Debug, Serialize)]
+pub struct StageTime {
+    pub stage: String,
+    pub seconds: f64,
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -98,6 +108,17 @@ pub fn gpu_raster_bench(
     step(true)?;
     let forward_seconds = median((0..runs).map(|_| step(false)).collect::<Result<_, _>>()?);
     let forward_backward_seconds = median((0..runs).map(|_| step(true)).collect::<Result<_, _>>()?);
+    crate::gpu::profile::start();
+    for _ in 0..runs {
+        step(true)?;
+    }
+    let stages = crate::gpu::profile::finish()
+        .into_iter()
+        .map(|(stage, times)| StageTime {
+            stage: stage.to_string(),
+            seconds: median(times),
+        })
+        .collect();
     let refs = scene.refs();
     let cpu_runs = runs.min(3);
     let cpu_forward_seconds = median(
@@ -132,5 +153,6 @@ pub fn gpu_raster_bench(
         speedup_forward: cpu_forward_seconds / forward_seconds,
         speedup_forward_backward: cpu_forward_backward_seconds / forward_backward_seconds,
         device_bytes_reserved: device.memory_pool_usage().map(|u| u.bytes_reserved),
+        stages,
     })
 }

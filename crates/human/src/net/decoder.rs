@@ -12,12 +12,11 @@
 use burn::module::Module;
 use burn::nn::conv::Conv2d;
 use burn::tensor::activation::relu;
-use burn::tensor::module::interpolate;
-use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
 use burn::tensor::{Device, Tensor};
 
 use super::config::NetConfig;
 use super::residual::{Stage, conv};
+use super::resize::resize;
 
 /// Decoder stages, finest level first, and the full-resolution fusion convolution.
 #[derive(Module, Debug)]
@@ -72,17 +71,4 @@ fn join(coarse: Option<Tensor<4>>, skips: impl Iterator<Item = Tensor<4>>) -> Ve
     let mut parts: Vec<Tensor<4>> = coarse.map(|c| resize(c, [h, w])).into_iter().collect();
     parts.extend(skips);
     parts
-}
-
-/// Bilinear resampling with half-pixel centres (PyTorch's `align_corners=False`, what
-/// GPS-Gaussian's `nn.Upsample` uses); the identity when the size already matches.
-fn resize(x: Tensor<4>, size: [usize; 2]) -> Tensor<4> {
-    let [_, _, h, w] = x.dims();
-    if [h, w] == size {
-        return x;
-    }
-    let options = InterpolateOptions::new(InterpolateMode::Bilinear)
-        .with_align_corners(false)
-        .with_output_size(size);
-    interpolate(x, options)
 }

@@ -19,6 +19,7 @@ pub mod heads;
 pub mod model;
 pub mod posemap;
 pub mod residual;
+pub mod resize;
 pub mod se;
 pub mod seed;
 

@@ -35,7 +35,37 @@ pub fn read_u32_at(client: &Client, handle: &Handle, index: usize) -> u32 {
     u32::from_bytes(&bytes)[0]
 }
 
-/// Cubes of `units` units covering `n` elements, one element per unit.
+/// The most cubes a launch may have along one axis (WebGPU's and Vulkan's usual limit).
+pub const MAX_CUBES_PER_AXIS: usize = 65_535;
+
+/// Cubes of `units` units covering `n` elements, one element per unit. Beyond
+/// [`MAX_CUBES_PER_AXIS`] cubes (16.7M elements at 256 units) the grid is two-dimensional; the
+/// kernels read their linear `CUBE_POS` and `ABSOLUTE_POS`, and the few surplus cubes at the end
+/// of the grid find no element (kernels that write per cube check `CUBE_POS` against their block
+/// count).
 pub fn cubes_for(n: usize, units: usize) -> CubeCount {
-    CubeCount::Static(n.div_ceil(units).max(1) as u32, 1, 1)
+    let (x, y) = grid(n.div_ceil(units).max(1));
+    CubeCount::Static(x as u32, y as u32, 1)
+}
+
+/// `(x, y)` with `x ≤ MAX_CUBES_PER_AXIS` and `x·y ≥ cubes`, the surplus below `y`.
+fn grid(cubes: usize) -> (usize, usize) {
+    let y = cubes.div_ceil(MAX_CUBES_PER_AXIS);
+    (cubes.div_ceil(y), y)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn large_launches_become_two_dimensional_grids_with_little_surplus() {
+        assert_eq!(grid(1), (1, 1));
+        assert_eq!(grid(MAX_CUBES_PER_AXIS), (MAX_CUBES_PER_AXIS, 1));
+        assert_eq!(grid(MAX_CUBES_PER_AXIS + 1), (32_768, 2));
+        for cubes in [70_000, 1_000_000, 4_000_003] {
+            let (x, y) = grid(cubes);
+            assert!(x <= MAX_CUBES_PER_AXIS && x * y >= cubes && x * y - cubes < y);
+        }
+    }
 }

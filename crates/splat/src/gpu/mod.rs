@@ -15,6 +15,7 @@
 
 pub mod blend;
 mod launch;
+pub mod profile;
 pub mod project;
 pub mod render;
 pub mod scan;

@@ -14,6 +14,7 @@ use cubecl::server::Handle;
 
 use super::blend::{TILE_UNITS, blend_backward, blend_forward};
 use super::launch::{alloc, arg, cubes_for, read_u32_at, upload_f32};
+use super::profile::StageClock;
 use super::project::{CameraBuffer, GRAD_FLOATS, SPLAT_FLOATS, project_backward, project_forward};
 use super::scan::exclusive_scan;
 use super::sort::{bits_for, indices, sort_pairs};
@@ -138,17 +139,19 @@ pub fn forward(tensors: [CubeTensor; 6], view: &RenderView) -> (CubeTensor, Cube
         last: alloc(&client, cam.num_pixels()),
     };
     let radii = alloc(&client, n);
-    project(&mut state, &radii);
-    bin(&mut state);
+    let mut clock = StageClock::start(&client);
+    project(&mut state, &radii, &mut clock);
+    bin(&mut state, &mut clock);
     let image = alloc(&client, cam.num_pixels() * OUT_CHANNELS);
     blend(&state, &image);
+    clock.stage("blend");
     let image = state.tensor(image, Shape::new([cam.height, cam.width, OUT_CHANNELS]));
     let radii = state.tensor(radii, Shape::new([n]));
     (image, radii, state)
 }
 
 /// Projection and the depth sort: fills `splats`, `rects`, `radii` and `order`.
-fn project(s: &mut GpuState, radii: &Handle) {
+fn project(s: &mut GpuState, radii: &Handle, clock: &mut StageClock) {
     let (client, n) = (&s.client, s.n);
     if n == 0 {
         return;
@@ -175,12 +178,14 @@ fn project(s: &mut GpuState, radii: &Handle) {
         s.width as u32,
         s.height as u32,
     );
+    clock.stage("project");
     let (_, order) = sort_pairs(client, &depth_keys, &indices(client, n), n, 32);
     s.order = order;
+    clock.stage("depth sort");
 }
 
 /// Tile binning: pair offsets per depth rank, the pairs sorted by tile, and each tile's range.
-fn bin(s: &mut GpuState) {
+fn bin(s: &mut GpuState, clock: &mut StageClock) {
     let (client, n) = (s.client.clone(), s.n);
     let (tiles_x, tiles_y) = s.tiles();
     let num_tiles = tiles_x * tiles_y;
@@ -196,6 +201,7 @@ fn bin(s: &mut GpuState) {
     );
     s.offsets = exclusive_scan(&client, &counts, n + 1);
     s.pairs = read_u32_at(&client, &s.offsets, n) as usize;
+    clock.stage("tile counts");
     let pairs = s.pairs;
     let (keys, slots) = (alloc(&client, pairs), alloc(&client, pairs));
     s.slot_gaussian = alloc(&client, pairs);
@@ -214,9 +220,11 @@ fn bin(s: &mut GpuState) {
             tiles_x as u32,
         );
     }
+    clock.stage("pair emission");
     let (sorted_keys, sorted_slots) =
         sort_pairs(&client, &keys, &slots, pairs, bits_for(num_tiles));
     s.sorted_slots = sorted_slots;
+    clock.stage("tile sort");
     s.ranges = alloc(&client, 2 * num_tiles);
     tile_ranges::launch(
         &client,
@@ -227,6 +235,7 @@ fn bin(s: &mut GpuState) {
         pairs as u32,
         num_tiles as u32,
     );
+    clock.stage("tile ranges");
 }
 
 fn tile_cubes(s: &GpuState) -> (CubeCount, CubeDim) {
@@ -281,6 +290,7 @@ pub fn backward(s: &GpuState, grad_image: CubeTensor) -> [CubeTensor; 6] {
     let (n, pairs, pixels) = (s.n, s.pairs, s.width * s.height);
     let (tiles_x, tiles_y) = s.tiles();
     let pair_grads = alloc(client, GRAD_FLOATS * pairs);
+    let mut clock = StageClock::start(client);
     let (count, dim) = tile_cubes(s);
     blend_backward::launch(
         client,
@@ -300,6 +310,7 @@ pub fn backward(s: &GpuState, grad_image: CubeTensor) -> [CubeTensor; 6] {
         tiles_x as u32,
         plane_reduction(client),
     );
+    clock.stage("blend backward");
     let splat_grads = alloc(client, GRAD_FLOATS * n);
     let k3 = 3 * s.sh_coeffs;
     let outs = [3 * n, 3 * n, 4 * n, n, k3 * n, 2 * n].map(|len| alloc(client, len));
@@ -315,6 +326,7 @@ pub fn backward(s: &GpuState, grad_image: CubeTensor) -> [CubeTensor; 6] {
             n as u32,
             GRAD_FLOATS,
         );
+        clock.stage("gradient gather");
         let [means, scales, quats, opacity, sh, _] = &s.inputs;
         project_backward::launch(
             client,
@@ -340,6 +352,7 @@ pub fn backward(s: &GpuState, grad_image: CubeTensor) -> [CubeTensor; 6] {
             s.width as u32,
             s.height as u32,
         );
+        clock.stage("project backward");
     }
     let mut k = 0;
     outs.map(|h| {

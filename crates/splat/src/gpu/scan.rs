@@ -31,7 +31,7 @@ pub fn cube_inclusive_scan(value: u32, shared: &mut [u32]) -> u32 {
 
 /// Exclusive scan of each block of `input` into `output`; each block's total goes to `totals`.
 #[cube(launch)]
-fn scan_blocks(input: &[u32], output: &mut [u32], totals: &mut [u32], len: u32) {
+fn scan_blocks(input: &[u32], output: &mut [u32], totals: &mut [u32], len: u32, blocks: u32) {
     let mut shared = Shared::<[u32]>::new_slice(SCAN_BLOCK);
     let i = ABSOLUTE_POS;
     let mut value = 0u32;
@@ -42,7 +42,7 @@ fn scan_blocks(input: &[u32], output: &mut [u32], totals: &mut [u32], len: u32) 
     if i < len as usize {
         output[i] = inclusive - value;
     }
-    if UNIT_POS == CUBE_DIM - 1 {
+    if UNIT_POS == CUBE_DIM - 1 && CUBE_POS < blocks as usize {
         totals[CUBE_POS] = inclusive;
     }
 }
@@ -72,6 +72,7 @@ pub fn exclusive_scan(client: &Client, input: &Handle, len: usize) -> Handle {
         arg(&output, len),
         arg(&totals, blocks),
         len as u32,
+        blocks as u32,
     );
     if blocks > 1 {
         let offsets = exclusive_scan(client, &totals, blocks);

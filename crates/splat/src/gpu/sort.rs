@@ -36,7 +36,9 @@ fn digit_histogram(keys: &[u32], hist: &mut [u32], len: u32, shift: u32, blocks:
         counts[digit as usize].fetch_add(1u32);
     }
     sync_cube();
-    hist[unit * blocks as usize + CUBE_POS] = counts[unit].load();
+    if CUBE_POS < blocks as usize {
+        hist[unit * blocks as usize + CUBE_POS] = counts[unit].load();
+    }
 }
 
 /// Moves each pair to its slot: the block's first slot for its digit plus the number of earlier

@@ -60,27 +60,56 @@ fn exclusive_scan_matches_the_host_at_every_block_depth() {
     }
 }
 
+/// Sorts `len` random keys below `below` by their low `bits` bits on the device and compares
+/// with a stable host sort.
+fn check_sort(client: &Client, len: usize, bits: u32, below: u32) {
+    let keys = random_u32(len as u64 + 7, len, below);
+    let values: Vec<u32> = (0..len as u32).collect();
+    let (k, v) = sort_pairs(
+        client,
+        &upload_u32(client, &keys),
+        &upload_u32(client, &values),
+        len,
+        bits,
+    );
+    let mut want: Vec<(u32, u32)> = keys.iter().copied().zip(values).collect();
+    want.sort_by_key(|&(key, _)| key);
+    let got: Vec<(u32, u32)> = read_u32(client, &k, len)
+        .into_iter()
+        .zip(read_u32(client, &v, len))
+        .collect();
+    assert!(got == want, "length {len}, {bits} bits: not a stable sort");
+}
+
 #[test]
 fn radix_sort_is_a_stable_sort_by_key() {
     let client = client();
     for (len, bits, below) in [(1000, 32, u32::MAX), (5000, 12, 3000), (70_000, 4, 5)] {
-        let keys = random_u32(len as u64 + 7, len, below);
-        let values: Vec<u32> = (0..len as u32).collect();
-        let (k, v) = sort_pairs(
-            &client,
-            &upload_u32(&client, &keys),
-            &upload_u32(&client, &values),
-            len,
-            bits,
-        );
-        let mut want: Vec<(u32, u32)> = keys.iter().copied().zip(values).collect();
-        want.sort_by_key(|&(key, _)| key);
-        let got: Vec<(u32, u32)> = read_u32(&client, &k, len)
-            .into_iter()
-            .zip(read_u32(&client, &v, len))
-            .collect();
-        assert_eq!(got, want, "length {len}, {bits} bits");
+        check_sort(&client, len, bits, below);
     }
+}
+
+#[test]
+fn launches_beyond_one_grid_axis_scan_and_sort_every_element() {
+    // 65,535 cubes of 256 units cover 16,776,960 elements; beyond that the grids are
+    // two-dimensional with surplus cubes (the sort's histogram table is as long as its input,
+    // so its scan crosses the limit too).
+    let client = client();
+    let len = 65_535 * 256 + 4097;
+    let values = random_u32(3, len, 3);
+    let got = read_u32(
+        &client,
+        &exclusive_scan(&client, &upload_u32(&client, &values), len),
+        len,
+    );
+    let mut acc = 0;
+    let first_wrong = values.iter().zip(&got).position(|(v, g)| {
+        let want = acc;
+        acc += v;
+        *g != want
+    });
+    assert_eq!(first_wrong, None, "scan of {len}");
+    check_sort(&client, len, 4, 16);
 }
 
 fn gpu() -> Device {
