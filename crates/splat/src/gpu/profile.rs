@@ -8,10 +8,13 @@ use std::time::Instant;
 
 use cubecl::prelude::*;
 
-/// Seconds per stage name, in the order stages first ran; `None` while recording is off.
-static RECORDED: Mutex<Option<Vec<(&'static str, Vec<f64>)>>> = Mutex::new(None);
+/// Seconds per stage name, in the order the stages first ran.
+type Stages = Vec<(&'static str, Vec<f64>)>;
 
-fn recorded() -> std::sync::MutexGuard<'static, Option<Vec<(&'static str, Vec<f64>)>>> {
+/// The stages recorded so far; `None` while recording is off.
+static RECORDED: Mutex<Option<Stages>> = Mutex::new(None);
+
+fn recorded() -> std::sync::MutexGuard<'static, Option<Stages>> {
     RECORDED.lock().unwrap_or_else(|e| e.into_inner())
 }
 
@@ -21,7 +24,7 @@ pub fn start() {
 }
 
 /// Stops recording and returns each stage's times.
-pub fn finish() -> Vec<(&'static str, Vec<f64>)> {
+pub fn finish() -> Stages {
     recorded().take().unwrap_or_default()
 }
 
