@@ -138,15 +138,23 @@ impl<'a> Trainer<'a> {
             .collect::<Result<Vec<_>>>()?;
         let meshes: Vec<Mesh> = hulls.values().cloned().collect();
         let framing = Framing::of_hulls(&meshes, &cameras, size, config.crop_margin)?;
-        // Seeds the backend the parameters are drawn on (an autodiff device wraps it) and holds
-        // the generator until they are drawn. Burn draws parameters lazily, on first use;
-        // reading them now ties them to the seed rather than to whatever else uses the
+        // The parameters are drawn on the CPU whatever the device, so that a seed gives the same
+        // network everywhere (each backend has its own generator), then moved. Seeds the
+        // generator and holds it until they are drawn: Burn draws parameters lazily, on first
+        // use; reading them now ties them to the seed rather than to whatever else uses the
         // generator first.
         let net = {
             let _generator = crate::net::seed::seeded(config.seed);
-            device.seed(config.seed);
-            let net = PoseGaussianNet::new(&net_config, &device)?;
-            net.clone().load_record(net.into_record())
+            let cpu = Device::flex().autodiff();
+            let draw_on = if device == cpu { &device } else { &cpu };
+            draw_on.seed(config.seed);
+            let net = PoseGaussianNet::new(&net_config, draw_on)?;
+            let net = net.clone().load_record(net.into_record());
+            if device == cpu {
+                net
+            } else {
+                net.fork(&device)
+            }
         };
         Ok(Self {
             inputs,
