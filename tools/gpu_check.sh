@@ -32,8 +32,8 @@ log "gsplat: compiling its CUDA extension in the background"
 ) &
 build=$!
 
-for reduction in plane tree; do
-  log "parity tests ($reduction sums where the device has plane sums)"
+for reduction in plane grouped tree; do
+  log "parity tests ($reduction reduction; plane and grouped fall back to the tree without plane sums)"
   FEWVIEW_GPU_REDUCTION=$reduction timeout 120 "$bin/splat_tests" --include-ignored --nocapture \
     --test-threads 1 gpu:: >"$out/parity_$reduction.log" 2>&1
   log "parity tests: exit $?"
@@ -43,7 +43,7 @@ log "waiting for the gsplat build"
 wait "$build"
 log "gsplat build: exit $?"
 
-for reduction in plane tree; do
+for reduction in plane grouped tree; do
   log "fewview bench --device gpu ($reduction)"
   FEWVIEW_GPU_REDUCTION=$reduction timeout 100 "$bin/fewview" bench --device gpu --only raster \
     --gaussians 1000000 --raster-size 1155x866 --runs 10 --write-scene /tmp/scene \

@@ -4,7 +4,10 @@
 //! tile once every pixel has stopped. The backward pass walks each tile's list back to front,
 //! recovering the transmittance by division as the CPU code does, and reduces each splat's
 //! per-pixel gradients across the tile (plane sums where the device has them, else a
-//! shared-memory tree) into the splat's pair slot.
+//! shared-memory tree) into the splat's pair slot. The plane sums come in two orders with the
+//! same sums: one splat at a time (two barriers per splat), or `grouped`, as many splats as a
+//! plane has units summed across planes in one pass (two barriers per group; a plane with no
+//! contribution skips its sums).
 // Device code: CubeCL's expanded struct types are not `Copy` (a struct passed twice is cloned)
 // and its macro cannot infer the type of a unary minus on some expressions (written as `* -1`).
 #![allow(clippy::clone_on_copy, clippy::neg_multiply)]
@@ -257,6 +260,50 @@ fn finish_sum(lanes: &mut [f32], #[comptime] plane: bool) -> f32 {
     sum
 }
 
+/// Writes this plane's sum of `value` (gradient value `c` of the `member`-th splat of the
+/// current group) to `lanes[plane][member][c]`. `any`: whether some unit of the plane has a
+/// contribution; a plane without one writes 0 and skips the sum.
+#[cube]
+fn plane_partial(lanes: &mut [f32], value: f32, c: usize, member: u32, any: bool) {
+    let mut v = 0.0f32;
+    if any {
+        v = plane_sum(value);
+    }
+    if UNIT_POS_PLANE == 0 {
+        let plane = UNIT_POS / PLANE_DIM;
+        lanes[((plane * PLANE_DIM + member) as usize) * GRAD_FLOATS + c] = v;
+    }
+}
+
+/// Sums the plane partials of a group of `members` splats (in the order they were processed,
+/// the `m`-th at local index `first_local − m` of the cache) and writes each splat's gradient at
+/// its pair slot. Starts and ends with a barrier.
+#[cube]
+fn flush_plane_partials(
+    lanes: &[f32],
+    cache_slot: &[u32],
+    pair_grads: &mut [f32],
+    first_local: u32,
+    members: u32,
+) {
+    sync_cube();
+    let planes = CUBE_DIM / PLANE_DIM;
+    let outputs = members * GRAD_FLOATS as u32;
+    let mut u = UNIT_POS;
+    while u < outputs {
+        let m = u / GRAD_FLOATS as u32;
+        let c = (u % GRAD_FLOATS as u32) as usize;
+        let mut sum = 0.0f32;
+        for p in 0..planes {
+            sum += lanes[((p * PLANE_DIM + m) as usize) * GRAD_FLOATS + c];
+        }
+        let slot = cache_slot[(first_local - m) as usize] as usize;
+        pair_grads[slot * GRAD_FLOATS + c] = sum;
+        u += CUBE_DIM;
+    }
+    sync_cube();
+}
+
 /// Gradients of every (tile, splat) pair's blending inputs, written at the pair's emit slot in
 /// `pair_grads` (`[slot, 10]`, the layout of [`GRAD_FLOATS`]), from the image gradient
 /// `grad_image` (`[H, W, 5]`).
@@ -276,6 +323,7 @@ pub fn blend_backward(
     height: u32,
     tiles_x: u32,
     #[comptime] plane: bool,
+    #[comptime] grouped: bool,
 ) {
     let tile = (CUBE_POS_Y * tiles_x + CUBE_POS_X) as usize;
     // One-dimensional cubes (subgroup builtins require them): unit u is pixel (u mod 16, u / 16).
@@ -346,6 +394,8 @@ pub fn blend_backward(
         }
         sync_cube();
         let mut rank = hi;
+        // Splats of the current group so far (`grouped`).
+        let mut member = 0u32;
         while rank > lo {
             rank -= 1;
             let local = (rank - lo) as usize;
@@ -367,29 +417,51 @@ pub fn blend_backward(
             let free = valid && s.opacity * gauss < ALPHA_MAX as f32;
             let dl_dalpha = select(free, t_j * dot, 0.0f32);
             let dpow = dl_dalpha * alpha;
-            cube_sum_into(
-                &mut lanes,
-                dpow * fma(s.conic_a, dx, s.conic_b * dy),
-                0,
-                plane,
-            );
-            cube_sum_into(
-                &mut lanes,
-                dpow * fma(s.conic_c, dy, s.conic_b * dx),
-                1,
-                plane,
-            );
-            cube_sum_into(&mut lanes, dpow * dx * dx * -0.5f32, 2, plane);
-            cube_sum_into(&mut lanes, dpow * dx * dy * -1.0f32, 3, plane);
-            cube_sum_into(&mut lanes, dpow * dy * dy * -0.5f32, 4, plane);
-            cube_sum_into(&mut lanes, dl_dalpha * gauss, 5, plane);
-            cube_sum_into(&mut lanes, w * g_r, 6, plane);
-            cube_sum_into(&mut lanes, w * g_g, 7, plane);
-            cube_sum_into(&mut lanes, w * g_b, 8, plane);
-            cube_sum_into(&mut lanes, w * g_d, 9, plane);
-            let sum = finish_sum(&mut lanes, plane);
-            if unit < GRAD_FLOATS {
-                pair_grads[cache_slot[local] as usize * GRAD_FLOATS + unit] = sum;
+            let v0 = dpow * fma(s.conic_a, dx, s.conic_b * dy);
+            let v1 = dpow * fma(s.conic_c, dy, s.conic_b * dx);
+            let v2 = dpow * dx * dx * -0.5f32;
+            let v3 = dpow * dx * dy * -1.0f32;
+            let v4 = dpow * dy * dy * -0.5f32;
+            let v5 = dl_dalpha * gauss;
+            let v6 = w * g_r;
+            let v7 = w * g_g;
+            let v8 = w * g_b;
+            let v9 = w * g_d;
+            if grouped {
+                // Plane sums into shared memory for a group of PLANE_DIM splats, then one
+                // cross-plane pass for the whole group: two barriers per group.
+                let any = plane_any(valid);
+                plane_partial(&mut lanes, v0, 0, member, any);
+                plane_partial(&mut lanes, v1, 1, member, any);
+                plane_partial(&mut lanes, v2, 2, member, any);
+                plane_partial(&mut lanes, v3, 3, member, any);
+                plane_partial(&mut lanes, v4, 4, member, any);
+                plane_partial(&mut lanes, v5, 5, member, any);
+                plane_partial(&mut lanes, v6, 6, member, any);
+                plane_partial(&mut lanes, v7, 7, member, any);
+                plane_partial(&mut lanes, v8, 8, member, any);
+                plane_partial(&mut lanes, v9, 9, member, any);
+                member += 1;
+                if member == PLANE_DIM || rank == lo {
+                    let first_local = (rank - lo) + member - 1;
+                    flush_plane_partials(&lanes, &cache_slot, pair_grads, first_local, member);
+                    member = 0;
+                }
+            } else {
+                cube_sum_into(&mut lanes, v0, 0, plane);
+                cube_sum_into(&mut lanes, v1, 1, plane);
+                cube_sum_into(&mut lanes, v2, 2, plane);
+                cube_sum_into(&mut lanes, v3, 3, plane);
+                cube_sum_into(&mut lanes, v4, 4, plane);
+                cube_sum_into(&mut lanes, v5, 5, plane);
+                cube_sum_into(&mut lanes, v6, 6, plane);
+                cube_sum_into(&mut lanes, v7, 7, plane);
+                cube_sum_into(&mut lanes, v8, 8, plane);
+                cube_sum_into(&mut lanes, v9, 9, plane);
+                let sum = finish_sum(&mut lanes, plane);
+                if unit < GRAD_FLOATS {
+                    pair_grads[cache_slot[local] as usize * GRAD_FLOATS + unit] = sum;
+                }
             }
             let keep = select(valid, one_minus, 1.0f32);
             let add = select(valid, alpha, 0.0f32);

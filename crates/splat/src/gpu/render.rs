@@ -268,19 +268,24 @@ fn blend(s: &GpuState, image: &Handle) {
     );
 }
 
-/// Whether the blend backward reduces with plane (subgroup) sums on this device: where it has
-/// them with one fixed plane size, unless `FEWVIEW_GPU_REDUCTION=tree` asks for the
-/// shared-memory tree (both give the same sums up to rounding; the switch is for comparing them).
-fn plane_reduction(client: &Client) -> bool {
-    if std::env::var("FEWVIEW_GPU_REDUCTION").is_ok_and(|v| v == "tree") {
-        return false;
+/// How the blend backward reduces each splat's per-pixel gradients across a tile, as
+/// `(plane, grouped)` for [`blend_backward`]: plane (subgroup) sums where the device has them
+/// with one fixed plane size, one splat at a time, else the shared-memory tree.
+/// `FEWVIEW_GPU_REDUCTION` overrides it: `tree`, or `grouped` (plane sums a group of splats per
+/// cross-plane pass, where plane sums exist). All give the same sums up to rounding; the switch
+/// is for comparing them.
+fn reduction(client: &Client) -> (bool, bool) {
+    let asked = std::env::var("FEWVIEW_GPU_REDUCTION").unwrap_or_default();
+    if asked == "tree" {
+        return (false, false);
     }
     let props = client.properties();
     let sizes = props.hardware.plane_size_min..=props.hardware.plane_size_max;
-    client.features().plane.contains(Plane::Ops)
+    let plane = client.features().plane.contains(Plane::Ops)
         && !sizes.is_empty()
         && (TILE_UNITS as u32).is_multiple_of(props.hardware.plane_size_max)
-        && props.hardware.plane_size_min == props.hardware.plane_size_max
+        && props.hardware.plane_size_min == props.hardware.plane_size_max;
+    (plane, plane && asked == "grouped")
 }
 
 /// Gradients of `means, log_scales, quats, opacity_logits, sh, means2d` from the image gradient.
@@ -290,6 +295,7 @@ pub fn backward(s: &GpuState, grad_image: CubeTensor) -> [CubeTensor; 6] {
     let (n, pairs, pixels) = (s.n, s.pairs, s.width * s.height);
     let (tiles_x, tiles_y) = s.tiles();
     let pair_grads = alloc(client, GRAD_FLOATS * pairs);
+    let (plane, grouped) = reduction(client);
     let mut clock = StageClock::start(client);
     let (count, dim) = tile_cubes(s);
     blend_backward::launch(
@@ -308,7 +314,8 @@ pub fn backward(s: &GpuState, grad_image: CubeTensor) -> [CubeTensor; 6] {
         s.width as u32,
         s.height as u32,
         tiles_x as u32,
-        plane_reduction(client),
+        plane,
+        grouped,
     );
     clock.stage("blend backward");
     let splat_grads = alloc(client, GRAD_FLOATS * n);
