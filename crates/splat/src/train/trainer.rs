@@ -27,7 +27,7 @@ pub struct TrainView {
     /// `[H, W, 3]` target.
     pub target: Tensor<3>,
     /// The image's alpha, when it has one: lets the loop composite it over other backgrounds.
-    pub alpha: Option<AlphaImage>,
+    alpha: Option<AlphaTensors>,
     /// `[H, W, 1]`, 1 where the image holds photo data and 0 in the blank border of an
     /// undistorted photo; the photometric loss sees neither render nor target there.
     pub valid: Option<Tensor<3>>,
@@ -65,16 +65,39 @@ impl AlphaImage {
         })
     }
 
-    /// The image composited over `background` instead, as a `[H, W, 3]` tensor.
-    pub fn over(&self, background: [f32; 3], device: &Device) -> Tensor<3> {
+    /// The image and `1 − alpha` on `device`.
+    fn upload(&self, device: &Device) -> AlphaTensors {
+        let (h, w) = (self.height, self.width);
+        let one_minus: Vec<f32> = self.alpha.iter().map(|a| 1.0 - a).collect();
+        AlphaTensors {
+            composited: Tensor::<3>::from_data(
+                TensorData::new(self.composited.clone(), [h, w, 3]),
+                device,
+            ),
+            one_minus_alpha: Tensor::<3>::from_data(TensorData::new(one_minus, [h, w, 1]), device),
+            background: self.background,
+        }
+    }
+}
+
+/// An [`AlphaImage`] on the compute device, so that compositing it over an iteration's
+/// background is a tensor operation and uploads nothing but the colour.
+#[derive(Clone, Debug)]
+struct AlphaTensors {
+    /// `[H, W, 3]`
+    composited: Tensor<3>,
+    /// `[H, W, 1]`
+    one_minus_alpha: Tensor<3>,
+    background: [f32; 3],
+}
+
+impl AlphaTensors {
+    /// `image + (1 − a)·(new − old)`.
+    fn over(&self, background: [f32; 3]) -> Tensor<3> {
         let shift = [0, 1, 2].map(|c| background[c] - self.background[c]);
-        let data: Vec<f32> = self
-            .composited
-            .iter()
-            .enumerate()
-            .map(|(i, &v)| v + (1.0 - self.alpha[i / 3]) * shift[i % 3])
-            .collect();
-        Tensor::<3>::from_data(TensorData::new(data, [self.height, self.width, 3]), device)
+        let device = self.composited.device();
+        let shift = Tensor::<3>::from_data(TensorData::new(shift.to_vec(), [1, 1, 3]), &device);
+        self.composited.clone() + self.one_minus_alpha.clone() * shift
     }
 }
 
@@ -114,8 +137,13 @@ impl TrainView {
 
     /// Attaches the image's alpha (see [`AlphaImage`]).
     pub fn with_alpha(mut self, alpha: AlphaImage) -> Self {
-        self.alpha = Some(alpha);
+        self.alpha = Some(alpha.upload(&self.target.device()));
         self
+    }
+
+    /// The target composited over `background`, when the image has alpha.
+    pub fn target_over(&self, background: [f32; 3]) -> Option<Tensor<3>> {
+        self.alpha.as_ref().map(|a| a.over(background))
     }
 }
 
@@ -369,7 +397,7 @@ impl Trainer {
             Some(alpha) if self.config.random_background => {
                 let mut rng = self.rng(iteration, 3);
                 let bg = [0; 3].map(|_| rng.random::<f32>());
-                (bg, alpha.over(bg, &self.device))
+                (bg, alpha.over(bg))
             }
             _ => (self.config.background, view.target.clone()),
         }
@@ -692,9 +720,12 @@ mod tests {
         let image = fewview_scene::Image::from_vec(3, 1, 3, over(old));
         let alpha = fewview_scene::Image::from_vec(3, 1, 1, a.to_vec());
         let device = Device::flex();
-        let got: Vec<f32> = AlphaImage::new(&image, &alpha, old)
+        // The camera plays no part in compositing.
+        let view = TrainView::new("v", crate::raster::tests::camera(), &image, &device)
+            .with_alpha(AlphaImage::new(&image, &alpha, old).unwrap());
+        let got: Vec<f32> = view
+            .target_over(new)
             .unwrap()
-            .over(new, &device)
             .into_data()
             .try_to_vec::<f32>()
             .unwrap();
