@@ -41,17 +41,17 @@ impl<const D: usize> Moments<D> {
         })
     }
 
-    /// One Adam step of `param` with gradient `grad`, written as [`AdamState::step_per_column`]
+    /// One Adam step of `param` (in place) with gradient `grad`, written as [`AdamState::step_per_column`]
     /// writes it so that the rounding is the same:
     /// `m ← β₁m + (1−β₁)g`, `v ← β₂v + ((1−β₂)g)g`, `p ← p − (lr/bc₁)·m / (√v/√bc₂ + ε)`.
     /// `scale(m, bc₁)` gives `(lr/bc₁)·m` (one rate, or one per column).
     fn step(
         &mut self,
-        param: Tensor<D>,
+        param: &mut Tensor<D>,
         grad: Tensor<D>,
         scale: impl FnOnce(Tensor<D>, f32) -> Tensor<D>,
         cfg: &AdamConfig,
-    ) -> Tensor<D> {
+    ) {
         self.step += 1;
         let t = self.step as i32;
         let bc1 = 1.0 - cfg.beta1.powi(t);
@@ -62,7 +62,7 @@ impl<const D: usize> Moments<D> {
         let scaled = scale(m.clone(), bc1);
         self.m = m;
         self.v = v;
-        param - scaled / denom
+        *param = param.clone() - scaled / denom;
     }
 
     fn reset(&mut self) {
@@ -189,35 +189,23 @@ impl ResidentState {
     pub fn adam_step(&mut self, grads: Gradients, rates: &StepRates, cfg: &AdamConfig) {
         let p = &mut self.params;
         let device = p.means.device();
-        p.means = self
-            .means
-            .step(p.means.clone(), grads.means, by(rates.means), cfg);
-        p.log_scales = self.log_scales.step(
-            p.log_scales.clone(),
-            grads.log_scales,
-            by(rates.log_scales),
-            cfg,
-        );
-        p.quats = self
-            .quats
-            .step(p.quats.clone(), grads.quats, by(rates.quats), cfg);
-        p.opacity_logits = self.opacity_logits.step(
-            p.opacity_logits.clone(),
-            grads.opacity_logits,
-            by(rates.opacity_logits),
-            cfg,
-        );
+        self.means
+            .step(&mut p.means, grads.means, by(rates.means), cfg);
+        let scales = by(rates.log_scales);
+        self.log_scales
+            .step(&mut p.log_scales, grads.log_scales, scales, cfg);
+        self.quats
+            .step(&mut p.quats, grads.quats, by(rates.quats), cfg);
+        let opacities = by(rates.opacity_logits);
+        self.opacity_logits
+            .step(&mut p.opacity_logits, grads.opacity_logits, opacities, cfg);
         let k = self.sh_coeffs;
         let band_rates: Vec<f32> = (0..k)
             .flat_map(|c| [if c == 0 { rates.sh_dc } else { rates.sh_rest }; 3])
             .collect();
         let band_rates = tensor(&band_rates, [1, k, 3], &device);
-        p.sh = self.sh.step(
-            p.sh.clone(),
-            grads.sh,
-            |m, bc1| m * band_rates.div_scalar(bc1),
-            cfg,
-        );
+        let bands = |m: Tensor<3>, bc1| m * band_rates.div_scalar(bc1);
+        self.sh.step(&mut p.sh, grads.sh, bands, cfg);
         self.ahead_of_host = true;
     }
 
