@@ -41,8 +41,8 @@ impl<const D: usize> Moments<D> {
         })
     }
 
-    /// One Adam step of `param` (in place) with gradient `grad`, written as [`AdamState::step_per_column`]
-    /// writes it so that the rounding is the same:
+    /// One Adam step of `param` (in place) with gradient `grad`, written as
+    /// [`AdamState::step_per_column`] writes it so that the rounding is the same:
     /// `m ← β₁m + (1−β₁)g`, `v ← β₂v + ((1−β₂)g)g`, `p ← p − (lr/bc₁)·m / (√v/√bc₂ + ε)`.
     /// `scale(m, bc₁)` gives `(lr/bc₁)·m` (one rate, or one per column).
     fn step(
