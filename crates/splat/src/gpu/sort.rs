@@ -3,9 +3,10 @@
 //! Each pass sorts by one 8-bit digit in three kernels: per-block digit histograms (laid out
 //! digit-major, so that one exclusive scan of the table gives every block's first slot for every
 //! digit), the scan ([`super::scan`]), and a stable scatter that ranks each element among the
-//! earlier elements of its block with the same digit. Stability across passes makes the result
-//! equal to a stable sort by key, so equal keys keep their input order (the CPU rasterizer breaks
-//! depth ties by Gaussian index the same way).
+//! earlier elements of its block with the same digit (per-segment digit counts plus a scan of
+//! the element's own 16-unit segment). Stability across passes makes the result equal to a
+//! stable sort by key, so equal keys keep their input order (the CPU rasterizer breaks depth
+//! ties by Gaussian index the same way).
 
 use cubecl::prelude::*;
 use cubecl::server::Handle;
@@ -19,8 +20,8 @@ pub const SORT_BLOCK: usize = 256;
 pub const DIGIT_BITS: u32 = 8;
 const BINS: usize = 1 << DIGIT_BITS;
 const _: () = assert!(
-    BINS == 256,
-    "the scatter kernel's out-of-range digit is 256"
+    BINS == 256 && BINS == SORT_BLOCK,
+    "the scatter kernel's out-of-range digit is 256, and its unit u scans digit u"
 );
 
 /// Counts each digit in each block into `hist[digit * blocks + block]`.
@@ -41,8 +42,14 @@ fn digit_histogram(keys: &[u32], hist: &mut [u32], len: u32, shift: u32, blocks:
     }
 }
 
+/// Units per segment of a block in the scatter's ranking.
+const SEGMENT: usize = 16;
+const SEGMENTS: usize = SORT_BLOCK / SEGMENT;
+
 /// Moves each pair to its slot: the block's first slot for its digit plus the number of earlier
-/// elements of the block with the same digit.
+/// elements of the block with the same digit. That rank is counted in two parts: the earlier
+/// 16-unit segments' counts of the digit (per-segment digit counts, scanned across segments),
+/// and the earlier units of the element's own segment, so that no unit scans the whole block.
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 fn stable_scatter(
@@ -56,7 +63,15 @@ fn stable_scatter(
     blocks: u32,
 ) {
     let mut digits = Shared::<[u32]>::new_slice(SORT_BLOCK);
+    // `before[segment * BINS + digit]`: elements with the digit in the segment, then (after the
+    // scan) in the earlier segments.
+    let before = Shared::<[Atomic<u32>]>::new_slice(SEGMENTS * BINS);
     let unit = UNIT_POS as usize;
+    let segment = unit / SEGMENT;
+    #[unroll]
+    for s in 0..SEGMENTS {
+        before[s * BINS + unit].store(0u32);
+    }
     let i = ABSOLUTE_POS;
     let inside = i < len as usize;
     let mut key = 0u32;
@@ -69,8 +84,21 @@ fn stable_scatter(
     digits[unit] = digit;
     sync_cube();
     if inside {
-        let mut rank = 0u32;
-        for j in 0..unit {
+        before[segment * BINS + digit as usize].fetch_add(1u32);
+    }
+    sync_cube();
+    // Unit u scans digit u's counts across the segments.
+    let mut running = 0u32;
+    #[unroll]
+    for s in 0..SEGMENTS {
+        let count = before[s * BINS + unit].load();
+        before[s * BINS + unit].store(running);
+        running += count;
+    }
+    sync_cube();
+    if inside {
+        let mut rank = before[segment * BINS + digit as usize].load();
+        for j in segment * SEGMENT..unit {
             if digits[j] == digit {
                 rank += 1;
             }
