@@ -10,9 +10,9 @@
 //!
 //! The backward pass runs the same stages in reverse with exact gradients (see
 //! [`backward`]). Every function is generic over [`Real`](crate::real::Real) so the `f64`
-//! instantiation checks the `f32` code path against finite differences. [`reference`] is an
-//! independent naive per-pixel renderer used as the forward test oracle and as the benchmark
-//! yardstick.
+//! instantiation checks the `f32` code path against finite differences.
+//! [`reference`](mod@reference) is an independent naive per-pixel renderer used as the forward
+//! test oracle and as the benchmark yardstick.
 //!
 //! **Screen bounding box.** Instead of the 3σ square of the reference code, a Gaussian is binned
 //! to the tiles its `α ≥ 1/255` ellipse touches (half-widths `sqrt(2 ln(255 o) Σ₂ᴰ_xx)`, etc.).
