@@ -442,10 +442,10 @@ fn quat_backward(
     }
 }
 
-/// Backward of [`project_forward`]: from each Gaussian's splat gradient (`splat_grads`,
-/// [`GRAD_FLOATS`] per Gaussian, zero for culled ones) to its parameters, as the CPU code's
-/// `project_one_backward`, and the `means2d` probe's gradient (pixel gradient × half the image
-/// size, the reference code's NDC units).
+/// Backward of [`project_forward`](fn@project_forward): from each Gaussian's splat gradient
+/// (`splat_grads`, [`GRAD_FLOATS`] per Gaussian, zero for culled ones) to its parameters, as the
+/// CPU code's `project_one_backward`, and the `means2d` probe's gradient (pixel gradient × half
+/// the image size, the reference code's NDC units).
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 pub fn project_backward(
