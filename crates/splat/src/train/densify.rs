@@ -89,7 +89,8 @@ impl DensifyStats {
         }
     }
 
-    fn mean_grad(&self, i: usize) -> f32 {
+    /// Average of `‖∂L/∂μ₂ᴰ‖` over the renders where Gaussian `i` was visible.
+    pub fn mean_grad(&self, i: usize) -> f32 {
         if self.denom[i] > 0.0 {
             self.grad_accum[i] / self.denom[i]
         } else {
@@ -106,14 +107,13 @@ pub struct DensifyReport {
     pub pruned: usize,
 }
 
-fn max_scale(model: &GaussianModel, i: usize) -> f32 {
-    let s = &model.log_scales[3 * i..3 * i + 3];
-    s[0].max(s[1]).max(s[2]).exp()
+/// Largest scale of the Gaussian whose log-scales are `log_scales`.
+fn max_scale(log_scales: &[f32]) -> f32 {
+    log_scales[0].max(log_scales[1]).max(log_scales[2]).exp()
 }
 
-/// Rotation matrix of the (normalised) quaternion of Gaussian `i`.
-fn rotation(model: &GaussianModel, i: usize) -> [[f32; 3]; 3] {
-    let q = &model.quats[4 * i..4 * i + 4];
+/// Rotation matrix of the (normalised) quaternion `q`, `(w, x, y, z)`.
+fn rotation(q: &[f32]) -> [[f32; 3]; 3] {
     let n = (q.iter().map(|v| v * v).sum::<f32>()).sqrt().max(1e-12);
     let (w, x, y, z) = (q[0] / n, q[1] / n, q[2] / n, q[3] / n);
     [
@@ -135,8 +135,135 @@ fn rotation(model: &GaussianModel, i: usize) -> [[f32; 3]; 3] {
     ]
 }
 
-/// One densification step (the reference code's `densify_and_prune`): clone, split (N = 2,
-/// samples from the Gaussian itself, scales divided by 0.8·N), then prune.
+/// Samples per split Gaussian (the reference code's N = 2).
+pub const SPLIT_SAMPLES: usize = 2;
+
+/// What one densification step does to a model of `n` Gaussians. The new rows follow the old
+/// ones: a copy of each cloned Gaussian in order, then [`SPLIT_SAMPLES`] rows per split Gaussian
+/// (its parameters, with the sampled centre and the shrunk log-scales); then every row whose
+/// `keep` flag is unset goes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DensifyPlan {
+    pub clone: Vec<usize>,
+    pub split: Vec<usize>,
+    /// Centres of the split samples, 3 per sample, in order.
+    pub split_means: Vec<f32>,
+    /// Log-scales of the split samples, 3 per sample.
+    pub split_log_scales: Vec<f32>,
+    /// Over the `n + clone + SPLIT_SAMPLES · split` rows.
+    pub keep: Vec<bool>,
+}
+
+impl DensifyPlan {
+    /// The originals each new row copies, in order (split originals once per sample).
+    pub fn sources(&self) -> Vec<usize> {
+        let samples = self.split.iter().flat_map(|&i| [i; SPLIT_SAMPLES]);
+        self.clone.iter().copied().chain(samples).collect()
+    }
+
+    pub fn report(&self) -> DensifyReport {
+        let removed = self.keep.iter().filter(|k| !**k).count();
+        DensifyReport {
+            cloned: self.clone.len(),
+            split: self.split.len(),
+            pruned: removed - self.split.len(),
+        }
+    }
+}
+
+/// The Gaussians to clone (high gradient, small) and to split (high gradient, large).
+pub fn clone_and_split(
+    stats: &DensifyStats,
+    log_scales: &[f32],
+    cfg: &DensifyConfig,
+    extent: f32,
+) -> (Vec<usize>, Vec<usize>) {
+    let threshold_scale = cfg.percent_dense * extent;
+    let n = stats.denom.len();
+    let high = |i: &usize| stats.mean_grad(*i) >= cfg.grad_threshold;
+    let small = |i: usize| max_scale(&log_scales[3 * i..3 * i + 3]) <= threshold_scale;
+    let clone = (0..n).filter(high).filter(|&i| small(i)).collect();
+    let split = (0..n).filter(high).filter(|&i| !small(i)).collect();
+    (clone, split)
+}
+
+/// The plan of one step (the reference code's `densify_and_prune`): clone, split (samples from
+/// the Gaussian itself, scales divided by 0.8·N), then prune. Reads the model through what it
+/// needs: all log-scales and opacity logits, and the centres and rotations of the split
+/// Gaussians (`split_rows(i)` gives Gaussian `i`'s centre and quaternion).
+#[allow(clippy::too_many_arguments)]
+pub fn plan<R: Rng>(
+    stats: &DensifyStats,
+    log_scales: &[f32],
+    opacity_logits: &[f32],
+    split_rows: impl Fn(usize) -> ([f32; 3], [f32; 4]),
+    cfg: &DensifyConfig,
+    extent: f32,
+    screen_size: Option<f32>,
+    rng: &mut R,
+) -> DensifyPlan {
+    let n = opacity_logits.len();
+    let (clone, split) = clone_and_split(stats, log_scales, cfg, extent);
+    let shrink = (0.8 * SPLIT_SAMPLES as f32).ln();
+    let mut split_means = Vec::with_capacity(split.len() * SPLIT_SAMPLES * 3);
+    let mut split_log_scales = Vec::with_capacity(split.len() * SPLIT_SAMPLES * 3);
+    for &i in &split {
+        let (mean, quat) = split_rows(i);
+        let r = rotation(&quat);
+        let ls = &log_scales[3 * i..3 * i + 3];
+        let scales = [0, 1, 2].map(|a| ls[a].exp());
+        for _ in 0..SPLIT_SAMPLES {
+            let s: [f32; 3] = std::array::from_fn(|a| {
+                let z: f64 = StandardNormal.sample(rng);
+                z as f32 * scales[a]
+            });
+            for (a, m) in mean.iter().enumerate() {
+                split_means.push(m + (r[a][0] * s[0] + r[a][1] * s[1] + r[a][2] * s[2]));
+            }
+            split_log_scales.extend(ls.iter().map(|l| l - shrink));
+        }
+    }
+    // Prune: the split originals, transparent Gaussians, and (optionally) oversized ones. A new
+    // row has its source's opacity; a split sample its own scales.
+    let mut plan = DensifyPlan {
+        clone,
+        split,
+        split_means,
+        split_log_scales,
+        keep: Vec::new(),
+    };
+    let sources = plan.sources();
+    let first_sample = n + plan.clone.len();
+    let row_log_scales = |i: usize| -> &[f32] {
+        if i < first_sample {
+            let j = if i < n { i } else { sources[i - n] };
+            &log_scales[3 * j..3 * j + 3]
+        } else {
+            &plan.split_log_scales[3 * (i - first_sample)..3 * (i - first_sample) + 3]
+        }
+    };
+    let mut keep = vec![true; n + sources.len()];
+    for &i in &plan.split {
+        keep[i] = false;
+    }
+    for (i, k) in keep.iter_mut().enumerate() {
+        let source = if i < n { i } else { sources[i - n] };
+        if sigmoid(opacity_logits[source]) < cfg.min_opacity {
+            *k = false;
+        }
+        if let Some(limit) = screen_size {
+            let radius = if i < n { stats.max_radii[i] } else { 0.0 };
+            if radius > limit || max_scale(row_log_scales(i)) > cfg.max_world_size * extent {
+                *k = false;
+            }
+        }
+    }
+    plan.keep = keep;
+    plan
+}
+
+/// One densification step on the host model: [`plan`], then its rows appended (new rows start
+/// with zero Adam moments) and the unkept ones removed; the statistics start again.
 ///
 /// `screen_size`: when set, Gaussians whose largest recorded screen radius exceeds it, or whose
 /// largest scale exceeds `max_world_size × extent`, are pruned too. (Deviation, documented: the
@@ -152,74 +279,35 @@ pub fn densify_and_prune<R: Rng>(
     screen_size: Option<f32>,
     rng: &mut R,
 ) -> DensifyReport {
-    let n = model.len();
-    let threshold_scale = cfg.percent_dense * extent;
-    let grads: Vec<f32> = (0..n).map(|i| stats.mean_grad(i)).collect();
-    let max_radii = stats.max_radii.clone();
-
-    // Clone: high gradient, small.
-    let clone: Vec<usize> = (0..n)
-        .filter(|&i| grads[i] >= cfg.grad_threshold && max_scale(model, i) <= threshold_scale)
-        .collect();
-    for &i in &clone {
+    let rows = |i: usize| {
         let g = model.get(i);
+        (g.mean, g.quat)
+    };
+    let plan = plan(
+        stats,
+        &model.log_scales,
+        &model.opacity_logits,
+        rows,
+        cfg,
+        extent,
+        screen_size,
+        rng,
+    );
+    for (k, &i) in plan.sources().iter().enumerate() {
+        let mut g = model.get(i);
+        if k >= plan.clone.len() {
+            let sample = k - plan.clone.len();
+            g.mean.copy_from_slice(&plan.split_means[3 * sample..3 * sample + 3]);
+            g.log_scale
+                .copy_from_slice(&plan.split_log_scales[3 * sample..3 * sample + 3]);
+        }
         model.push(&g);
     }
-    adam.extend_zeros(clone.len());
-
-    // Split: high gradient, large (originals only; clones have no gradient yet).
-    let split: Vec<usize> = (0..n)
-        .filter(|&i| grads[i] >= cfg.grad_threshold && max_scale(model, i) > threshold_scale)
-        .collect();
-    const SAMPLES: usize = 2;
-    let shrink = (0.8 * SAMPLES as f32).ln();
-    for &i in &split {
-        let r = rotation(model, i);
-        let base = model.get(i);
-        let scales = [0, 1, 2].map(|a| model.log_scales[3 * i + a].exp());
-        for _ in 0..SAMPLES {
-            let s: [f32; 3] = std::array::from_fn(|a| {
-                let z: f64 = StandardNormal.sample(rng);
-                z as f32 * scales[a]
-            });
-            let mut g = base.clone();
-            for (a, m) in g.mean.iter_mut().enumerate() {
-                *m += r[a][0] * s[0] + r[a][1] * s[1] + r[a][2] * s[2];
-            }
-            for ls in g.log_scale.iter_mut() {
-                *ls -= shrink;
-            }
-            model.push(&g);
-        }
-    }
-    adam.extend_zeros(split.len() * SAMPLES);
-
-    // Prune: the split originals, transparent Gaussians, and (optionally) oversized ones.
-    let total = model.len();
-    let mut keep = vec![true; total];
-    for &i in &split {
-        keep[i] = false;
-    }
-    for (i, k) in keep.iter_mut().enumerate() {
-        if sigmoid(model.opacity_logits[i]) < cfg.min_opacity {
-            *k = false;
-        }
-        if let Some(limit) = screen_size {
-            let radius = if i < n { max_radii[i] } else { 0.0 };
-            if radius > limit || max_scale(model, i) > cfg.max_world_size * extent {
-                *k = false;
-            }
-        }
-    }
-    let pruned = keep.iter().filter(|k| !**k).count() - split.len();
-    model.retain(&keep);
-    adam.retain(&keep);
+    adam.extend_zeros(plan.sources().len());
+    model.retain(&plan.keep);
+    adam.retain(&plan.keep);
     *stats = DensifyStats::new(model.len());
-    DensifyReport {
-        cloned: clone.len(),
-        split: split.len(),
-        pruned,
-    }
+    plan.report()
 }
 
 /// Caps every opacity at 0.01 and clears its Adam moments (the reference code's `reset_opacity`).
