@@ -297,7 +297,8 @@ pub fn densify_and_prune<R: Rng>(
         let mut g = model.get(i);
         if k >= plan.clone.len() {
             let sample = k - plan.clone.len();
-            g.mean.copy_from_slice(&plan.split_means[3 * sample..3 * sample + 3]);
+            g.mean
+                .copy_from_slice(&plan.split_means[3 * sample..3 * sample + 3]);
             g.log_scale
                 .copy_from_slice(&plan.split_log_scales[3 * sample..3 * sample + 3]);
         }

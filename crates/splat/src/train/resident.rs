@@ -4,14 +4,15 @@
 //!
 //! The arithmetic is the host code's, operation for operation ([`fewview_optim::adam`] and
 //! [`DensifyStats::record`]), so on the CPU backend the two give the same bits. Densification
-//! itself (clone, split, prune: a few times per thousand iterations) downloads the state, runs
-//! the host step with the same random draws, and uploads the result.
+//! (clone, split, prune) is decided on the host by [`super::densify::plan`] from what it reads:
+//! the statistics, the log-scales and opacities, and the split Gaussians' centres and rotations
+//! (the same random draws as the host path); the plan is applied here by gathering rows.
 
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Int, Tensor, TensorData};
 use fewview_optim::adam::{AdamConfig, AdamState};
 use fewview_optim::{ReadbackError, f32_values};
 
-use super::densify::{DensifyStats, ModelAdam};
+use super::densify::{DensifyPlan, DensifyStats, ModelAdam};
 use crate::model::GaussianModel;
 use crate::op::GaussianTensors;
 
@@ -63,6 +64,18 @@ impl<const D: usize> Moments<D> {
         self.m = m;
         self.v = v;
         *param = param.clone() - scaled / denom;
+    }
+
+    /// Appends `rows` rows of zero moments, then keeps the rows of `keep` (all when `None`).
+    fn grow_zeros(&mut self, rows: usize, keep: &Option<Tensor<1, Int>>) {
+        let zeros = |t: &Tensor<D>| {
+            let mut shape = t.dims();
+            shape[0] = rows;
+            (rows > 0).then(|| Tensor::<D>::zeros(shape, &t.device()))
+        };
+        let (m, v) = (zeros(&self.m), zeros(&self.v));
+        self.m = kept(append(self.m.clone(), m), keep);
+        self.v = kept(append(self.v.clone(), v), keep);
     }
 
     fn reset(&mut self) {
@@ -209,6 +222,70 @@ impl ResidentState {
         self.ahead_of_host = true;
     }
 
+    /// What densification reads: the statistics, all log-scales and opacity logits.
+    pub fn densify_inputs(&self) -> Result<(DensifyStats, Vec<f32>, Vec<f32>), ReadbackError> {
+        let stats = DensifyStats {
+            grad_accum: f32_values(self.grad_accum.clone(), "densification gradient sums")?,
+            denom: f32_values(self.denom.clone(), "densification view counts")?,
+            max_radii: f32_values(self.max_radii.clone(), "largest screen radii")?,
+        };
+        let p = &self.params;
+        let log_scales = f32_values(p.log_scales.clone(), "log-scales")?;
+        let opacity = f32_values(p.opacity_logits.clone(), "opacity logits")?;
+        Ok((stats, log_scales, opacity))
+    }
+
+    /// The centres and quaternions of Gaussians `rows`, in order.
+    pub fn rows(&self, rows: &[usize]) -> Result<(Vec<f32>, Vec<f32>), ReadbackError> {
+        if rows.is_empty() {
+            return Ok((Vec::new(), Vec::new()));
+        }
+        let index = indices(rows, &self.params.means.device());
+        let means = self.params.means.clone().select(0, index.clone());
+        let quats = self.params.quats.clone().select(0, index);
+        Ok((
+            f32_values(means, "centres of split Gaussians")?,
+            f32_values(quats, "rotations of split Gaussians")?,
+        ))
+    }
+
+    /// Applies a densification plan that keeps at least one Gaussian: the new rows are gathered
+    /// from their sources (the split samples with their own centres and log-scales), with zero
+    /// Adam moments; the unkept rows go; the statistics start again.
+    pub fn apply(&mut self, plan: &DensifyPlan) {
+        let device = self.params.means.device();
+        let index = |rows: &[usize]| (!rows.is_empty()).then(|| indices(rows, &device));
+        let sources = plan.sources();
+        let kept_rows: Vec<usize> = (0..plan.keep.len()).filter(|&i| plan.keep[i]).collect();
+        let keep = (kept_rows.len() < plan.keep.len()).then(|| indices(&kept_rows, &device));
+        let (clones, from) = (index(&plan.clone), index(&sources));
+        let samples = sources.len() - plan.clone.len();
+        let sampled = |values: &[f32]| (samples > 0).then(|| tensor(values, [samples, 3], &device));
+        let p = &mut self.params;
+        // Centres and log-scales: originals, clones, then the split samples' own values.
+        let with_samples = |t: &Tensor<2>, values: &[f32]| {
+            let grown = append(t.clone(), gather(t, &clones));
+            kept(append(grown, sampled(values)), &keep)
+        };
+        p.means = with_samples(&p.means, &plan.split_means);
+        p.log_scales = with_samples(&p.log_scales, &plan.split_log_scales);
+        p.quats = kept(append(p.quats.clone(), gather(&p.quats, &from)), &keep);
+        let opacity = append(p.opacity_logits.clone(), gather(&p.opacity_logits, &from));
+        p.opacity_logits = kept(opacity, &keep);
+        p.sh = kept(append(p.sh.clone(), gather(&p.sh, &from)), &keep);
+        let rows = sources.len();
+        self.means.grow_zeros(rows, &keep);
+        self.log_scales.grow_zeros(rows, &keep);
+        self.quats.grow_zeros(rows, &keep);
+        self.opacity_logits.grow_zeros(rows, &keep);
+        self.sh.grow_zeros(rows, &keep);
+        let n = kept_rows.len();
+        self.grad_accum = Tensor::<1>::zeros([n], &device);
+        self.denom = Tensor::<1>::zeros([n], &device);
+        self.max_radii = Tensor::<1>::zeros([n], &device);
+        self.ahead_of_host = true;
+    }
+
     /// [`super::densify::reset_opacity`] on the device.
     pub fn reset_opacity(&mut self, cap: f32) {
         let o = self.params.opacity_logits.clone();
@@ -239,6 +316,34 @@ impl Gradients {
             means2d: or_zeros(means2d.grad(grads), means2d),
         }
     }
+}
+
+/// `t` with the rows of `extra` appended.
+fn append<const D: usize>(t: Tensor<D>, extra: Option<Tensor<D>>) -> Tensor<D> {
+    match extra {
+        Some(extra) => Tensor::cat(vec![t, extra], 0),
+        None => t,
+    }
+}
+
+/// The rows of `keep` (all when `None`).
+fn kept<const D: usize>(t: Tensor<D>, keep: &Option<Tensor<1, Int>>) -> Tensor<D> {
+    match keep {
+        Some(index) => t.select(0, index.clone()),
+        None => t,
+    }
+}
+
+/// The rows `index` of `t` (none when `None`).
+fn gather<const D: usize>(t: &Tensor<D>, index: &Option<Tensor<1, Int>>) -> Option<Tensor<D>> {
+    index.as_ref().map(|i| t.clone().select(0, i.clone()))
+}
+
+/// `rows` as an index tensor.
+fn indices(rows: &[usize], device: &Device) -> Tensor<1, Int> {
+    let rows: Vec<i64> = rows.iter().map(|&i| i as i64).collect();
+    let len = rows.len();
+    Tensor::<1, Int>::from_data(TensorData::new(rows, [len]), device)
 }
 
 /// `(lr/bc₁)·m` for a group with one learning rate.

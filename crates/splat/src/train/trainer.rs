@@ -12,7 +12,9 @@ use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
 use super::config::TrainConfig;
-use super::densify::{DensifyReport, DensifyStats, ModelAdam, densify_and_prune, reset_opacity};
+use super::densify::{
+    DensifyReport, DensifyStats, ModelAdam, clone_and_split, densify_and_prune, plan, reset_opacity,
+};
 use super::resident::{Gradients, ResidentState, StepRates};
 use crate::loss::photometric_loss;
 use crate::model::{GaussianModel, inverse_sigmoid};
@@ -583,12 +585,9 @@ impl Trainer {
             let resident = self.resident.as_mut().expect("called with a device state");
             resident.record(radii, grads.means2d.clone());
             if self.densifies_at(it) {
-                self.sync_host()?;
-                densified = self.densify_on_host(it)?;
-                let s = &self.state;
-                let resident = ResidentState::upload(&s.model, &s.adam, &s.stats, &self.device);
-                self.resident = Some(resident);
-            } else if it.is_multiple_of(d.opacity_reset_interval) {
+                densified = Some(self.densify_on_device(it)?);
+            }
+            if it.is_multiple_of(self.config.densify.opacity_reset_interval) {
                 let resident = self.resident.as_mut().expect("called with a device state");
                 resident.reset_opacity(inverse_sigmoid(0.01));
             }
@@ -599,6 +598,43 @@ impl Trainer {
             resident.adam_step(grads, &rates, &self.config.adam);
         }
         Ok(densified)
+    }
+
+    /// Clone, split and prune on the device state: the plan is made on the host from what it
+    /// reads back (see [`super::resident`]), with the host path's random draws.
+    fn densify_on_device(&mut self, it: usize) -> Result<DensifyReport, TrainError> {
+        let d = &self.config.densify;
+        let screen = (it > d.opacity_reset_interval).then_some(d.max_screen_size);
+        let mut rng = self.rng(it, 2);
+        let resident = self.resident.as_mut().expect("called with a device state");
+        let (stats, log_scales, opacity) = resident.densify_inputs()?;
+        let (_, split) = clone_and_split(&stats, &log_scales, d, self.extent);
+        let (means, quats) = resident.rows(&split)?;
+        let rows = |i: usize| {
+            let k = split
+                .binary_search(&i)
+                .expect("asked only for split Gaussians");
+            let mean = std::array::from_fn(|a| means[3 * k + a]);
+            (mean, std::array::from_fn(|a| quats[4 * k + a]))
+        };
+        let plan = plan(
+            &stats,
+            &log_scales,
+            &opacity,
+            rows,
+            d,
+            self.extent,
+            screen,
+            &mut rng,
+        );
+        if !plan.keep.contains(&true) {
+            return Err(TrainError::NoGaussiansLeft {
+                iteration: it,
+                before: opacity.len(),
+            });
+        }
+        resident.apply(&plan);
+        Ok(plan.report())
     }
 
     /// Whether iteration `it` clones, splits and prunes.
