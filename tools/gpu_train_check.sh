@@ -9,13 +9,14 @@
 #
 #   tools/gpu_train_check.sh BIN_DIR DATA OUT_DIR [SECONDS]
 #
-# SECONDS bounds the lego run (default 420); a run stopped by it leaves its last progress line
-# in train.log and a checkpoint that `--resume` continues.
+# SECONDS bounds the lego run (default 400, so that the whole script fits a 10-minute call); a
+# run stopped by it leaves its last progress line in train.log and a checkpoint that `--resume`
+# continues.
 set -uo pipefail
 bin=$1
 data=$2
 out=$3
-limit=${4:-420}
+limit=${4:-400}
 mkdir -p "$out"
 for f in "$bin"/*.xz; do [ -e "$f" ] && xz -dkf "$f"; done
 chmod +x "$bin"/fewview
@@ -25,7 +26,7 @@ nproc >>"$out/gpu.txt"
 
 for device in gpu cpu; do
   log "training-step bench on the $device"
-  timeout 120 "$bin/fewview" bench --device "$device" --only train --train-steps 100 \
+  timeout 60 "$bin/fewview" bench --device "$device" --only train --train-steps 100 \
     --json "$out/bench_train_$device.json" >"$out/bench_train_$device.log" 2>&1
   log "bench: exit $?"
 done
