@@ -102,6 +102,16 @@ fn exp_blend(x_in: f32) -> f32 {
     p * f32::reinterpret(bits)
 }
 
+/// This cube's tile and this unit's pixel `(x, y)`. Cubes are one-dimensional (subgroup builtins
+/// require them): unit u is pixel (u mod 16, u / 16) of the tile.
+#[cube]
+fn tile_and_pixel(tiles_x: u32) -> (usize, u32, u32) {
+    let tile = (CUBE_POS_Y * tiles_x + CUBE_POS_X) as usize;
+    let px = CUBE_POS_X * TILE as u32 + UNIT_POS % TILE as u32;
+    let py = CUBE_POS_Y * TILE as u32 + UNIT_POS / TILE as u32;
+    (tile, px, py)
+}
+
 /// The tile's pair range, read once and made uniform across the cube.
 #[cube]
 fn tile_range(ranges: &[u32], tile: usize) -> (u32, u32) {
@@ -134,10 +144,7 @@ pub fn blend_forward(
     height: u32,
     tiles_x: u32,
 ) {
-    let tile = (CUBE_POS_Y * tiles_x + CUBE_POS_X) as usize;
-    // One-dimensional cubes (subgroup builtins require them): unit u is pixel (u mod 16, u / 16).
-    let px = CUBE_POS_X * TILE as u32 + UNIT_POS % TILE as u32;
-    let py = CUBE_POS_Y * TILE as u32 + UNIT_POS / TILE as u32;
+    let (tile, px, py) = tile_and_pixel(tiles_x);
     let inside = px < width && py < height;
     let unit = UNIT_POS as usize;
     let mut cache = Shared::<[f32]>::new_slice(TILE_UNITS * SPLAT_FLOATS);
@@ -325,10 +332,7 @@ pub fn blend_backward(
     #[comptime] plane: bool,
     #[comptime] grouped: bool,
 ) {
-    let tile = (CUBE_POS_Y * tiles_x + CUBE_POS_X) as usize;
-    // One-dimensional cubes (subgroup builtins require them): unit u is pixel (u mod 16, u / 16).
-    let px = CUBE_POS_X * TILE as u32 + UNIT_POS % TILE as u32;
-    let py = CUBE_POS_Y * TILE as u32 + UNIT_POS / TILE as u32;
+    let (tile, px, py) = tile_and_pixel(tiles_x);
     let inside = px < width && py < height;
     let unit = UNIT_POS as usize;
     let mut cache = Shared::<[f32]>::new_slice(TILE_UNITS * SPLAT_FLOATS);
