@@ -328,31 +328,28 @@ impl VirtualViewTerm {
 /// set), weight 10, throughout training. The neighbours' mean is held constant in the gradient.
 pub struct KnnColorTerm {
     options: KnnColorOptions,
-    neighbours: Vec<i64>,
-    /// `neighbours` on the compute device, uploaded once per search.
-    index: Option<Tensor<1, Int>>,
-    found_for: Option<(usize, usize)>,
+    /// The last search's `(period, Gaussian count)` and its neighbours, row by row (`[n·k]`),
+    /// on the compute device.
+    found: Option<((usize, usize), Tensor<1, Int>)>,
 }
 
 impl KnnColorTerm {
     pub fn new(options: KnnColorOptions) -> Self {
         Self {
             options,
-            neighbours: Vec::new(),
-            index: None,
-            found_for: None,
+            found: None,
         }
     }
 
     /// The `k` nearest other Gaussians of each Gaussian, row by row.
-    fn find(&mut self, means: &[[f32; 3]], period: usize) {
+    fn find(&self, means: &[[f32; 3]]) -> Vec<i64> {
         let k = self
             .options
             .neighbours
             .min(means.len().saturating_sub(1))
             .max(1);
         let tree = PointTree::new(means);
-        self.neighbours = means
+        means
             .iter()
             .enumerate()
             .flat_map(|(i, p)| {
@@ -366,8 +363,7 @@ impl KnnColorTerm {
                 found.resize(k, i as i64);
                 found
             })
-            .collect();
-        self.found_for = Some((period, means.len()));
+            .collect()
     }
 }
 
@@ -388,19 +384,24 @@ impl LossTerm for KnnColorTerm {
             .clone()
             .slice([0..n, 0..1, 0..3])
             .reshape([n, 3]);
-        if self.found_for != Some((period, n)) {
-            let means: Vec<[f32; 3]> = ctx
-                .model()?
-                .means
-                .chunks_exact(3)
-                .map(|p| [p[0], p[1], p[2]])
-                .collect();
-            self.find(&means, period);
-            let index = TensorData::new(self.neighbours.clone(), [self.neighbours.len()]);
-            self.index = Some(Tensor::<1, Int>::from_data(index, &dc.device()));
-        }
-        let k = self.neighbours.len() / n;
-        let index = self.index.clone().expect("found above");
+        let index = match &self.found {
+            Some((key, index)) if *key == (period, n) => index.clone(),
+            _ => {
+                let means: Vec<[f32; 3]> = ctx
+                    .model()?
+                    .means
+                    .chunks_exact(3)
+                    .map(|p| [p[0], p[1], p[2]])
+                    .collect();
+                let found = self.find(&means);
+                let len = found.len();
+                let index =
+                    Tensor::<1, Int>::from_data(TensorData::new(found, [len]), &dc.device());
+                self.found = Some(((period, n), index.clone()));
+                index
+            }
+        };
+        let k = index.dims()[0] / n;
         let mean = dc
             .clone()
             .select(0, index)

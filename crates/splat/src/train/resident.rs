@@ -156,12 +156,17 @@ impl ResidentState {
             opacity_logits: self.opacity_logits.download(1, "opacities")?,
             sh: self.sh.download(k3, "SH")?,
         };
-        let stats = DensifyStats {
+        let stats = self.stats()?;
+        Ok((model, adam, stats))
+    }
+
+    /// The densification statistics read back.
+    fn stats(&self) -> Result<DensifyStats, ReadbackError> {
+        Ok(DensifyStats {
             grad_accum: f32_values(self.grad_accum.clone(), "densification gradient sums")?,
             denom: f32_values(self.denom.clone(), "densification view counts")?,
             max_radii: f32_values(self.max_radii.clone(), "largest screen radii")?,
-        };
-        Ok((model, adam, stats))
+        })
     }
 
     /// Number of Gaussians.
@@ -224,11 +229,7 @@ impl ResidentState {
 
     /// What densification reads: the statistics, all log-scales and opacity logits.
     pub fn densify_inputs(&self) -> Result<(DensifyStats, Vec<f32>, Vec<f32>), ReadbackError> {
-        let stats = DensifyStats {
-            grad_accum: f32_values(self.grad_accum.clone(), "densification gradient sums")?,
-            denom: f32_values(self.denom.clone(), "densification view counts")?,
-            max_radii: f32_values(self.max_radii.clone(), "largest screen radii")?,
-        };
+        let stats = self.stats()?;
         let p = &self.params;
         let log_scales = f32_values(p.log_scales.clone(), "log-scales")?;
         let opacity = f32_values(p.opacity_logits.clone(), "opacity logits")?;

@@ -545,7 +545,7 @@ impl Trainer {
         let mut densified = None;
         if it < d.until_iter {
             self.state.stats.record(&radii, &host.means2d);
-            densified = self.densify_on_host(it)?;
+            densified = self.densify_on_host(it);
         }
         if densified.is_none() && !self.state.model.is_empty() {
             let rates = self.rates(it);
@@ -570,8 +570,8 @@ impl Trainer {
         Ok(densified)
     }
 
-    /// Densification and Adam on the device state; densification itself goes through the host
-    /// (see [`super::resident`]). Gradients are not read back: one that is not finite makes the
+    /// Densification and Adam on the device state; densification is decided on the host (see
+    /// [`Self::densify_on_device`]). Gradients are not read back: one that is not finite makes the
     /// next iteration's loss non-finite, which stops training there.
     fn update_on_device(
         &mut self,
@@ -604,8 +604,7 @@ impl Trainer {
     /// reads back (see [`super::resident`]), with the host path's random draws.
     fn densify_on_device(&mut self, it: usize) -> Result<DensifyReport, TrainError> {
         let d = &self.config.densify;
-        let screen = (it > d.opacity_reset_interval).then_some(d.max_screen_size);
-        let mut rng = self.rng(it, 2);
+        let (screen, mut rng) = self.densify_draws(it);
         let resident = self.resident.as_mut().expect("called with a device state");
         let (stats, log_scales, opacity) = resident.densify_inputs()?;
         let (_, split) = clone_and_split(&stats, &log_scales, d, self.extent);
@@ -637,21 +636,28 @@ impl Trainer {
         Ok(plan.report())
     }
 
+    /// The screen-size limit and the random generator of densification at iteration `it`, the
+    /// same for the host and the device path.
+    fn densify_draws(&self, it: usize) -> (Option<f32>, StdRng) {
+        let d = &self.config.densify;
+        let screen = (it > d.opacity_reset_interval).then_some(d.max_screen_size);
+        (screen, self.rng(it, 2))
+    }
+
     /// Whether iteration `it` clones, splits and prunes.
     fn densifies_at(&self, it: usize) -> bool {
         let d = &self.config.densify;
         it < d.until_iter && it > d.from_iter && it.is_multiple_of(d.interval)
     }
 
-    /// The host half of densification at iteration `it`: clone, split and prune when it is
+    /// Densification of the host state at iteration `it`: clone, split and prune when it is
     /// due, then the periodic opacity reset (before the optimiser step, as the reference code;
     /// an iteration that densifies skips the step because its gradients belong to the old set).
-    fn densify_on_host(&mut self, it: usize) -> Result<Option<DensifyReport>, TrainError> {
+    fn densify_on_host(&mut self, it: usize) -> Option<DensifyReport> {
         let d = &self.config.densify;
         let mut densified = None;
         if self.densifies_at(it) {
-            let screen = (it > d.opacity_reset_interval).then_some(d.max_screen_size);
-            let mut rng = self.rng(it, 2);
+            let (screen, mut rng) = self.densify_draws(it);
             let s = &mut self.state;
             densified = Some(densify_and_prune(
                 &mut s.model,
@@ -666,7 +672,7 @@ impl Trainer {
         if it.is_multiple_of(d.opacity_reset_interval) {
             reset_opacity(&mut self.state.model, &mut self.state.adam);
         }
-        Ok(densified)
+        densified
     }
 
     /// The learning rates of iteration `it`.
