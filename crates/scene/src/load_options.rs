@@ -51,7 +51,7 @@ impl FromStr for UndistortMode {
     }
 }
 
-/// The dataset layouts [`load_dataset`] reads.
+/// The dataset layouts [`crate::load_dataset`] reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum DatasetFormat {

@@ -64,7 +64,7 @@ pub fn write(path: &Path, magic: &[u8], payload: &[u8]) -> Result<()> {
     crate::atomic::write_bytes(path, &seal(magic, payload))
 }
 
-/// Reads a file written by [`write`] and returns its payload, checked as [`unseal`] checks it.
+/// Reads a file written by [`write()`] and returns its payload, checked as [`unseal`] checks it.
 pub fn read(path: &Path, magic: &[u8], older: &[&[u8]], what: &str) -> Result<Vec<u8>> {
     let mut bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
     let payload_len = unseal(path, &bytes, magic, older, what)?.len();

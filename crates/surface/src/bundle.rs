@@ -17,7 +17,7 @@
 //! (pixels). Cameras take left se(3) steps (`P ← exp(ξ) P`, rotation first), the first view is
 //! held, and the common scale, which no image sees, is restored at the end. Levenberg–Marquardt
 //! with Marquardt's damping on analytic Jacobians, points eliminated by the Schur complement
-//! ([`crate::schur`]), Cauchy weights (iteratively reweighted) at `cauchy_sigmas` robust
+//! (the `schur` module), Cauchy weights (iteratively reweighted) at `cauchy_sigmas` robust
 //! standard deviations of the starting residuals. Unlike [`crate::patch_adjustment`], the
 //! scale is not recomputed as the fit tightens: on DTU's triplets a shrinking scale kept
 //! moving the optimum (docs/experiments.md, 2026-11-26).

@@ -581,8 +581,8 @@ impl Trainer {
     }
 
     /// One optimisation step: a batch of random rays and correspondences
-    /// ([`Self::sample_batch`]), rendered through the current poses, the loss terms on it
-    /// ([`Self::loss_terms`]), then the Adam updates ([`Self::update`]).
+    /// (`sample_batch`), rendered through the current poses, the loss terms on it
+    /// (`loss_terms`), then the Adam updates (`update`).
     pub fn step(&mut self) -> Result<StepStats> {
         let it = self.state.iteration;
         let cfg = self.config.clone();

@@ -36,7 +36,7 @@ const NAL_PPS: u8 = 8;
 const TICKS_PER_FRAME: u32 = 1000;
 
 /// The highest frame rate an MP4 written here can record: the track timescale,
-/// [`TICKS_PER_FRAME`] ticks a frame, is a 32-bit field, so a faster rate would be saved wrong
+/// `TICKS_PER_FRAME` ticks a frame, is a 32-bit field, so a faster rate would be saved wrong
 /// (the timescale saturates).
 pub const MAX_MP4_FPS: f32 = (u32::MAX / TICKS_PER_FRAME) as f32;
 

@@ -49,13 +49,13 @@ pub struct Args {
     /// DTU observation mask: a boolean/uint8/float .npy voxel grid (ObsMask converted from .mat).
     #[arg(long, requires_all = ["obs_bb_min", "obs_bb_max", "obs_res"])]
     pub obs_mask: Option<PathBuf>,
-    /// BB[0] of the observation mask, "x,y,z".
+    /// The observation mask's lower corner "x,y,z" (the first row of `BB` in ObsMask*.mat).
     #[arg(long, allow_hyphen_values = true)]
     pub obs_bb_min: Option<String>,
-    /// BB[1] of the observation mask, "x,y,z".
+    /// The observation mask's upper corner "x,y,z" (the second row of `BB` in ObsMask*.mat).
     #[arg(long, allow_hyphen_values = true)]
     pub obs_bb_max: Option<String>,
-    /// Res of the observation mask.
+    /// The observation mask's voxel size (`Res` in ObsMask*.mat).
     #[arg(long)]
     pub obs_res: Option<f64>,
     /// DTU ground plane "a,b,c,d": only ground truth with a·x + b·y + c·z + d > 0 counts.

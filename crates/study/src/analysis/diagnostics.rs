@@ -7,7 +7,7 @@
 use crate::error::{Result, StudyError};
 
 /// The fewest draws per chain: the chains are split in halves, and Geyer's initial positive
-/// sequence in [`ess`] looks at lags 1 to 3 of each half, so a half needs at least 5 draws.
+/// sequence in `ess` looks at lags 1 to 3 of each half, so a half needs at least 5 draws.
 pub const MIN_DRAWS: usize = 10;
 
 /// Rank-normalised split R̂ (the larger of the bulk and the folded-tail value).

@@ -381,7 +381,7 @@ impl StudyAnalysis {
     }
 
     /// Writes `report.md`, `pairs.csv`, `skills.csv`, `analysis.json` and one ranking plot per
-    /// question (`ranking_<question>.png`, [`ranking_file_names`]) into `dir`, each atomically.
+    /// question (`ranking_<question>.png`, `ranking_file_names`) into `dir`, each atomically.
     /// Returns the paths written.
     pub fn write_report(&self, dir: &Path) -> Result<Vec<std::path::PathBuf>> {
         std::fs::create_dir_all(dir).map_err(|e| StudyError::io(dir, e))?;

@@ -15,7 +15,7 @@
 //!    `max_global_points`) is matched against every position of image `b` (inside `b`'s mask)
 //!    by normalised cross-correlation (NCC) of `(2r+1)²` patches. Views tens of degrees apart
 //!    see a surface rotated, scaled and foreshortened, so each template is tried under a small
-//!    set of affine warps ([`SEARCH_WARPS`]: identity, ±15° rotations, scales 0.8 and 1.25,
+//!    set of affine warps (`SEARCH_WARPS`: identity, ±15° rotations, scales 0.8 and 1.25,
 //!    0.8/1.25 foreshortening along each axis). The level is small (≤ 64 px by default), so
 //!    the exhaustive search costs about a billion multiply–adds. The remaining grid points
 //!    start from their nearest searched point.

@@ -10,7 +10,7 @@
 //! which then begins from poses the matches agree with.
 //!
 //! Model: each world-to-camera pose is updated on the left, `P_i ← exp(ξ_i) P_i`, with
-//! `ξ_i ∈ se(3)` (rotation first, [`se3_exp`]); the residual of match `k` between views `a` and
+//! `ξ_i ∈ se(3)` (rotation first, [`se3_exp`](crate::pose::se3_exp)); the residual of match `k` between views `a` and
 //! `b` is the signed Sampson distance `x_bᵀ F x_a / √((F x_a)₁² + (F x_a)₂² + (Fᵀ x_b)₁² + (Fᵀ x_b)₂²)`
 //! (pixels) with `F` from the current poses and the known intrinsics, weighted by the match's
 //! confidence and a Cauchy weight `1 / (1 + (d/s)²)` (iteratively reweighted). The scale `s`

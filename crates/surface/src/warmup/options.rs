@@ -27,8 +27,8 @@ pub struct WarmupOptions {
     pub connectivity: Connectivity,
     /// After the annealing, one more Levenberg–Marquardt run at the final Cauchy scale with
     /// each match's distance divided by its standard deviation across its epipolar line, from
-    /// the Lucas–Kanade covariance of its second end ([`Match::b_covariance`], dense matches
-    /// only), relative to the median one ([`covariance_scaled`]). Off by default.
+    /// the Lucas–Kanade covariance of its second end ([`Match::b_covariance`](crate::matching::Match::b_covariance), dense matches
+    /// only), relative to the median one (`covariance_scaled`). Off by default.
     #[serde(default)]
     pub covariance_polish: bool,
     /// Also start one annealing run from the poses the matches imply on their own

@@ -4,15 +4,15 @@
 //! be fetched here; see [`crate::stereo::source`] for plugging one in).
 //!
 //! The stages, each in its own module:
-//! 1. [`cost`]: the Birchfield–Tomasi sampling-insensitive pixel cost on an x-Sobel image clipped
+//! 1. `cost`: the Birchfield–Tomasi sampling-insensitive pixel cost on an x-Sobel image clipped
 //!    to `±pre_filter_cap`, plus the same cost on the raw intensities divided by 4, summed over
 //!    channels and over a `block_size²` window;
-//! 2. [`paths`]: the costs aggregated along 5 (or 8) straight paths with penalties `P1` for a
+//! 2. `paths`: the costs aggregated along 5 (or 8) straight paths with penalties `P1` for a
 //!    disparity change of one and `P2` for larger jumps (Hirschmüller's Eq. 13);
-//! 3. [`select`]: winner-takes-all with the uniqueness ratio, a parabola through the three
+//! 3. `select`: winner-takes-all with the uniqueness ratio, a parabola through the three
 //!    aggregated costs around the minimum for sub-pixel disparity, and the left–right check
 //!    against the disparity each right pixel would choose;
-//! 4. [`filter`]: a 3×3 median and the speckle filter (small connected regions are dropped).
+//! 4. `filter`: a 3×3 median and the speckle filter (small connected regions are dropped).
 //!
 //! Disparities are `x_left − x_right` in pixels and are kept in OpenCV's fixed point (1/16 px,
 //! `i16`), costs as saturating `i16`, so that an image pair gives the same map as OpenCV's.
