@@ -120,6 +120,38 @@ fn cam_at(cam: &[f32], #[comptime] k: usize) -> f32 {
     cam[k]
 }
 
+/// The world-to-camera rotation `W`, row-major.
+#[derive(CubeType, Clone, Copy)]
+#[expand(derive(Clone))]
+struct Rotation {
+    w00: f32,
+    w01: f32,
+    w02: f32,
+    w10: f32,
+    w11: f32,
+    w12: f32,
+    w20: f32,
+    w21: f32,
+    w22: f32,
+}
+
+/// Reads `W` from the camera buffer (the forward and backward projections both use it).
+#[cube]
+fn rotation(cam: &[f32]) -> Rotation {
+    let o = CameraBuffer::ROT;
+    Rotation {
+        w00: cam[o],
+        w01: cam[o + 1],
+        w02: cam[o + 2],
+        w10: cam[o + 3],
+        w11: cam[o + 4],
+        w12: cam[o + 5],
+        w20: cam[o + 6],
+        w21: cam[o + 7],
+        w22: cam[o + 8],
+    }
+}
+
 /// `Σ_k Y_k(d) sh_k` for one colour channel, plus 0.5 (the Inria convention).
 #[cube]
 fn sh_channel(sh: &[f32], base: usize, k_used: u32, dir: Vec3, ch: usize) -> f32 {
@@ -145,18 +177,10 @@ pub fn forward_one(
     k_used: u32,
 ) -> Fwd {
     let (px, py, pz) = (means[3 * i], means[3 * i + 1], means[3 * i + 2]);
-    let w00 = cam_at(cam, CameraBuffer::ROT);
-    let w01 = cam_at(cam, CameraBuffer::ROT + 1);
-    let w02 = cam_at(cam, CameraBuffer::ROT + 2);
-    let w10 = cam_at(cam, CameraBuffer::ROT + 3);
-    let w11 = cam_at(cam, CameraBuffer::ROT + 4);
-    let w12 = cam_at(cam, CameraBuffer::ROT + 5);
-    let w20 = cam_at(cam, CameraBuffer::ROT + 6);
-    let w21 = cam_at(cam, CameraBuffer::ROT + 7);
-    let w22 = cam_at(cam, CameraBuffer::ROT + 8);
-    let t0 = w00 * px + w01 * py + w02 * pz + cam_at(cam, CameraBuffer::TRANS);
-    let t1 = w10 * px + w11 * py + w12 * pz + cam_at(cam, CameraBuffer::TRANS + 1);
-    let t2 = w20 * px + w21 * py + w22 * pz + cam_at(cam, CameraBuffer::TRANS + 2);
+    let rot = rotation(cam);
+    let t0 = rot.w00 * px + rot.w01 * py + rot.w02 * pz + cam_at(cam, CameraBuffer::TRANS);
+    let t1 = rot.w10 * px + rot.w11 * py + rot.w12 * pz + cam_at(cam, CameraBuffer::TRANS + 1);
+    let t2 = rot.w20 * px + rot.w21 * py + rot.w22 * pz + cam_at(cam, CameraBuffer::TRANS + 2);
     let (q0, q1, q2, q3) = (
         quats[4 * i],
         quats[4 * i + 1],
@@ -206,12 +230,12 @@ pub fn forward_one(
     let j11 = fy * inv_z;
     let j12 = -fy * ry * inv_z;
     // T = J W (J01 = J10 = 0; the CPU code adds their zero products, which changes nothing).
-    let m00 = j00 * w00 + 0.0 * w10 + j02 * w20;
-    let m01 = j00 * w01 + 0.0 * w11 + j02 * w21;
-    let m02 = j00 * w02 + 0.0 * w12 + j02 * w22;
-    let m10 = 0.0 * w00 + j11 * w10 + j12 * w20;
-    let m11 = 0.0 * w01 + j11 * w11 + j12 * w21;
-    let m12 = 0.0 * w02 + j11 * w12 + j12 * w22;
+    let m00 = j00 * rot.w00 + 0.0 * rot.w10 + j02 * rot.w20;
+    let m01 = j00 * rot.w01 + 0.0 * rot.w11 + j02 * rot.w21;
+    let m02 = j00 * rot.w02 + 0.0 * rot.w12 + j02 * rot.w22;
+    let m10 = 0.0 * rot.w00 + j11 * rot.w10 + j12 * rot.w20;
+    let m11 = 0.0 * rot.w01 + j11 * rot.w11 + j12 * rot.w21;
+    let m12 = 0.0 * rot.w02 + j11 * rot.w12 + j12 * rot.w22;
     // Σ' = T Σ Tᵀ + 0.3 I
     let ts00 = m00 * sg00 + m01 * sg01 + m02 * sg02;
     let ts01 = m00 * sg01 + m01 * sg11 + m02 * sg12;
@@ -590,19 +614,11 @@ pub fn project_backward(
     let dtm11 = 2.0 * (u10 * s01 + u11 * s11 + u12 * s12);
     let dtm12 = 2.0 * (u10 * s02 + u11 * s12 + u12 * s22);
     // T = J W: dL/dJ = dL/dT Wᵀ (only J00, J02, J11, J12 depend on t).
-    let w00 = cam_at(cam, CameraBuffer::ROT);
-    let w01 = cam_at(cam, CameraBuffer::ROT + 1);
-    let w02 = cam_at(cam, CameraBuffer::ROT + 2);
-    let w10 = cam_at(cam, CameraBuffer::ROT + 3);
-    let w11 = cam_at(cam, CameraBuffer::ROT + 4);
-    let w12 = cam_at(cam, CameraBuffer::ROT + 5);
-    let w20 = cam_at(cam, CameraBuffer::ROT + 6);
-    let w21 = cam_at(cam, CameraBuffer::ROT + 7);
-    let w22 = cam_at(cam, CameraBuffer::ROT + 8);
-    let dj00 = dtm00 * w00 + dtm01 * w01 + dtm02 * w02;
-    let dj02 = dtm00 * w20 + dtm01 * w21 + dtm02 * w22;
-    let dj11 = dtm10 * w10 + dtm11 * w11 + dtm12 * w12;
-    let dj12 = dtm10 * w20 + dtm11 * w21 + dtm12 * w22;
+    let rot = rotation(cam);
+    let dj00 = dtm00 * rot.w00 + dtm01 * rot.w01 + dtm02 * rot.w02;
+    let dj02 = dtm00 * rot.w20 + dtm01 * rot.w21 + dtm02 * rot.w22;
+    let dj11 = dtm10 * rot.w10 + dtm11 * rot.w11 + dtm12 * rot.w12;
+    let dj12 = dtm10 * rot.w20 + dtm11 * rot.w21 + dtm12 * rot.w22;
     let iz2 = inv_z * inv_z;
     dt2 = dt2 - dj00 * fx * iz2 - dj11 * fy * iz2;
     if f.clamped_x {
@@ -618,9 +634,9 @@ pub fn project_backward(
         dt2 += dj12 * 2.0 * fy * f.t1 * iz2 * inv_z;
     }
     // t = W p + t₀: dL/dp = Wᵀ dL/dt.
-    dm_x += w00 * dt0 + w10 * dt1 + w20 * dt2;
-    dm_y += w01 * dt0 + w11 * dt1 + w21 * dt2;
-    dm_z += w02 * dt0 + w12 * dt1 + w22 * dt2;
+    dm_x += rot.w00 * dt0 + rot.w10 * dt1 + rot.w20 * dt2;
+    dm_y += rot.w01 * dt0 + rot.w11 * dt1 + rot.w21 * dt2;
+    dm_z += rot.w02 * dt0 + rot.w12 * dt1 + rot.w22 * dt2;
     d_means[3 * i] = dm_x;
     d_means[3 * i + 1] = dm_y;
     d_means[3 * i + 2] = dm_z;
