@@ -92,19 +92,15 @@ impl GpuState {
 pub fn forward(tensors: [CubeTensor; 6], view: &RenderView) -> (CubeTensor, CubeTensor, GpuState) {
     let client = tensors[0].client.clone();
     let device = tensors[0].device.clone();
-    let names = [
-        "means",
-        "log_scales",
-        "quats",
-        "opacity_logits",
-        "sh",
-        "means2d",
+    let [means, log_scales, quats, opacity_logits, sh, means2d] = tensors;
+    let inputs = [
+        input(means, "means"),
+        input(log_scales, "log_scales"),
+        input(quats, "quats"),
+        input(opacity_logits, "opacity_logits"),
+        input(sh, "sh"),
+        input(means2d, "means2d"),
     ];
-    let mut i = 0;
-    let inputs = tensors.map(|t| {
-        i += 1;
-        input(t, names[i - 1])
-    });
     let n = inputs[3].shape.num_elements();
     let sh_coeffs = if n == 0 {
         1
@@ -361,9 +357,5 @@ pub fn backward(s: &GpuState, grad_image: CubeTensor) -> [CubeTensor; 6] {
         );
         clock.stage("project backward");
     }
-    let mut k = 0;
-    outs.map(|h| {
-        k += 1;
-        s.tensor(h, s.inputs[k - 1].shape.clone())
-    })
+    std::array::from_fn(|k| s.tensor(outs[k].clone(), s.inputs[k].shape.clone()))
 }
