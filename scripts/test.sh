@@ -21,8 +21,11 @@ fi
 
 cargo test --release --workspace -- "${extra[@]}" "$@"
 
-# The GPU rasterizer (feature `gpu`, off in the workspace build): its parity tests against the
-# CPU rasterizer and a GPU training run, on the first adapter wgpu finds (Mesa's lavapipe on a
-# machine without a GPU).
-echo "GPU tests: feature gpu, splat crate"
-cargo test --release -p fewview-splat --features gpu -- --include-ignored gpu "$@"
+# The GPU code (feature `gpu`, off in the workspace build), on the first adapter wgpu finds
+# (Mesa's lavapipe on a machine without a GPU): the rasterizer's parity tests against the CPU
+# rasterizer and a GPU training run (splat), and the PoseGaussian network against the CPU
+# (human). Only the targets that hold GPU tests are built.
+echo "GPU tests: feature gpu, splat and human crates"
+cargo test --release -p fewview-splat -p fewview-human \
+  --features fewview-splat/gpu,fewview-human/gpu \
+  --lib --test gpu_training --test gpu_network -- --include-ignored gpu "$@"
