@@ -6,7 +6,9 @@
 #
 # Build here (x86-64): `cargo build --release -p fewview --features gpu` and the splat crate's
 # test binary (`cargo test --release -p fewview-splat --features gpu --no-run`), then put them,
-# optionally xz-compressed, in BIN_DIR as `fewview` and `splat_tests`.
+# optionally xz-compressed, in BIN_DIR as `fewview` and `splat_tests`. Optionally also the
+# network's GPU test (`cargo test --release -p fewview-human --features gpu --test gpu_network
+# --no-run`) as `human_gpu_tests`.
 #
 #   tools/gpu_check.sh BIN_DIR OUT_DIR
 #
@@ -38,6 +40,13 @@ for reduction in plane grouped tree; do
     --test-threads 1 gpu:: >"$out/parity_$reduction.log" 2>&1
   log "parity tests: exit $?"
 done
+
+if [ -e "$bin/human_gpu_tests" ]; then
+  chmod +x "$bin/human_gpu_tests"
+  log "PoseGaussian network: GPU against CPU"
+  timeout 60 "$bin/human_gpu_tests" --nocapture >"$out/human_network.log" 2>&1
+  log "network test: exit $?"
+fi
 
 log "waiting for the gsplat build"
 wait "$build"
