@@ -27,6 +27,7 @@ pub mod undistort;
 
 use std::path::{Path, PathBuf};
 
+use fewview_scene::distortion::Distortion;
 use fewview_scene::{Camera, Image};
 use nalgebra::{Matrix3, Vector3};
 
@@ -35,7 +36,7 @@ use crate::maps::{self, DepthMap, Mask};
 use crate::opencv::camera_from_opencv;
 use crate::readlog::{ReadKind, ReadLog};
 use crate::source::{MultiView, check_index, check_joints_inside};
-use undistort::{Distortion, UndistortMap};
+use undistort::{UndistortMap, distortion_from_opencv};
 
 /// Millimetres per metre: `annots.npy` stores `T` in millimetres.
 const MM_PER_M: f64 = 1000.0;
@@ -189,9 +190,8 @@ impl ZjuDataset {
     /// The undistortion map of `camera`, or `None` without distortion.
     fn map(&self, camera: usize) -> Option<UndistortMap> {
         let d = &self.distortion[camera];
-        let k = &self.cameras[camera].intrinsics;
-        let size = (k.width as usize, k.height as usize);
-        (!d.is_zero()).then(|| UndistortMap::new(&self.intrinsics_cv[camera], d, size.0, size.1))
+        let (width, height) = self.size(camera);
+        (!d.is_identity()).then(|| UndistortMap::new(&self.intrinsics_cv[camera], d, width, height))
     }
 
     fn size(&self, camera: usize) -> (usize, usize) {
@@ -376,9 +376,9 @@ fn read_parents(path: &Path) -> Result<Vec<i64>> {
 /// A camera's `D`: none (no distortion), or OpenCV's 4 or 5 coefficients.
 fn distortion_of(d: &[f64], annots: &Path, camera: &str) -> Result<Distortion> {
     if d.is_empty() {
-        return Ok(Distortion::default());
+        return Ok(Distortion::opencv(&[]));
     }
-    Distortion::from_coefficients(d).ok_or_else(|| {
+    distortion_from_opencv(d).ok_or_else(|| {
         let msg = format!(
             "camera {camera}: D has {} coefficients, expected 4 or 5 (k1, k2, p1, p2[, k3])",
             d.len()
@@ -444,9 +444,9 @@ mod tests {
     #[test]
     fn distortion_needs_none_four_or_five_coefficients() {
         let at = Path::new("annots.npy");
-        assert!(distortion_of(&[], at, "B1").unwrap().is_zero());
+        assert!(distortion_of(&[], at, "B1").unwrap().is_identity());
         let d = distortion_of(&[0.1, -0.2, 0.01, 0.02], at, "B1").unwrap();
-        assert_eq!((d.k1, d.p2, d.k3), (0.1, 0.02, 0.0));
+        assert_eq!(d, Distortion::opencv(&[0.1, -0.2, 0.01, 0.02, 0.0]));
         let err = distortion_of(&[0.1, 0.2, 0.3], at, "B1")
             .unwrap_err()
             .to_string();

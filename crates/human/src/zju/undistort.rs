@@ -1,61 +1,30 @@
 //! Lens undistortion of ZJU-MoCap views into pinhole images with the same `K`, so that the
 //! rest of the engine (fewview-scene's cameras have no distortion) sees ideal pinhole views.
 //!
-//! The model is OpenCV's (Brown–Conrady) with `D = (k1, k2, p1, p2[, k3])`: a normalised point
-//! `(x, y)`, `r² = x² + y²`, is seen at
-//! `x_d = x (1 + k1 r² + k2 r⁴ + k3 r⁶) + 2 p1 x y + p2 (r² + 2x²)` and
-//! `y_d = y (1 + k1 r² + k2 r⁴ + k3 r⁶) + p1 (r² + 2y²) + 2 p2 x y`.
-//! Each output pixel's centre is unprojected with `K`, distorted, and projected with `K` again to
-//! find where to sample the recorded image, as `cv2.initUndistortRectifyMap(K, D, None, K, ...)`
-//! followed by `cv2.remap` does: bilinear for colour, nearest (ties to even, as OpenCV rounds) for
-//! masks, zero outside the recorded image. Pixel coordinates here are OpenCV's (centres at
-//! integers), the convention `K` was calibrated in.
+//! The lens model is OpenCV's Brown–Conrady one, `D = (k1, k2, p1, p2[, k3])`, evaluated by
+//! [`fewview_scene::distortion::Distortion`] ([`distortion_from_opencv`] reads `D`). Each output
+//! pixel's centre is unprojected with `K`, distorted, and projected with `K` again to find where
+//! to sample the recorded image, as `cv2.initUndistortRectifyMap(K, D, None, K, ...)` followed
+//! by `cv2.remap` does: bilinear for colour, nearest (ties to even, as OpenCV rounds) for masks,
+//! zero outside the recorded image.
+//!
+//! Only this sampling map lives here, because it follows conventions that the scene crate's
+//! [`fewview_scene::distortion::undistort_image`] does not, and switching would change the
+//! undistorted views: pixel centres at integers (OpenCV's, the convention `K` was calibrated in)
+//! rather than at half-integers, zero beyond the recorded image (`BORDER_CONSTANT`) rather than
+//! the repeated edge pixel (`BORDER_REPLICATE`), bilinear weights in `f64` rather than `f32`, and
+//! a nearest-neighbour mode for masks, which the scene crate has none of.
 
 use fewview_scene::Image;
+use fewview_scene::distortion::Distortion;
 use nalgebra::Matrix3;
 
 use crate::maps::Mask;
 
-/// OpenCV's radial-tangential distortion coefficients.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Distortion {
-    pub k1: f64,
-    pub k2: f64,
-    pub p1: f64,
-    pub p2: f64,
-    pub k3: f64,
-}
-
-impl Distortion {
-    /// From OpenCV's `D` with 4 or 5 coefficients (`k3 = 0` for 4); `None` for other lengths.
-    pub fn from_coefficients(d: &[f64]) -> Option<Self> {
-        match *d {
-            [k1, k2, p1, p2] => Some(Self {
-                k1,
-                k2,
-                p1,
-                p2,
-                k3: 0.0,
-            }),
-            [k1, k2, p1, p2, k3] => Some(Self { k1, k2, p1, p2, k3 }),
-            _ => None,
-        }
-    }
-
-    pub fn is_zero(&self) -> bool {
-        [self.k1, self.k2, self.p1, self.p2, self.k3]
-            .iter()
-            .all(|&v| v == 0.0)
-    }
-
-    /// Where the lens puts the normalised point `(x, y)`.
-    pub fn apply(&self, x: f64, y: f64) -> (f64, f64) {
-        let r2 = x * x + y * y;
-        let radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
-        let xd = x * radial + 2.0 * self.p1 * x * y + self.p2 * (r2 + 2.0 * x * x);
-        let yd = y * radial + self.p1 * (r2 + 2.0 * y * y) + 2.0 * self.p2 * x * y;
-        (xd, yd)
-    }
+/// The lens of OpenCV's `D` with 4 or 5 coefficients (`k3 = 0` for 4), the lengths ZJU-MoCap
+/// calibrations use; `None` for other lengths.
+pub fn distortion_from_opencv(d: &[f64]) -> Option<Distortion> {
+    matches!(d.len(), 4 | 5).then(|| Distortion::opencv(d))
 }
 
 /// For every pixel of the undistorted image, the position in the recorded image to sample
@@ -78,7 +47,7 @@ impl UndistortMap {
             let y = (v as f64 - cy) / fy;
             for u in 0..width {
                 let x = (u as f64 - cx) / fx;
-                let (xd, yd) = d.apply(x, y);
+                let (xd, yd) = d.distort(x, y);
                 source.push([fx * xd + cx, fy * yd + cy]);
             }
         }
@@ -135,7 +104,7 @@ mod tests {
     #[test]
     fn zero_distortion_is_the_identity_map() {
         let k = Matrix3::new(50.0, 0.0, 9.5, 0.0, 40.0, 7.0, 0.0, 0.0, 1.0);
-        let map = UndistortMap::new(&k, &Distortion::default(), 20, 15);
+        let map = UndistortMap::new(&k, &Distortion::opencv(&[0.0; 5]), 20, 15);
         for (i, p) in map.source.iter().enumerate() {
             let (u, v) = ((i % 20) as f64, (i / 20) as f64);
             assert!((p[0] - u).abs() < 1e-12 && (p[1] - v).abs() < 1e-12);
@@ -147,13 +116,31 @@ mod tests {
         assert_eq!(map.remap_bilinear(&img), img);
     }
 
+    /// The map against OpenCV's equations written out: radial `1 + k1 r² + k2 r⁴ + k3 r⁶` and
+    /// tangential `p1, p2` terms, in OpenCV pixels (centres at integers).
     #[test]
-    fn tangential_terms_follow_the_formula() {
-        let d = Distortion::from_coefficients(&[0.0, 0.0, 0.01, -0.02]).unwrap();
-        let (xd, yd) = d.apply(0.3, -0.2);
-        let r2 = 0.13;
-        assert!((xd - (0.3 + 2.0 * 0.01 * 0.3 * -0.2 - 0.02 * (r2 + 2.0 * 0.09))).abs() < 1e-15);
-        assert!((yd - (-0.2 + 0.01 * (r2 + 2.0 * 0.04) + 2.0 * -0.02 * 0.3 * -0.2)).abs() < 1e-15);
-        assert!(Distortion::from_coefficients(&[0.1; 8]).is_none());
+    fn map_follows_the_opencv_formula() {
+        let (k1, k2, p1, p2, k3) = (-0.3, 0.12, 0.01, -0.02, -0.05);
+        let d = distortion_from_opencv(&[k1, k2, p1, p2, k3]).unwrap();
+        let (fx, fy, cx, cy) = (50.0, 40.0, 9.5, 7.0);
+        let k = Matrix3::new(fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0);
+        let map = UndistortMap::new(&k, &d, 20, 15);
+        for (i, p) in map.source.iter().enumerate() {
+            let (x, y) = (((i % 20) as f64 - cx) / fx, ((i / 20) as f64 - cy) / fy);
+            let r2 = x * x + y * y;
+            let radial = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2;
+            let xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
+            let yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+            assert!((p[0] - (fx * xd + cx)).abs() < 1e-12, "{i}: {p:?}");
+            assert!((p[1] - (fy * yd + cy)).abs() < 1e-12, "{i}: {p:?}");
+        }
+    }
+
+    #[test]
+    fn opencv_d_needs_four_or_five_coefficients() {
+        let four = distortion_from_opencv(&[0.1, -0.2, 0.01, 0.02]).unwrap();
+        assert_eq!(four, Distortion::opencv(&[0.1, -0.2, 0.01, 0.02, 0.0]));
+        assert!(distortion_from_opencv(&[0.1; 3]).is_none());
+        assert!(distortion_from_opencv(&[0.1; 8]).is_none());
     }
 }

@@ -114,6 +114,7 @@ impl Distortion {
     }
 
     /// The radial scale `s(r²)` of the radial–tangential model and its derivative in `r²`.
+    #[inline]
     fn radial_scale(radial: &[f64; 4], rational: &[f64; 3], r2: f64) -> (f64, f64) {
         let [k1, k2, k3, k4] = *radial;
         let [d1, d2, d3] = *rational;
@@ -133,11 +134,15 @@ impl Distortion {
     }
 
     /// The distorted normalised coordinates of the ideal ones `(x, y)`.
+    // Inlined, with `distort_with_jacobian` and `radial_scale`, so that per-pixel callers in
+    // other crates drop the Jacobian they do not use.
+    #[inline]
     pub fn distort(&self, x: f64, y: f64) -> (f64, f64) {
         self.distort_with_jacobian(x, y).0
     }
 
     /// The distorted point and the 2×2 Jacobian `∂(x_d, y_d)/∂(x, y)` (row-major).
+    #[inline]
     pub fn distort_with_jacobian(&self, x: f64, y: f64) -> ((f64, f64), [f64; 4]) {
         match self {
             Distortion::RadialTangential {
