@@ -223,9 +223,12 @@ mod tests {
 
     use super::*;
 
-    #[test]
-    fn ssim_op_value_and_gradient_match_the_metrics_crate() {
-        let (h, w) = (23, 31);
+    /// Two `h×w` RGB test images, their SSIM by `ssim` on the CPU backend, and the metrics
+    /// crate's value and exact gradient for the same pair: `(got, want, got_grad, want_grad)`.
+    fn against_metrics(
+        (h, w): (usize, usize),
+        ssim: impl Fn(Tensor<3>, Tensor<3>, &SsimOptions) -> Tensor<1>,
+    ) -> (f64, f64, Vec<f32>, Vec<f32>) {
         let a: Vec<f32> = (0..h * w * 3)
             .map(|i| ((i * 7919) % 101) as f32 / 100.0)
             .collect();
@@ -237,19 +240,21 @@ mod tests {
             Tensor::<3>::from_data(TensorData::new(a.clone(), [h, w, 3]), &device).require_grad();
         let tb = Tensor::<3>::from_data(TensorData::new(b.clone(), [h, w, 3]), &device);
         let opts = SsimOptions::training_loss();
-        let s = ssim_mean(ta.clone(), tb, opts);
-        let loss = s.clone() * 3.0;
-        let grads = loss.backward();
+        let s = ssim(ta.clone(), tb, &opts);
+        let grads = s.clone().backward();
         let (ia, ib) = (Image::from_vec(w, h, 3, a), Image::from_vec(w, h, 3, b));
         let (want, want_grad) = fewview_metrics::ssim::ssim_with_grad(&ia, &ib, &opts).unwrap();
         let got = s.into_data().try_to_vec::<f32>().unwrap()[0];
-        assert!((got as f64 - want).abs() < 1e-6);
-        let g = ta
-            .grad(&grads)
-            .unwrap()
-            .into_data()
-            .try_to_vec::<f32>()
-            .unwrap();
+        let got_grad = ta.grad(&grads).unwrap().into_data().try_to_vec().unwrap();
+        (got as f64, want, got_grad, want_grad)
+    }
+
+    #[test]
+    fn ssim_op_value_and_gradient_match_the_metrics_crate() {
+        // Scaled by 3 so that the op's backward must use the incoming gradient.
+        let (got, want, g, want_grad) =
+            against_metrics((23, 31), |a, b, opts| ssim_mean(a, b, *opts) * 3.0);
+        assert!((got - 3.0 * want).abs() < 3e-6, "{got} vs {}", 3.0 * want);
         for (x, y) in g.iter().zip(&want_grad) {
             assert!((x - 3.0 * y).abs() < 1e-7, "{x} vs {}", 3.0 * y);
         }
@@ -259,30 +264,8 @@ mod tests {
     /// and exact gradient are the reference.
     #[test]
     fn composed_ssim_matches_the_metrics_crate() {
-        let (h, w) = (19, 26);
-        let a: Vec<f32> = (0..h * w * 3)
-            .map(|i| ((i * 7919) % 101) as f32 / 100.0)
-            .collect();
-        let b: Vec<f32> = (0..h * w * 3)
-            .map(|i| ((i * 104_729) % 97) as f32 / 96.0)
-            .collect();
-        let device = Device::flex().autodiff();
-        let ta =
-            Tensor::<3>::from_data(TensorData::new(a.clone(), [h, w, 3]), &device).require_grad();
-        let tb = Tensor::<3>::from_data(TensorData::new(b.clone(), [h, w, 3]), &device);
-        let opts = SsimOptions::training_loss();
-        let s = ssim_mean_composed(ta.clone(), tb, &opts);
-        let grads = s.clone().backward();
-        let (ia, ib) = (Image::from_vec(w, h, 3, a), Image::from_vec(w, h, 3, b));
-        let (want, want_grad) = fewview_metrics::ssim::ssim_with_grad(&ia, &ib, &opts).unwrap();
-        let got = s.into_data().try_to_vec::<f32>().unwrap()[0];
-        assert!((got as f64 - want).abs() < 1e-5, "{got} vs {want}");
-        let g = ta
-            .grad(&grads)
-            .unwrap()
-            .into_data()
-            .try_to_vec::<f32>()
-            .unwrap();
+        let (got, want, g, want_grad) = against_metrics((19, 26), ssim_mean_composed);
+        assert!((got - want).abs() < 1e-5, "{got} vs {want}");
         let scale = want_grad.iter().fold(0.0f32, |m, v| m.max(v.abs()));
         for (x, y) in g.iter().zip(&want_grad) {
             assert!((x - y).abs() < 1e-3 * scale, "{x} vs {y}");
