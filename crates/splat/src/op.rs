@@ -331,7 +331,7 @@ pub(crate) mod tests {
     use burn::tensor::{Device, Tensor, TensorData};
 
     use super::*;
-    use crate::raster::render::{backward, forward};
+    use crate::raster::render::{ParamGradients, backward, forward};
     use crate::raster::tests::{Scene, camera};
 
     /// Host parameters (means, log-scales, quaternions, opacity logits, SH) as tensors that
@@ -358,6 +358,32 @@ pub(crate) mod tests {
 
     pub(crate) fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
         t.into_data().try_to_vec::<f32>().unwrap()
+    }
+
+    /// Each input's name, the gradient the op gave it (the five parameters of `g`, then the
+    /// `means2d` probe) and the host rasterizer's gradient `want` of the same input.
+    pub(crate) fn paired_gradients<'a>(
+        g: &GaussianTensors,
+        probe: &Tensor<2>,
+        grads: &burn::tensor::Gradients,
+        want: &'a ParamGradients<f32>,
+    ) -> [(&'static str, Vec<f32>, &'a [f32]); 6] {
+        [
+            ("means", values(g.means.grad(grads).unwrap()), &want.means),
+            (
+                "log_scales",
+                values(g.log_scales.grad(grads).unwrap()),
+                &want.log_scales,
+            ),
+            ("quats", values(g.quats.grad(grads).unwrap()), &want.quats),
+            (
+                "opacity",
+                values(g.opacity_logits.grad(grads).unwrap()),
+                &want.opacity_logits,
+            ),
+            ("sh", values(g.sh.grad(grads).unwrap()), &want.sh),
+            ("means2d", values(probe.grad(grads).unwrap()), &want.means2d),
+        ]
     }
 
     #[test]
@@ -417,23 +443,8 @@ pub(crate) mod tests {
                 assert!((a - b).abs() <= 1e-5 * scale, "{name}: {a} vs {b}");
             }
         };
-        close(values(g.means.grad(&grads).unwrap()), &want.means, "means");
-        close(
-            values(g.log_scales.grad(&grads).unwrap()),
-            &want.log_scales,
-            "log_scales",
-        );
-        close(values(g.quats.grad(&grads).unwrap()), &want.quats, "quats");
-        close(
-            values(g.opacity_logits.grad(&grads).unwrap()),
-            &want.opacity_logits,
-            "opacity",
-        );
-        close(values(g.sh.grad(&grads).unwrap()), &want.sh, "sh");
-        close(
-            values(probe.grad(&grads).unwrap()),
-            &want.means2d,
-            "means2d",
-        );
+        for (name, got, want) in paired_gradients(&g, &probe, &grads, &want) {
+            close(got, want, name);
+        }
     }
 }

@@ -12,7 +12,7 @@ use rand::{RngExt, SeedableRng};
 
 use super::scan::exclusive_scan;
 use super::sort::sort_pairs;
-use crate::op::tests::{tensors, values};
+use crate::op::tests::{paired_gradients, tensors, values};
 use crate::op::{RenderView, render};
 use crate::raster::render::{OUT_CHANNELS, backward, forward};
 use crate::raster::tests::{Scene, camera};
@@ -194,24 +194,9 @@ fn check_parity(host: &[Vec<f32>; 5], k: usize, view: &RenderView, tol: &Toleran
             "{name}: off by {worst} of {scale}"
         );
     };
-    close(values(g.means.grad(&grads).unwrap()), &want.means, "means");
-    close(
-        values(g.log_scales.grad(&grads).unwrap()),
-        &want.log_scales,
-        "log_scales",
-    );
-    close(values(g.quats.grad(&grads).unwrap()), &want.quats, "quats");
-    close(
-        values(g.opacity_logits.grad(&grads).unwrap()),
-        &want.opacity_logits,
-        "opacity",
-    );
-    close(values(g.sh.grad(&grads).unwrap()), &want.sh, "sh");
-    close(
-        values(probe.grad(&grads).unwrap()),
-        &want.means2d,
-        "means2d",
-    );
+    for (name, got, want) in paired_gradients(&g, &probe, &grads, &want) {
+        close(got, want, name);
+    }
 }
 
 /// Images to 1e-4 everywhere, gradients to 1e-3 of their scale.
