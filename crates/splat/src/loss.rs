@@ -223,11 +223,13 @@ mod tests {
 
     use super::*;
 
-    /// Two `h×w` RGB test images, their SSIM by `ssim` on the CPU backend, and the metrics
-    /// crate's value and exact gradient for the same pair: `(got, want, got_grad, want_grad)`.
+    /// Two `h×w` RGB test images, their SSIM by `ssim` on the CPU backend and the gradient of
+    /// `grad_scale ×` that SSIM, beside the metrics crate's value and exact gradient for the same
+    /// pair: `(got, want, got_grad, want_grad)`.
     fn against_metrics(
         (h, w): (usize, usize),
         ssim: impl Fn(Tensor<3>, Tensor<3>, &SsimOptions) -> Tensor<1>,
+        grad_scale: f32,
     ) -> (f64, f64, Vec<f32>, Vec<f32>) {
         let a: Vec<f32> = (0..h * w * 3)
             .map(|i| ((i * 7919) % 101) as f32 / 100.0)
@@ -241,7 +243,7 @@ mod tests {
         let tb = Tensor::<3>::from_data(TensorData::new(b.clone(), [h, w, 3]), &device);
         let opts = SsimOptions::training_loss();
         let s = ssim(ta.clone(), tb, &opts);
-        let grads = s.clone().backward();
+        let grads = (s.clone() * grad_scale).backward();
         let (ia, ib) = (Image::from_vec(w, h, 3, a), Image::from_vec(w, h, 3, b));
         let (want, want_grad) = fewview_metrics::ssim::ssim_with_grad(&ia, &ib, &opts).unwrap();
         let got = s.into_data().try_to_vec::<f32>().unwrap()[0];
@@ -251,10 +253,10 @@ mod tests {
 
     #[test]
     fn ssim_op_value_and_gradient_match_the_metrics_crate() {
-        // Scaled by 3 so that the op's backward must use the incoming gradient.
+        // The loss is scaled by 3 so that the op's backward must use the incoming gradient.
         let (got, want, g, want_grad) =
-            against_metrics((23, 31), |a, b, opts| ssim_mean(a, b, *opts) * 3.0);
-        assert!((got - 3.0 * want).abs() < 3e-6, "{got} vs {}", 3.0 * want);
+            against_metrics((23, 31), |a, b, opts| ssim_mean(a, b, *opts), 3.0);
+        assert!((got - want).abs() < 1e-6, "{got} vs {want}");
         for (x, y) in g.iter().zip(&want_grad) {
             assert!((x - 3.0 * y).abs() < 1e-7, "{x} vs {}", 3.0 * y);
         }
@@ -264,7 +266,7 @@ mod tests {
     /// and exact gradient are the reference.
     #[test]
     fn composed_ssim_matches_the_metrics_crate() {
-        let (got, want, g, want_grad) = against_metrics((19, 26), ssim_mean_composed);
+        let (got, want, g, want_grad) = against_metrics((19, 26), ssim_mean_composed, 1.0);
         assert!((got - want).abs() < 1e-5, "{got} vs {want}");
         let scale = want_grad.iter().fold(0.0f32, |m, v| m.max(v.abs()));
         for (x, y) in g.iter().zip(&want_grad) {
