@@ -138,17 +138,16 @@ struct Rotation {
 /// Reads `W` from the camera buffer (the forward and backward projections both use it).
 #[cube]
 fn rotation(cam: &[f32]) -> Rotation {
-    let o = CameraBuffer::ROT;
     Rotation {
-        w00: cam[o],
-        w01: cam[o + 1],
-        w02: cam[o + 2],
-        w10: cam[o + 3],
-        w11: cam[o + 4],
-        w12: cam[o + 5],
-        w20: cam[o + 6],
-        w21: cam[o + 7],
-        w22: cam[o + 8],
+        w00: cam_at(cam, CameraBuffer::ROT),
+        w01: cam_at(cam, CameraBuffer::ROT + 1),
+        w02: cam_at(cam, CameraBuffer::ROT + 2),
+        w10: cam_at(cam, CameraBuffer::ROT + 3),
+        w11: cam_at(cam, CameraBuffer::ROT + 4),
+        w12: cam_at(cam, CameraBuffer::ROT + 5),
+        w20: cam_at(cam, CameraBuffer::ROT + 6),
+        w21: cam_at(cam, CameraBuffer::ROT + 7),
+        w22: cam_at(cam, CameraBuffer::ROT + 8),
     }
 }
 
