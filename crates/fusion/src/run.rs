@@ -6,7 +6,7 @@ use std::path::Path;
 use fewview_scene::Dataset;
 use fewview_splat::pipeline::{RunConfig, RunSummary, train_run_with};
 use fewview_splat::stereo_start::stereo_views;
-use fewview_splat::train::{LossTerm, Progress};
+use fewview_splat::train::{AppearanceModel, LossTerm, Progress};
 use serde::{Deserialize, Serialize};
 
 use crate::error::FusionError;
@@ -81,6 +81,15 @@ pub fn fusion_run(
     on_progress: impl FnMut(&Progress),
 ) -> Result<(RunSummary, FusionRecord), FusionError> {
     fusion.validate().map_err(FusionError::Invalid)?;
+    let appearance = base.train.appearance.model;
+    if appearance != AppearanceModel::None && !fusion.variant.takes_appearance() {
+        return Err(FusionError::Invalid(format!(
+            "the appearance model `{}` does not combine with variant `{}`: its target is a blend \
+             of the photos' own colours (use plain, sparse-init, knn-color, tv or gf)",
+            appearance.name(),
+            fusion.variant
+        )));
+    }
     let pairs = training_pairs(ds)?;
     let record_path = dir.join("fusion.json");
     if resume {

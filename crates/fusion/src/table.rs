@@ -1,5 +1,7 @@
 //! The comparison table of finished fusion runs (the variants side by side), read from their
-//! `metrics.json`, `fusion.json` and `transition.json`.
+//! `metrics.json`, `fusion.json`, `config.json` and `transition.json`. Held-out figures are given
+//! raw and gain-matched ([`fewview_metrics::gain`]); a variant trained with a per-photo
+//! appearance model is named `…+affine`.
 
 use std::path::{Path, PathBuf};
 
@@ -14,15 +16,23 @@ pub struct TableRow {
     pub run: PathBuf,
     pub dataset: String,
     pub variant: String,
+    pub seed: u64,
     pub held_out_psnr: f64,
     pub held_out_ssim: f64,
     pub held_out_lpips: Option<f64>,
+    pub gain_matched_psnr: f64,
+    pub gain_matched_ssim: f64,
+    pub gain_matched_lpips: Option<f64>,
     pub warping_error: f64,
     /// Mean `|Δ|` of the warp PSNR along the path.
     pub warp_psnr_delta: f64,
+    /// Local popping ([`fewview_metrics::popping`]).
+    pub popping: f64,
     pub path_psnr: Option<f64>,
     pub path_psnr_delta: Option<f64>,
     pub path_lpips: Option<f64>,
+    /// The ground truth's own local popping along the path.
+    pub truth_popping: Option<f64>,
     pub train_seconds: f64,
 }
 
@@ -54,53 +64,84 @@ fn text(v: &Value, pointer: &str, file: &Path) -> Result<String, FusionError> {
 
 /// The row of the finished run in `dir`.
 pub fn read_row(dir: &Path) -> Result<TableRow, FusionError> {
-    let (m, f, t) = (
+    let (m, f, t, c) = (
         dir.join("metrics.json"),
         dir.join("fusion.json"),
         dir.join("transition.json"),
+        dir.join("config.json"),
     );
-    let (metrics, fusion, transition) = (read_json(&m)?, read_json(&f)?, read_json(&t)?);
+    let (metrics, fusion, transition, config) = (
+        read_json(&m)?,
+        read_json(&f)?,
+        read_json(&t)?,
+        read_json(&c)?,
+    );
     let optional = |p: &str| transition.pointer(p).and_then(Value::as_f64);
+    let mut variant = text(&fusion, "/config/variant", &f)?;
+    let appearance = config
+        .pointer("/run/train/appearance/model")
+        .and_then(Value::as_str)
+        .unwrap_or("none");
+    if appearance != "none" {
+        variant = if variant == "plain" {
+            appearance.to_string()
+        } else {
+            format!("{variant}+{appearance}")
+        };
+    }
     Ok(TableRow {
         run: dir.to_path_buf(),
         dataset: text(&metrics, "/dataset", &m)?,
-        variant: text(&fusion, "/config/variant", &f)?,
+        variant,
+        seed: number(&config, "/run/train/seed", &c)? as u64,
         held_out_psnr: number(&metrics, "/test/mean_psnr", &m)?,
         held_out_ssim: number(&metrics, "/test/mean_ssim", &m)?,
         held_out_lpips: optional("/held_out_lpips"),
+        gain_matched_psnr: number(&metrics, "/test/mean_gain_matched_psnr", &m)?,
+        gain_matched_ssim: number(&metrics, "/test/mean_gain_matched_ssim", &m)?,
+        gain_matched_lpips: optional("/held_out_lpips_gain_matched"),
         warping_error: number(&transition, "/warping_error/mean", &t)?,
         warp_psnr_delta: number(&transition, "/warp_psnr/delta/mean", &t)?,
+        popping: number(&transition, "/popping/p99", &t)?,
         path_psnr: optional("/truth/psnr/mean"),
         path_psnr_delta: optional("/truth/psnr/delta/mean"),
         path_lpips: optional("/truth/lpips/mean"),
+        truth_popping: optional("/truth/truth_popping/p99"),
         train_seconds: number(&metrics, "/train_seconds", &m)?,
     })
 }
 
-/// The rows as a Markdown table (one dataset per table is the caller's choice).
+/// The rows as a Markdown table (one dataset per table is the caller's choice). Popping is in
+/// 8-bit levels (× 255).
 pub fn markdown(rows: &[TableRow]) -> String {
     let opt = |v: Option<f64>, digits: usize| {
         v.map(|x| format!("{x:.digits$}"))
             .unwrap_or_else(|| "–".into())
     };
     let mut out = String::from(
-        "| dataset | variant | held-out PSNR | SSIM | LPIPS (ST-Alex) | path warping error ×10³ \
-         | warp ΔPSNR | path PSNR vs truth | path ΔPSNR | path LPIPS | train s |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| dataset | variant | seed | held-out PSNR raw / gain-matched | SSIM raw / g.-m. \
+         | LPIPS (ST-Alex) raw / g.-m. | local popping (levels) | path warping error ×10³ \
+         | path PSNR vs truth | path ΔPSNR | path LPIPS | truth's popping | train s |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         out.push_str(&format!(
-            "| {} | {} | {:.2} | {:.4} | {} | {:.4} | {:.3} | {} | {} | {} | {:.0} |\n",
+            "| {} | {} | {} | {:.2} / {:.2} | {:.4} / {:.4} | {} / {} | {:.1} | {:.4} | {} | {} | {} | {} | {:.0} |\n",
             r.dataset,
             r.variant,
+            r.seed,
             r.held_out_psnr,
+            r.gain_matched_psnr,
             r.held_out_ssim,
+            r.gain_matched_ssim,
             opt(r.held_out_lpips, 4),
+            opt(r.gain_matched_lpips, 4),
+            r.popping * 255.0,
             r.warping_error * 1e3,
-            r.warp_psnr_delta,
             opt(r.path_psnr, 2),
             opt(r.path_psnr_delta, 3),
             opt(r.path_lpips, 4),
+            opt(r.truth_popping.map(|p| p * 255.0), 1),
             r.train_seconds,
         ));
     }

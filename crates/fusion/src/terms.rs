@@ -10,6 +10,7 @@ use fewview_geom::mesh::Mesh;
 use fewview_scene::{Camera, Image};
 use fewview_splat::eval::render_model;
 use fewview_splat::raster::RenderCamera;
+use fewview_splat::train::appearance::{self, Affine};
 use fewview_splat::train::{LossContext, LossTerm, TrainConfig, TrainError};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
@@ -136,11 +137,13 @@ impl VirtualViewTerm {
         self.meshes = self
             .views
             .iter()
-            .map(|v| {
+            .enumerate()
+            .map(|(i, v)| {
                 let model = ctx.model().map_err(|e| e.to_string())?;
                 let r = render_model(model, &RenderCamera::from(&v.camera), ctx.settings);
                 let depth = surface_depth(&r.depth.data, &r.alpha.data, min_alpha);
-                reference_mesh(&depth, &v.camera, &v.photo).map_err(|e| e.to_string())
+                let photo = in_model_colours(&v.photo, ctx.appearance.get(i))?;
+                reference_mesh(&depth, &v.camera, &photo).map_err(|e| e.to_string())
             })
             .collect::<Result<_, _>>()?;
         self.meshed_for = Some(source);
@@ -203,6 +206,29 @@ impl VirtualViewTerm {
         };
         Ok(loss)
     }
+}
+
+/// A training photo in the colours the Gaussians learn: with a per-photo appearance model
+/// ([`fewview_splat::train::appearance`]) the render's colours pass through the photo's transform
+/// before they meet the photo, so the references of the virtual views take the inverse
+/// transform (as it stands when they are re-meshed).
+fn in_model_colours(photo: &Image, transform: Option<&Affine>) -> Result<Image, String> {
+    let Some(m) = transform else {
+        return Ok(photo.clone());
+    };
+    if photo.channels != 3 {
+        return Err(format!(
+            "a colour transform needs an RGB photo, not {} channels",
+            photo.channels
+        ));
+    }
+    let inverse = appearance::inverse(m)
+        .ok_or_else(|| "a photo's colour transform became singular".to_string())?;
+    let data = appearance::apply_host(&inverse, &photo.data)
+        .into_iter()
+        .map(|v| v.clamp(0.0, 1.0))
+        .collect();
+    Ok(Image::from_vec(photo.width, photo.height, 3, data))
 }
 
 /// A pseudo ground truth of a virtual view: colours (`[H, W, 3]`) and where they hold.

@@ -8,12 +8,20 @@
 //!   form, `warp PSNR_t = PSNR(frame_t, warp(frame_{t−1}))`, and the Δ of that series (mean of
 //!   `|m_t − m_{t−1}|`) show jumps. Warping error alone rewards blur: report it beside the
 //!   held-out PSNR/SSIM/LPIPS.
+//! * **Local popping** ([`fewview_metrics::popping`]): the tail of the same warped differences,
+//!   which sees a seam or a patch that switches colour where the mean does not; its per-transition
+//!   maps are written as a video.
 //! * With a **ground truth along the path** (the demo scene's ray tracer): per-frame PSNR, SSIM,
-//!   LPIPS against the true frames, their Δ, and the truth's own warping error (its view-dependent
-//!   highlight moves, so an exact render's warping error is that, not 0).
+//!   LPIPS against the true frames, their Δ, and the truth's own warping error and popping (its
+//!   view-dependent highlight moves, so an exact render's warping error is that, not 0). When the
+//!   training photos' exposures differ, the truth of a frame between two photos has their gains
+//!   interpolated log-linearly ([`fewview_scene::photometric`]): the natural colour transition.
 
+use fewview_geom::colormap::colorize_range;
 use fewview_metrics::flow::path_flows;
+use fewview_metrics::gain::gain_matched;
 use fewview_metrics::lpips::Lpips;
+use fewview_metrics::popping::{Popping, local_popping};
 use fewview_metrics::psnr::psnr_from_mse;
 use fewview_metrics::ssim::SsimOptions;
 use fewview_metrics::temporal::{MetricSeries, evaluate_sequence, warping_errors};
@@ -41,26 +49,67 @@ pub fn clip_frames() -> usize {
     (CLIP_SECONDS * CLIP_FPS).round() as usize
 }
 
-/// `frames` cameras along a smooth loop through `keys` in order and back to the first
-/// (SLERP rotations, linear centres and intrinsics, eased with smoothstep on each segment so the
-/// camera slows down at each training view instead of turning sharply). The first key starts the
-/// loop; it does not end it twice.
-pub fn transition_path(keys: &[Camera], frames: usize) -> Vec<Camera> {
-    if keys.len() < 2 {
-        return keys.iter().cloned().cycle().take(frames).collect();
+/// Where a frame of the transition path lies: `t` of the (eased) way from key `from` to key
+/// `to` (indices into the keys).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathPosition {
+    pub from: usize,
+    pub to: usize,
+    pub t: f64,
+}
+
+/// The positions of `frames` frames along a smooth loop through `keys` keys in order and back to
+/// the first, eased with smoothstep on each segment so the camera slows down at each key
+/// instead of turning sharply. The first key starts the loop; it does not end it twice.
+pub fn transition_positions(keys: usize, frames: usize) -> Vec<PathPosition> {
+    if keys == 0 {
+        return Vec::new();
     }
-    let there_and_back: Vec<&Camera> = keys.iter().chain(keys.iter().rev().skip(1)).collect();
+    if keys == 1 {
+        let still = PathPosition {
+            from: 0,
+            to: 0,
+            t: 0.0,
+        };
+        return vec![still; frames];
+    }
+    let there_and_back: Vec<usize> = (0..keys).chain((0..keys - 1).rev()).collect();
     let segments = there_and_back.len() - 1;
     (0..frames)
         .map(|i| {
             let u = i as f64 * segments as f64 / frames as f64;
             let s = (u.floor() as usize).min(segments - 1);
             let f = u - s as f64;
-            let eased = f * f * (3.0 - 2.0 * f);
-            there_and_back[s].interpolate(there_and_back[s + 1], eased)
+            PathPosition {
+                from: there_and_back[s],
+                to: there_and_back[s + 1],
+                t: f * f * (3.0 - 2.0 * f),
+            }
         })
         .collect()
 }
+
+/// `frames` cameras along the loop of [`transition_positions`] through `keys` (SLERP rotations,
+/// linear centres and intrinsics).
+pub fn transition_path(keys: &[Camera], frames: usize) -> Vec<Camera> {
+    transition_positions(keys.len(), frames)
+        .into_iter()
+        .map(|p| keys[p.from].interpolate(&keys[p.to], p.t))
+        .collect()
+}
+
+/// One frame of the path as the ground truth sees it: its camera, and where it lies between the
+/// training views (`from`, `to`: positions in the dataset's training order).
+pub struct PathFrame<'a> {
+    pub camera: &'a Camera,
+    pub from: usize,
+    pub to: usize,
+    pub t: f64,
+}
+
+/// Renders the ground truth of a path frame (the demo scene's ray tracer, with the exposure of
+/// the photos around it).
+pub type TruthRenderer<'a> = &'a (dyn Fn(&PathFrame<'_>) -> Image + Sync);
 
 /// Frames rendered along a path, with the depth of their visible surface.
 pub struct RenderedPath {
@@ -100,6 +149,8 @@ pub struct PathTruth {
     pub lpips: Option<MetricSeries>,
     /// The truth's own warping error under the same flows.
     pub truth_warping_error: MetricSeries,
+    /// The truth's own local popping under the same flows (a moving highlight pops a little).
+    pub truth_popping: Popping,
 }
 
 /// How smooth a transition is (see the module docs).
@@ -111,12 +162,22 @@ pub struct TransitionReport {
     pub warping_error: MetricSeries,
     /// `PSNR(frame_t, warp(frame_{t−1}))` per transition, its mean and Δ.
     pub warp_psnr: MetricSeries,
+    /// Local popping ([`fewview_metrics::popping`]): the 99th percentile over transitions of
+    /// the 99th percentile over co-visible pixels of `|frame_t − warp(frame_{t−1})|`.
+    pub popping: Popping,
     /// Fraction of pixels the flows trust (mean over transitions).
     pub flow_coverage: f64,
     pub truth: Option<PathTruth>,
-    /// Mean ST-LPIPS AlexNet of the held-out views (sharpness beside the warping error), when
-    /// computed.
+    /// Mean ST-LPIPS AlexNet of the held-out views (sharpness beside the warping error), raw
+    /// and gain-matched, when computed.
     pub held_out_lpips: Option<f64>,
+    pub held_out_lpips_gain_matched: Option<f64>,
+}
+
+/// A scored path and the per-transition popping maps (`NaN` where the frames share no pixel).
+pub struct ScoredPath {
+    pub report: TransitionReport,
+    pub popping_maps: Vec<Vec<f32>>,
 }
 
 /// Scores a rendered path; `truth` (one image per frame) adds the ground-truth scores, `lpips`
@@ -125,9 +186,10 @@ pub fn score_transition(
     path: &RenderedPath,
     truth: Option<&[Image]>,
     lpips: Option<&Lpips>,
-) -> Result<TransitionReport, FusionError> {
+) -> Result<ScoredPath, FusionError> {
     let flows = path_flows(&path.cameras, &path.depths)?;
     let errors = warping_errors(&path.frames, &flows)?;
+    let (popping, popping_maps) = local_popping(&path.frames, &flows)?;
     // The warping error sums the squared difference over the 3 channels.
     let warp_psnr: Vec<f64> = errors.iter().map(|e| psnr_from_mse(e / 3.0)).collect();
     let coverage = flows
@@ -150,28 +212,41 @@ pub fn score_transition(
                     "warping_error",
                     warping_errors(gt, &flows)?,
                 ),
+                truth_popping: local_popping(gt, &flows)?.0,
             })
         }
         None => None,
     };
-    Ok(TransitionReport {
+    let report = TransitionReport {
         frames: path.frames.len(),
         fps: CLIP_FPS,
         warping_error: MetricSeries::new("warping_error", errors),
         warp_psnr: MetricSeries::new("warp_psnr", warp_psnr),
+        popping,
         flow_coverage: coverage,
         truth,
         held_out_lpips: None,
+        held_out_lpips_gain_matched: None,
+    };
+    Ok(ScoredPath {
+        report,
+        popping_maps,
     })
 }
 
+/// The popping maps' colour scale: 0 to this difference (25 of 255 levels) over the ramp.
+pub const POPPING_MAP_MAX: f32 = 0.1;
+
 /// Renders the trained run in `dir` along the transition path through `ds`'s training views
-/// (ordered along their baseline), writes `transition.mp4` and `transition.json`, and returns
-/// the scores. `truth` renders the ground truth of any camera (the demo scene's ray tracer).
+/// (ordered along their baseline) and writes `transition.mp4`, `transition.json`, the popping
+/// maps (`popping.mp4`, one frame per transition, 0 to [`POPPING_MAP_MAX`] on the ramp, black
+/// where the frames share nothing) and the worst transition's map (`popping_worst.png`), and
+/// returns the scores. `truth` renders the ground truth of any path frame (the demo scene's ray
+/// tracer).
 pub fn transition_of_run(
     ds: &Dataset,
     dir: &Path,
-    truth: Option<&(dyn Fn(&Camera) -> Image + Sync)>,
+    truth: Option<TruthRenderer<'_>>,
     lpips: Option<&Lpips>,
 ) -> Result<TransitionReport, FusionError> {
     let model = read_ply(&dir.join("point_cloud.ply"))?;
@@ -181,43 +256,95 @@ pub fn transition_of_run(
         ..RenderSettings::default()
     };
     let cameras: Vec<&Camera> = ds.train_views().map(|v| &v.camera).collect();
-    let keys: Vec<Camera> = order_along_baseline(&cameras)
-        .into_iter()
-        .map(|i| cameras[i].clone())
+    let order = order_along_baseline(&cameras);
+    let positions = transition_positions(order.len(), clip_frames());
+    let path: Vec<Camera> = positions
+        .iter()
+        .map(|p| cameras[order[p.from]].interpolate(cameras[order[p.to]], p.t))
         .collect();
-    let path = transition_path(&keys, clip_frames());
     let rendered = render_path(&model, &path, &settings);
-    let truth_frames: Option<Vec<Image>> = truth.map(|f| path.par_iter().map(f).collect());
-    let mut report = score_transition(&rendered, truth_frames.as_deref(), lpips)?;
-    report.held_out_lpips = lpips
-        .map(|l| held_out_lpips(ds, &model, &settings, l))
-        .transpose()?;
+    let truth_frames: Option<Vec<Image>> = truth.map(|f| {
+        path.par_iter()
+            .zip(&positions)
+            .map(|(camera, p)| {
+                f(&PathFrame {
+                    camera,
+                    from: order[p.from],
+                    to: order[p.to],
+                    t: p.t,
+                })
+            })
+            .collect()
+    });
+    let ScoredPath {
+        mut report,
+        popping_maps,
+    } = score_transition(&rendered, truth_frames.as_deref(), lpips)?;
+    if let Some(l) = lpips {
+        let (raw, matched) = held_out_lpips(ds, &model, &settings, l)?;
+        report.held_out_lpips = Some(raw);
+        report.held_out_lpips_gain_matched = Some(matched);
+    }
     write_video(
         &dir.join("transition.mp4"),
         &rendered.frames,
         CLIP_FPS,
         &VideoOptions::default(),
     )?;
+    write_popping_maps(dir, &rendered, &popping_maps, &report.popping)?;
     let json =
         serde_json::to_vec_pretty(&report).map_err(|e| FusionError::Invalid(e.to_string()))?;
     fewview_scene::atomic::write_bytes(&dir.join("transition.json"), &json)?;
     Ok(report)
 }
 
-/// Mean LPIPS of `model`'s renders of the held-out views against their photos.
+/// `popping.mp4` and `popping_worst.png` (see [`transition_of_run`]).
+fn write_popping_maps(
+    dir: &Path,
+    rendered: &RenderedPath,
+    maps: &[Vec<f32>],
+    popping: &Popping,
+) -> Result<(), FusionError> {
+    let (w, h) = (rendered.frames[0].width, rendered.frames[0].height);
+    let pictures: Vec<Image> = maps
+        .iter()
+        .map(|m| colorize_range(m, w, h, 0.0, POPPING_MAP_MAX))
+        .collect();
+    write_video(
+        &dir.join("popping.mp4"),
+        &pictures,
+        CLIP_FPS,
+        &VideoOptions::default(),
+    )?;
+    let worst = popping
+        .per_transition
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.is_finite())
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map_or(0, |(i, _)| i);
+    pictures[worst].save_png(&dir.join("popping_worst.png"))?;
+    Ok(())
+}
+
+/// Mean LPIPS of `model`'s renders of the held-out views against their photos: raw, and after
+/// the per-channel gain fit ([`fewview_metrics::gain`]).
 pub fn held_out_lpips(
     ds: &Dataset,
     model: &GaussianModel,
     settings: &RenderSettings,
     lpips: &Lpips,
-) -> Result<f64, FusionError> {
+) -> Result<(f64, f64), FusionError> {
     let views: Vec<_> = ds.test_views().collect();
-    let mut sum = 0.0;
+    let (mut raw, mut matched) = (0.0, 0.0);
     for v in &views {
         let r = render_model(model, &RenderCamera::from(&v.camera), settings);
-        sum += lpips.distance(&r.rgb, &v.image)?;
+        raw += lpips.distance(&r.rgb, &v.image)?;
+        let gm = gain_matched(&r.rgb, &v.image, v.valid.as_ref())?;
+        matched += lpips.distance(&gm, &v.image)?;
     }
-    Ok(sum / views.len().max(1) as f64)
+    let n = views.len().max(1) as f64;
+    Ok((raw / n, matched / n))
 }
 
 #[cfg(test)]

@@ -80,6 +80,17 @@ impl Variant {
     pub fn uses_references(self) -> bool {
         matches!(self, Variant::L1Virtual | Variant::Poisson | Variant::Gf)
     }
+
+    /// Whether the variant combines with a per-photo appearance model
+    /// ([`fewview_splat::train::appearance`]). (d) and (e) pull the virtual view's colours
+    /// themselves towards a blend of the photos; under an appearance model each photo lives in
+    /// its own colour space, brought into the model's only through transforms that keep moving
+    /// between re-meshings, so their targets would chase stale colours. GF's target is the
+    /// photos' gradients, which a transform scales without moving an edge, and the others have
+    /// no photo-based target.
+    pub fn takes_appearance(self) -> bool {
+        !matches!(self, Variant::L1Virtual | Variant::Poisson)
+    }
 }
 
 impl std::fmt::Display for Variant {

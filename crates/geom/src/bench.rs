@@ -16,7 +16,7 @@ use crate::raster::rasterize_mesh_colors;
 use crate::stereo::pairs::StereoView;
 use crate::stereo::refine::RefineOptions;
 use crate::stereo::sgm::{Border, GrayOrRgb, Paths, SgmParams, match_left};
-use crate::stereo::source::{DisparityRange, eight_bit_rgb, match_pair};
+use crate::stereo::source::{DisparityRange, Photometry, eight_bit_rgb, match_pair};
 
 /// Figures of the occlusion-aware Poisson blend benchmark.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -166,6 +166,7 @@ pub fn stereo_bench(
         },
         DisparityRange::FromDepthBounds,
         Some(&RefineOptions::default()),
+        Photometry::GainMatched,
     )?;
     let pair_seconds = t.elapsed().as_secs_f64();
     let crop = |img: &Image| -> Vec<u8> {

@@ -47,9 +47,33 @@ pub fn colorize(values: &[f32], width: usize, height: usize, invert: bool) -> Im
     img
 }
 
+/// `values` as colours on a fixed scale: `lo` to `hi` over the ramp (clamped outside), black
+/// where a value is not finite. Maps drawn on one scale compare across runs.
+pub fn colorize_range(values: &[f32], width: usize, height: usize, lo: f32, hi: f32) -> Image {
+    let mut img = Image::new(width, height, 3);
+    let span = (hi - lo).max(f32::EPSILON);
+    for (p, &v) in values.iter().enumerate().take(width * height) {
+        if v.is_finite() {
+            img.data[3 * p..3 * p + 3].copy_from_slice(&ramp((v - lo) / span));
+        }
+    }
+    img
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_fixed_range_maps_its_ends_to_the_ramps_ends() {
+        let img = colorize_range(&[0.0, 0.05, 0.1, 0.3, f32::NAN, -1.0], 6, 1, 0.0, 0.1);
+        assert_eq!(img.pixel(0, 0), &RAMP[0]);
+        assert_eq!(img.pixel(2, 0), &RAMP[5]);
+        assert_eq!(img.pixel(3, 0), &RAMP[5]);
+        assert_eq!(img.pixel(4, 0), &[0.0; 3]);
+        assert_eq!(img.pixel(5, 0), &RAMP[0]);
+        assert_eq!(img.pixel(1, 0), &ramp(0.5));
+    }
 
     #[test]
     fn the_ramp_runs_through_its_anchors_and_missing_values_are_black() {

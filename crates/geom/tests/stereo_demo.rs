@@ -28,6 +28,7 @@ fn tier_accuracy(width: usize) -> Vec<(Region, usize, f64, f64)> {
         },
         range: DisparityRange::FromDepthBounds,
         refine: Some(Default::default()),
+        photometry: Default::default(),
     };
     let options = HierarchyOptions {
         contraction: None,

@@ -5,8 +5,10 @@
 pub mod bench;
 pub mod error;
 pub mod flow;
+pub mod gain;
 #[cfg(feature = "lpips")]
 pub mod lpips;
+pub mod popping;
 pub mod pose_error;
 pub mod psnr;
 pub mod ssim;
@@ -14,6 +16,8 @@ pub mod temporal;
 
 pub use error::MetricsError;
 pub use flow::{flow_between, path_flows};
+pub use gain::{gain_fit, gain_matched};
+pub use popping::{Popping, local_popping};
 pub use psnr::{mse, psnr, psnr_from_mse, psnr_masked};
 pub use ssim::{
     SsimBorder, SsimOptions, SsimWorkspace, ssim, ssim_masked, ssim_masked_with_grad, ssim_with,

@@ -293,7 +293,7 @@ pub fn warping_error(previous: &Image, current: &Image, flow: &Flow) -> Result<f
 
 /// Bilinear sample at continuous pixel coordinates (pixel centres at integers); `false` if the
 /// point is outside the frame.
-fn bilinear(img: &Image, x: f32, y: f32, out: &mut [f32]) -> bool {
+pub(crate) fn bilinear(img: &Image, x: f32, y: f32, out: &mut [f32]) -> bool {
     if x < 0.0 || y < 0.0 || x > (img.width - 1) as f32 || y > (img.height - 1) as f32 {
         return false;
     }

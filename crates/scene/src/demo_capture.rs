@@ -27,7 +27,9 @@ pub struct CaptureSummary {
 /// model; `None` for an ideal pinhole) with `intrinsics` (`None`: the demo's), into `dir`: `images/
 /// view_NN.png`, `transforms.json` (`camera_model` `OPENCV`, `fl_x fl_y cx cy w h k1 k2 p1
 /// p2`, OpenGL camera-to-world matrices) and `sparse/0/{cameras,images,points3D}.txt` (one
-/// `OPENCV` camera, or `PINHOLE` without distortion). Every file is written atomically.
+/// `OPENCV` camera, or `PINHOLE` without distortion). The demo's training views carry the
+/// photometric jitter of `opts` (applied on the sensor, after the lens), the others none. Every
+/// file is written atomically.
 pub fn write_demo_capture(
     dir: &Path,
     opts: &DemoOptions,
@@ -58,7 +60,11 @@ pub fn write_demo_capture(
     let mut images_txt = String::from("# IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME\n");
     for (i, view) in pinhole.views.iter().enumerate() {
         let name = format!("{}.png", view.name);
-        demo_render_through(&view.camera, &lens, opts).save_png(&images.join(&name))?;
+        let mut photo = demo_render_through(&view.camera, &lens, opts);
+        if pinhole.train.contains(&i) && !opts.jitter.is_none() {
+            photo = opts.jitter.gain(i).apply(&photo);
+        }
+        photo.save_png(&images.join(&name))?;
         let gl = opengl_to_opencv(&view.camera.camera_to_world()).to_matrix4();
         let rows: Vec<Vec<f64>> = (0..4)
             .map(|r| (0..4).map(|c| gl[(r, c)]).collect())

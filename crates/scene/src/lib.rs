@@ -29,6 +29,7 @@ pub mod load;
 mod load_options;
 mod load_report;
 pub mod numpy;
+pub mod photometric;
 pub mod ply_scalar;
 pub mod pose_export;
 pub mod sealed;

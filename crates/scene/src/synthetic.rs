@@ -8,6 +8,12 @@
 //! that colours change with the viewpoint as they do in real captures. Cameras sit on an arc in
 //! front of it, looking at its centre (a forward-facing capture, like LLFF); [`demo_render`]
 //! renders the same ground truth for any other camera, e.g. the frames of a camera path.
+//!
+//! Two conditions of real captures can be switched on ([`DemoOptions::gloss`],
+//! [`DemoOptions::jitter`]): a strong highlight and a mirror-like floor, so that colours really
+//! change with the viewpoint, and photos whose exposure, white balance and vignetting differ
+//! ([`crate::photometric`]), applied to the training photos only (held-out views keep one
+//! neutral exposure).
 
 use nalgebra::Vector3;
 
@@ -15,6 +21,7 @@ use crate::camera::{Camera, Intrinsics};
 use crate::dataset::{Dataset, View};
 use crate::distortion::LensCamera;
 use crate::image::Image;
+use crate::photometric::{PhotoJitter, jitter_training_photos};
 
 /// Size and views of the demo scene.
 #[derive(Clone, Debug, PartialEq)]
@@ -23,12 +30,64 @@ pub struct DemoOptions {
     pub height: usize,
     /// Cameras on the arc.
     pub views: usize,
+    /// The arc's width relative to the default 50° of azimuth (2: 100°, a wide baseline).
+    pub baseline_scale: f64,
     /// Indices of the training views (the rest are held out).
     pub train: Vec<usize>,
     /// Supersampling per pixel axis (anti-aliasing of the ground truth).
     pub supersample: usize,
     /// How surfaces reflect the light: view-independent or with a moving highlight.
     pub shading: DemoShading,
+    /// The highlights' strength and the floor's reflectance under [`DemoShading::Specular`].
+    pub gloss: DemoGloss,
+    /// Per-photo exposure, white balance and vignetting of the training photos.
+    pub jitter: PhotoJitter,
+}
+
+/// How glossy the demo scene is under [`DemoShading::Specular`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DemoGloss {
+    /// Blinn–Phong `(ks, exponent)` of the spheres.
+    pub sphere: (f64, f64),
+    /// Blinn–Phong `(ks, exponent)` of the ground.
+    pub ground: (f64, f64),
+    /// Mirror reflectance of the ground in `[0, 1)`: its colour is `(1 − m)·shaded + m·(what the
+    /// mirrored ray sees)`, so the reflections of the spheres move over the floor with the
+    /// camera.
+    pub mirror: f64,
+}
+
+impl Default for DemoGloss {
+    fn default() -> Self {
+        Self {
+            sphere: SPHERE_GLOSS,
+            ground: GROUND_GLOSS,
+            mirror: 0.0,
+        }
+    }
+}
+
+impl DemoGloss {
+    /// Checks the values; the message names the setting.
+    pub fn validate(&self) -> Result<(), String> {
+        for (name, (ks, exponent)) in [("sphere", self.sphere), ("ground", self.ground)] {
+            if !(ks.is_finite() && (0.0..=1.0).contains(&ks)) {
+                return Err(format!("{name} highlight strength {ks} is not in [0, 1]"));
+            }
+            if !(exponent.is_finite() && (1.0..=10_000.0).contains(&exponent)) {
+                return Err(format!(
+                    "{name} highlight exponent {exponent} is not in [1, 10000]"
+                ));
+            }
+        }
+        if !(self.mirror.is_finite() && (0.0..1.0).contains(&self.mirror)) {
+            return Err(format!(
+                "floor mirror reflectance {} is not in [0, 1)",
+                self.mirror
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// The reflectance model of the demo scene.
@@ -50,9 +109,12 @@ impl Default for DemoOptions {
             width: 200,
             height: 150,
             views: 24,
+            baseline_scale: 1.0,
             train: vec![2, 11, 21],
             supersample: 3,
             shading: DemoShading::default(),
+            gloss: DemoGloss::default(),
+            jitter: PhotoJitter::default(),
         }
     }
 }
@@ -74,6 +136,7 @@ struct Sphere {
 struct Scene {
     spheres: [Sphere; 2],
     light: Vector3<f64>,
+    gloss: DemoGloss,
 }
 
 /// Blinn–Phong `(ks, exponent)` of the spheres under [`DemoShading::Specular`]. Kept weak: a
@@ -93,8 +156,9 @@ const WALL_HEIGHT: f64 = 6.0;
 const EPS: f64 = 1e-9;
 
 impl Scene {
-    fn new() -> Self {
+    fn new(gloss: DemoGloss) -> Self {
         Self {
+            gloss,
             spheres: [
                 Sphere {
                     center: Vector3::new(-0.45, 0.0, 0.6),
@@ -181,16 +245,35 @@ impl Scene {
     }
 
     /// Blinn–Phong `(ks, exponent)` of a surface; `None` for a matte one.
-    fn gloss(s: Surface) -> Option<(f64, f64)> {
+    fn gloss(&self, s: Surface) -> Option<(f64, f64)> {
         match s {
-            Surface::Sphere(_) => Some(SPHERE_GLOSS),
-            Surface::Ground => Some(GROUND_GLOSS),
+            Surface::Sphere(_) => Some(self.gloss.sphere),
+            Surface::Ground => Some(self.gloss.ground),
             Surface::Wall => None,
         }
     }
 
-    /// Radiance along a ray (shaded albedo, or the sky when nothing is hit), clamped to [0, 1].
+    /// Radiance along a ray (shaded albedo, or the sky when nothing is hit), clamped to [0, 1];
+    /// under [`DemoShading::Specular`] the ground mixes in what its mirror image of the ray sees.
     fn shade(&self, o: &Vector3<f64>, d: &Vector3<f64>, shading: DemoShading) -> [f64; 3] {
+        let local = self.shade_local(o, d, shading);
+        let m = self.gloss.mirror;
+        if shading == DemoShading::Lambertian || m == 0.0 {
+            return local;
+        }
+        match self.intersect(o, d) {
+            Some((t, Surface::Ground)) => {
+                let p = o + d * t;
+                let mirrored = Vector3::new(d.x, d.y, -d.z);
+                let seen = self.shade_local(&(p + Vector3::z() * 1e-6), &mirrored, shading);
+                [0, 1, 2].map(|k| (1.0 - m) * local[k] + m * seen[k])
+            }
+            _ => local,
+        }
+    }
+
+    /// Radiance along a ray without the floor's mirror image.
+    fn shade_local(&self, o: &Vector3<f64>, d: &Vector3<f64>, shading: DemoShading) -> [f64; 3] {
         let Some((t, s)) = self.intersect(o, d) else {
             let h = d.z.clamp(-1.0, 1.0) * 0.5 + 0.5;
             return [0.55 + 0.3 * h, 0.7 + 0.2 * h, 0.95];
@@ -201,7 +284,7 @@ impl Scene {
         let shadowed = self.intersect(&(p + n * 1e-6), &self.light).is_some();
         let k = 0.35 + if shadowed { 0.0 } else { 0.65 * lit };
         // The white highlight: the half vector between the light and the direction to the eye.
-        let highlight = match (shading, Self::gloss(s)) {
+        let highlight = match (shading, self.gloss(s)) {
             (DemoShading::Specular, Some((ks, exponent))) if !shadowed && lit > 0.0 => {
                 let half = (self.light - d).normalize();
                 ks * n.dot(&half).max(0.0).powf(exponent)
@@ -214,8 +297,9 @@ impl Scene {
 
 /// The demo dataset: `views` cameras on an arc, ray-traced images, the chosen training views and
 /// the rest held out. Depth bounds come from the rendered depths (for frustum initialisation).
+/// With [`DemoOptions::jitter`], the training photos are jittered ([`jitter_training_photos`]).
 pub fn demo_dataset(opts: &DemoOptions) -> Dataset {
-    let scene = Scene::new();
+    let scene = Scene::new(opts.gloss);
     let focal = 0.9 * opts.width as f64;
     let intrinsics = Intrinsics::centered(focal, opts.width as u32, opts.height as u32);
     let target = Vector3::new(0.1, 0.3, 0.45);
@@ -226,7 +310,7 @@ pub fn demo_dataset(opts: &DemoOptions) -> Dataset {
         } else {
             0.5
         };
-        let azimuth = (-25.0 + 50.0 * s).to_radians();
+        let azimuth = (opts.baseline_scale * (-25.0 + 50.0 * s)).to_radians();
         let elevation = (18.0 + 8.0 * (s * std::f64::consts::PI).sin()).to_radians();
         let radius = 4.2;
         let eye = target
@@ -255,7 +339,7 @@ pub fn demo_dataset(opts: &DemoOptions) -> Dataset {
         .filter(|&i| i < opts.views)
         .collect();
     let test = (0..opts.views).filter(|i| !train.contains(i)).collect();
-    Dataset {
+    let mut ds = Dataset {
         name: "demo".into(),
         views,
         train,
@@ -263,14 +347,16 @@ pub fn demo_dataset(opts: &DemoOptions) -> Dataset {
         points: None,
         background: [0.0; 3],
         to_source_world: None,
-    }
+    };
+    jitter_training_photos(&mut ds, &opts.jitter);
+    ds
 }
 
 /// The exact z-depth (along the optical axis) of the demo scene through every pixel centre of
 /// `camera`, row-major, 0 where the ray meets nothing (sky): the ground truth of depth and
 /// stereo tests.
 pub fn demo_depth(camera: &Camera) -> Vec<f32> {
-    let scene = Scene::new();
+    let scene = Scene::new(DemoGloss::default());
     let (w, h) = (camera.width() as usize, camera.height() as usize);
     let forward = camera.forward();
     let mut depth = vec![0f32; w * h];
@@ -285,12 +371,13 @@ pub fn demo_depth(camera: &Camera) -> Vec<f32> {
     depth
 }
 
-/// The demo scene seen by any `camera` (its own size and intrinsics), with the supersampling and
-/// shading of `opts` (the other fields are unused): the ground truth of novel views, e.g. every
-/// frame of a path between the dataset's cameras. For a camera of [`demo_dataset`] with the same
-/// options it is that view's image, bit for bit.
+/// The demo scene seen by any `camera` (its own size and intrinsics), with the supersampling,
+/// shading and gloss of `opts` at the neutral exposure (the other fields are unused): the ground
+/// truth of novel views, e.g. every frame of a path between the dataset's cameras. For a camera
+/// of [`demo_dataset`] with the same options it is that view's image, bit for bit (before the
+/// jitter of a training photo).
 pub fn demo_render(camera: &Camera, opts: &DemoOptions) -> Image {
-    render_view(&Scene::new(), camera, opts).0
+    render_view(&Scene::new(opts.gloss), camera, opts).0
 }
 
 /// The demo scene photographed through a lens from `camera`'s pose: `lens` gives the
@@ -305,7 +392,7 @@ pub fn demo_render_through(camera: &Camera, lens: &LensCamera, opts: &DemoOption
         lens.undistort_normalized(u, v)
             .map(|(x, y)| ideal.ray(k.fx * x + k.cx, k.fy * y + k.cy))
     };
-    render_rays(&Scene::new(), &ideal, opts, ray).0
+    render_rays(&Scene::new(opts.gloss), &ideal, opts, ray).0
 }
 
 fn render_view(scene: &Scene, camera: &Camera, opts: &DemoOptions) -> (Image, f64, f64) {
@@ -364,7 +451,7 @@ mod tests {
 
     #[test]
     fn sphere_hit_is_on_the_sphere_and_ground_is_below() {
-        let s = Scene::new();
+        let s = Scene::new(DemoGloss::default());
         let o = Vector3::new(-0.45, -5.0, 0.6);
         let d = Vector3::new(0.0, 1.0, 0.0);
         let (t, surf) = s.intersect(&o, &d).unwrap();
@@ -388,7 +475,7 @@ mod tests {
         });
         let cam = &ds.views[1].camera;
         let depth = demo_depth(cam);
-        let scene = Scene::new();
+        let scene = Scene::new(DemoGloss::default());
         let mut hits = 0;
         for (i, &z) in depth.iter().enumerate() {
             if z <= 0.0 {
@@ -467,7 +554,7 @@ mod tests {
             ..DemoOptions::default()
         });
         let (a, b) = (ds.views[2].camera.clone(), ds.views[21].camera.clone());
-        let scene = Scene::new();
+        let scene = Scene::new(DemoGloss::default());
         let sphere = &scene.spheres[0];
         let n = (scene.light + (a.center() - sphere.center).normalize()).normalize();
         let p = sphere.center + n * sphere.radius;
@@ -538,5 +625,83 @@ mod tests {
         let mid = ds.views[1].camera.interpolate(&ds.views[2].camera, 0.5);
         let img = demo_render(&mid, &opts);
         assert_eq!((img.width, img.height, img.channels), (40, 30, 3));
+    }
+
+    #[test]
+    fn a_mirror_floor_reflects_the_spheres_and_changes_with_the_viewpoint() {
+        let mirror = Scene::new(DemoGloss {
+            mirror: 0.5,
+            ..DemoGloss::default()
+        });
+        let plain = Scene::new(DemoGloss::default());
+        let (_, a, b, _) = two_cameras_and_a_highlight();
+        // A floor point in front of the large sphere: the mirrored ray from camera a meets it.
+        let sphere = &plain.spheres[0];
+        let eye = a.center();
+        // Where the ray from the eye to the sphere's centre's mirror image crosses the floor.
+        let image = Vector3::new(sphere.center.x, sphere.center.y, -sphere.center.z);
+        let s = eye.z / (eye.z - image.z);
+        let p = eye + (image - eye) * s;
+        let d = (p - eye).normalize();
+        let reflected = mirror.shade(&eye, &d, DemoShading::Specular);
+        let matte = plain.shade(&eye, &d, DemoShading::Specular);
+        let seen = plain.shade(
+            &(p + Vector3::z() * 1e-6),
+            &Vector3::new(d.x, d.y, -d.z),
+            DemoShading::Specular,
+        );
+        for k in 0..3 {
+            assert!((reflected[k] - (0.5 * matte[k] + 0.5 * seen[k])).abs() < 1e-12);
+        }
+        assert!(
+            max_difference(reflected, matte) > 0.05,
+            "{reflected:?} {matte:?}"
+        );
+        // Without the highlight model the floor is matte.
+        assert_eq!(
+            mirror.shade(&eye, &d, DemoShading::Lambertian),
+            plain.shade(&eye, &d, DemoShading::Lambertian)
+        );
+        // The same floor point seen from camera b reflects something else.
+        let from_b = mirror.shade(
+            &b.center(),
+            &(p - b.center()).normalize(),
+            DemoShading::Specular,
+        );
+        let matte_b = plain.shade(
+            &b.center(),
+            &(p - b.center()).normalize(),
+            DemoShading::Specular,
+        );
+        assert!(max_difference(from_b, matte_b) > 1e-3);
+        assert!(max_difference(from_b, reflected) > 0.05);
+    }
+
+    #[test]
+    fn jitter_touches_only_the_training_photos() {
+        let opts = DemoOptions {
+            width: 32,
+            height: 24,
+            views: 4,
+            train: vec![1, 3],
+            supersample: 1,
+            jitter: PhotoJitter {
+                exposure_ev: 0.5,
+                white_balance: 0.05,
+                vignetting: 0.2,
+                seed: 3,
+            },
+            ..DemoOptions::default()
+        };
+        let ds = demo_dataset(&opts);
+        for (i, v) in ds.views.iter().enumerate() {
+            let neutral = demo_render(&v.camera, &opts);
+            if opts.train.contains(&i) {
+                assert_eq!(v.image, opts.jitter.gain(i).apply(&neutral), "{}", v.name);
+                assert_ne!(v.image, neutral);
+            } else {
+                assert_eq!(v.image, neutral, "{}", v.name);
+            }
+        }
     }
 }

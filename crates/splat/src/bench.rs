@@ -333,3 +333,30 @@ pub fn train_step_bench_with(
         iterations_per_cpu_second: iterations as f64 / cpu_seconds,
     })
 }
+
+/// Training steps with and without a per-photo appearance model, same scene and start.
+#[derive(Clone, Debug, Serialize)]
+pub struct AppearanceStepBench {
+    pub plain: TrainStepBench,
+    pub affine: TrainStepBench,
+    /// What the colour transform adds to a step: `t_affine / t_plain − 1` (wall time).
+    pub overhead: f64,
+}
+
+/// Times `iterations` steps of `ds`'s default run without and with the affine colour transform
+/// per photo ([`crate::train::appearance`]).
+pub fn appearance_step_bench(
+    ds: &fewview_scene::Dataset,
+    iterations: usize,
+) -> Result<AppearanceStepBench, crate::pipeline::PipelineError> {
+    let mut cfg = crate::pipeline::RunConfig::new(crate::train::TrainConfig::sparse_view(3000));
+    cfg.train.background = ds.background;
+    let plain = train_step_bench_with(ds, &cfg, Vec::new(), iterations)?;
+    cfg.train.appearance.model = crate::train::AppearanceModel::Affine;
+    let affine = train_step_bench_with(ds, &cfg, Vec::new(), iterations)?;
+    Ok(AppearanceStepBench {
+        overhead: affine.seconds / plain.seconds - 1.0,
+        plain,
+        affine,
+    })
+}

@@ -1,6 +1,9 @@
 //! Rendering a trained model to images and scoring held-out views (PSNR, SSIM as papers report
-//! them: scikit-image SSIM, data range 1; masked variants when the dataset has masks).
+//! them: scikit-image SSIM, data range 1; masked variants when the dataset has masks), raw and
+//! gain-matched (a per-channel least-squares gain to the photo first,
+//! [`fewview_metrics::gain`], as evaluations of captures with varying exposure do).
 
+use fewview_metrics::gain::gain_matched;
 use fewview_metrics::psnr::{psnr, psnr_masked};
 use fewview_metrics::ssim::{SsimOptions, ssim_masked, ssim_with};
 use fewview_scene::{Image, View};
@@ -54,6 +57,9 @@ pub struct ViewScore {
     /// Over the object mask, when the dataset has masks (DTU protocol).
     pub masked_psnr: Option<f64>,
     pub masked_ssim: Option<f64>,
+    /// PSNR and SSIM after the per-channel gain fit (over the pixels the raw scores count).
+    pub gain_matched_psnr: f64,
+    pub gain_matched_ssim: f64,
 }
 
 /// Scores of a set of held-out views and their means.
@@ -64,6 +70,8 @@ pub struct EvalReport {
     pub mean_ssim: f64,
     pub mean_masked_psnr: Option<f64>,
     pub mean_masked_ssim: Option<f64>,
+    pub mean_gain_matched_psnr: f64,
+    pub mean_gain_matched_ssim: f64,
 }
 
 fn mean(v: impl Iterator<Item = f64>) -> f64 {
@@ -97,22 +105,27 @@ pub fn score(
         ),
         None => (None, None),
     };
-    let (p, s) = match &view.valid {
-        Some(valid) => (
-            psnr_masked(rendered, &view.image, valid)?,
-            ssim_masked(rendered, &view.image, valid, &opts)?,
-        ),
-        None => (
-            psnr(rendered, &view.image)?,
-            ssim_with(rendered, &view.image, &opts)?,
-        ),
+    let scores = |image: &Image| match &view.valid {
+        Some(valid) => Ok::<_, fewview_metrics::error::MetricsError>((
+            psnr_masked(image, &view.image, valid)?,
+            ssim_masked(image, &view.image, valid, &opts)?,
+        )),
+        None => Ok((
+            psnr(image, &view.image)?,
+            ssim_with(image, &view.image, &opts)?,
+        )),
     };
+    let (p, s) = scores(rendered)?;
+    let matched = gain_matched(rendered, &view.image, view.valid.as_ref())?;
+    let (gp, gs) = scores(&matched)?;
     Ok(ViewScore {
         name: name.to_string(),
         psnr: p,
         ssim: s,
         masked_psnr: mp,
         masked_ssim: ms,
+        gain_matched_psnr: gp,
+        gain_matched_ssim: gs,
     })
 }
 
@@ -165,6 +178,8 @@ pub fn evaluate(
         mean_ssim: mean(scores.iter().map(|s| s.ssim)),
         mean_masked_psnr: masked.then(|| mean(scores.iter().filter_map(|s| s.masked_psnr))),
         mean_masked_ssim: masked.then(|| mean(scores.iter().filter_map(|s| s.masked_ssim))),
+        mean_gain_matched_psnr: mean(scores.iter().map(|s| s.gain_matched_psnr)),
+        mean_gain_matched_ssim: mean(scores.iter().map(|s| s.gain_matched_ssim)),
         views: scores,
     };
     Ok((report, renders))

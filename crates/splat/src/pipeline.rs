@@ -9,6 +9,7 @@
 //! <run>/checkpoint.bin     latest checkpoint (removed when the run completes)
 //! <run>/point_cloud.ply    trained Gaussians (Inria layout)
 //! <run>/metrics.json       held-out PSNR/SSIM per view and means, Gaussian count, timings
+//! <run>/appearance.json    the training photos' colour transforms (with an appearance model)
 //! <run>/renders/test/      held-out renders (PNG)
 //! ```
 
@@ -120,6 +121,9 @@ impl RunDir {
     pub fn metrics(&self) -> PathBuf {
         self.0.join("metrics.json")
     }
+    pub fn appearance(&self) -> PathBuf {
+        self.0.join("appearance.json")
+    }
     /// The cameras of the split, so that a viewer or `fewview render --cameras` can show the
     /// run from its own views without the dataset.
     pub fn cameras(&self) -> PathBuf {
@@ -213,9 +217,10 @@ pub struct RunSummary {
 
 /// Header of the current checkpoint format: the payload is postcard of
 /// `(TrainConfig, RunData, TrainState)`, sealed with a CRC-32 ([`fewview_scene::sealed`]).
-const CHECKPOINT_MAGIC: &[u8; 8] = b"FVCKPT02";
-/// Earlier formats: `FVCKPT01` had neither the run's data nor a checksum.
-const OLDER_CHECKPOINT_MAGICS: [&[u8]; 1] = [b"FVCKPT01"];
+const CHECKPOINT_MAGIC: &[u8; 8] = b"FVCKPT03";
+/// Earlier formats: `FVCKPT01` had neither the run's data nor a checksum, `FVCKPT02` no
+/// appearance model.
+const OLDER_CHECKPOINT_MAGICS: [&[u8]; 2] = [b"FVCKPT01", b"FVCKPT02"];
 
 /// What a checkpoint holds: the training configuration, the data it trains on and the state.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -551,8 +556,12 @@ pub fn train_run_with(
     })?;
     let train_seconds = start.elapsed().as_secs_f64();
     let iterations = trainer.iteration();
-    let model = &trainer.into_state()?.model;
+    let state = trainer.into_state()?;
+    let model = &state.model;
     write_ply(&run.ply(), model)?;
+    if !state.appearance.transforms.is_empty() {
+        write_appearance(&run.appearance(), ds, &state.appearance.transforms)?;
+    }
 
     let settings = RenderSettings {
         background: cfg.train.background,
@@ -584,6 +593,26 @@ pub fn train_run_with(
         std::fs::remove_file(run.checkpoint()).map_err(|e| SceneError::io(run.checkpoint(), e))?;
     }
     Ok(summary)
+}
+
+/// `appearance.json`: each training photo's name and its colour transform `[A | b]` (3×4, row
+/// by row).
+fn write_appearance(
+    path: &Path,
+    ds: &Dataset,
+    transforms: &[crate::train::appearance::Affine],
+) -> Result<(), PipelineError> {
+    let rows: Vec<serde_json::Value> = ds
+        .train_views()
+        .zip(transforms)
+        .map(|(v, m)| {
+            let matrix: Vec<&[f32]> = m.chunks(4).collect();
+            serde_json::json!({ "view": v.name, "transform": matrix })
+        })
+        .collect();
+    let json = serde_json::to_vec_pretty(&rows).map_err(|e| PipelineError::Eval(e.to_string()))?;
+    fewview_scene::atomic::write_bytes(path, &json)?;
+    Ok(())
 }
 
 /// Renders `model` along a smooth path through `keys` (SLERP rotations, linear centres).

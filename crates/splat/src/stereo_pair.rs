@@ -55,6 +55,7 @@ pub fn inspect_pair(
         &init.sgm,
         init.range,
         init.refine.as_ref(),
+        init.photometry,
     )?;
     let match_seconds = start.elapsed().as_secs_f64();
     on_step(1, 2);

@@ -17,7 +17,9 @@ use fewview_geom::stereo::hierarchy::{
 use fewview_geom::stereo::pairs::{OverlapRule, StereoView, stereo_pairs, with_depth_bounds};
 use fewview_geom::stereo::refine::RefineOptions;
 use fewview_geom::stereo::sgm::{Paths, SgmParams};
-use fewview_geom::stereo::source::{DepthMapSource, DepthSource, DisparityRange, SgmSource};
+use fewview_geom::stereo::source::{
+    DepthMapSource, DepthSource, DisparityRange, Photometry, SgmSource,
+};
 use fewview_scene::{Dataset, PointCloud, SceneError};
 use serde::{Deserialize, Serialize};
 
@@ -42,6 +44,9 @@ pub struct StereoInit {
     pub range: DisparityRange,
     /// Sub-pixel refinement of the disparities (`None`: SGM's parabola only).
     pub refine: Option<RefineOptions>,
+    /// How a pair's photos are brought to one brightness before matching.
+    #[serde(default)]
+    pub photometry: Photometry,
     pub overlap: OverlapRule,
     pub hierarchy: HierarchyOptions,
 }
@@ -59,6 +64,7 @@ impl Default for StereoInit {
             },
             range: DisparityRange::FromDepthBounds,
             refine: Some(RefineOptions::default()),
+            photometry: Photometry::default(),
             overlap: OverlapRule::default(),
             hierarchy: HierarchyOptions::default(),
         }
@@ -116,6 +122,7 @@ pub fn stereo_start(
             params: init.sgm.clone(),
             range: init.range,
             refine: init.refine,
+            photometry: init.photometry,
         }),
         DepthFrom::Maps(dir) => Box::new(DepthMapSource::load(dir, &views, 0.001)?),
     };

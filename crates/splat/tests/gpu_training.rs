@@ -21,6 +21,7 @@ fn gpu_training_matches_cpu_training_on_the_demo_scene() {
         train: vec![1, 4, 7],
         supersample: 2,
         shading: DemoShading::Lambertian,
+        ..DemoOptions::default()
     });
     let mut psnr = Vec::new();
     for device in [ComputeDevice::Cpu, ComputeDevice::Gpu] {

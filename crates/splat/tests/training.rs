@@ -24,6 +24,7 @@ fn demo(width: usize, height: usize, train: Vec<usize>) -> Dataset {
         train,
         supersample: 2,
         shading: DemoShading::Lambertian,
+        ..DemoOptions::default()
     })
 }
 
@@ -284,6 +285,7 @@ fn training_learns_the_demo_scene() {
         train: vec![1, 4, 7],
         supersample: 2,
         shading: DemoShading::Lambertian,
+        ..DemoOptions::default()
     });
     let mut cfg = RunConfig::new(TrainConfig::sparse_view(600));
     cfg.init_points = 5000;

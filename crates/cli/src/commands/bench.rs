@@ -81,6 +81,8 @@ pub enum Section {
     Train,
     /// Demo training steps with the gradient-domain fusion term.
     Fusion,
+    /// Demo training steps with a per-photo affine colour transform.
+    Appearance,
     /// Surface training steps on DTU scan65.
     Surface,
     /// The SSIM loss.
@@ -127,6 +129,9 @@ struct Report {
     /// Demo training steps with the gradient-domain fusion term on every step.
     #[serde(skip_serializing_if = "Option::is_none")]
     fusion_demo: Option<fewview_fusion::bench::FusionStepBench>,
+    /// Demo training steps with a per-photo affine colour transform.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    appearance_demo: Option<fewview_splat::bench::AppearanceStepBench>,
     #[serde(skip_serializing_if = "Option::is_none")]
     train_fern: Option<fewview_splat::bench::TrainStepBench>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -207,8 +212,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         false => None,
     };
-    let demo = (args.wants(Section::Train) || args.wants(Section::Fusion))
-        .then(|| demo_dataset(&DemoOptions::default()));
+    let demo = (args.wants(Section::Train)
+        || args.wants(Section::Fusion)
+        || args.wants(Section::Appearance))
+    .then(|| demo_dataset(&DemoOptions::default()));
     let train_demo = match (&demo, args.wants(Section::Train)) {
         (Some(demo), true) => {
             eprintln!("training steps: demo scene ...");
@@ -224,6 +231,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (Some(demo), true) => {
             eprintln!("training steps with the fusion term: demo scene ...");
             Some(fewview_fusion::bench::fusion_step_bench(
+                demo,
+                args.train_steps,
+            )?)
+        }
+        _ => None,
+    };
+    let appearance_demo = match (&demo, args.wants(Section::Appearance)) {
+        (Some(demo), true) => {
+            eprintln!("training steps with a per-photo colour transform: demo scene ...");
+            Some(fewview_splat::bench::appearance_step_bench(
                 demo,
                 args.train_steps,
             )?)
@@ -270,6 +287,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         raster_gpu,
         train_demo,
         fusion_demo,
+        appearance_demo,
         train_fern,
         train_surface,
         ssim,
@@ -507,6 +525,18 @@ fn print_training(r: &Report) {
         println!(
             "{:<46} {:>14.2} {:>14}",
             "  fusion term's share of a step", f.term_share, ""
+        );
+    }
+    if let Some(a) = &r.appearance_demo {
+        println!(
+            "{:<46} {:>14.2} {:>14.2}",
+            "demo it/s with colour transforms (vs without)",
+            a.affine.iterations_per_second,
+            a.plain.iterations_per_second
+        );
+        println!(
+            "{:<46} {:>14.3} {:>14}",
+            "  transforms' cost per step (fraction)", a.overhead, ""
         );
     }
     if let Some(s) = &r.train_surface {

@@ -4,11 +4,13 @@ use std::path::PathBuf;
 
 use clap::Args as ClapArgs;
 use fewview_fusion::FusionConfig;
+use fewview_scene::photometric::training_gains;
 use fewview_scene::synthetic::{DemoOptions, demo_dataset};
 
-use super::fusion::{print_transition, train_with_progress, transition};
+use super::fusion::{print_transition, train_with_progress, transition, write_gains};
 use super::number_args::count_in;
 use super::output_paths::check_folder;
+use super::photo_args::{DemoSceneArgs, JitterArgs};
 use super::train::{check_init, print_summary};
 use super::train_args::TrainArgs;
 
@@ -32,6 +34,10 @@ pub struct Args {
     pub width: usize,
     #[command(flatten)]
     pub train: TrainArgs,
+    #[command(flatten)]
+    pub jitter: JitterArgs,
+    #[command(flatten)]
+    pub scene: DemoSceneArgs,
     /// Continue the run in `--out` from its last checkpoint.
     #[arg(long)]
     pub resume: bool,
@@ -109,11 +115,12 @@ fn demo_width(s: &str) -> Result<usize, String> {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let opts = DemoOptions {
+    let opts = args.scene.apply(DemoOptions {
         width: args.width,
         height: args.width * 3 / 4,
+        jitter: args.jitter.jitter(),
         ..DemoOptions::default()
-    };
+    })?;
     if let Some(dir) = &args.write_capture {
         return write_capture(
             dir,
@@ -143,6 +150,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let fusion = FusionConfig::default();
     let summary = train_with_progress(&ds, &cfg, &fusion, &args.out, args.resume)?;
+    write_gains(&args.out, &training_gains(&ds, &opts.jitter))?;
     let report = transition(&ds, Some(&opts), &args.out, true)?;
     print_summary(&summary, &args.out);
     print_transition(&report);

@@ -5,14 +5,16 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
-use fewview_fusion::transition::{TransitionReport, transition_of_run};
+use fewview_fusion::transition::{PathFrame, TransitionReport, transition_of_run};
 use fewview_fusion::{FusionConfig, Variant, fusion_run};
-use fewview_scene::Dataset;
+use fewview_scene::photometric::{PhotoGain, jitter_training_photos, training_gains};
 use fewview_scene::synthetic::{DemoOptions, demo_dataset, demo_render};
+use fewview_scene::{Dataset, Image};
 use fewview_splat::pipeline::{RunConfig, RunSummary, default_iterations};
 
 use super::dataset_args::{ViewList, parse_views};
 use super::output_paths::check_folder;
+use super::photo_args::{DemoSceneArgs, JitterArgs};
 use super::progress;
 use super::train::print_summary;
 use super::train_args::TrainArgs;
@@ -60,6 +62,10 @@ pub struct Args {
     pub test_views: Option<ViewList>,
     #[command(flatten)]
     pub train: TrainArgs,
+    #[command(flatten)]
+    pub jitter: JitterArgs,
+    #[command(flatten)]
+    pub scene: DemoSceneArgs,
     /// The regulariser: gf (f, ours), plain, sparse-init (a), knn-color (b), tv (c),
     /// l1-virtual (d), poisson (e).
     #[arg(long, default_value = "gf", value_parser = parse_variant)]
@@ -109,7 +115,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !args.study.is_empty() {
         return write_study(&args.study, &out);
     }
-    let (ds, demo) = load(&args)?;
+    let (ds, demo, gains) = load(&args)?;
     let default = if demo.is_some() {
         2000
     } else {
@@ -135,12 +141,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         out.display()
     );
     let summary = train_with_progress(&ds, &cfg, &fusion, &out, args.resume)?;
+    write_gains(&out, &gains)?;
     print_summary(&summary, &out);
     if !args.no_transition {
         let report = transition(&ds, demo.as_ref(), &out, !args.no_lpips)?;
         print_transition(&report);
     }
     Ok(())
+}
+
+/// `photo_gains.json`: the exposure, white balance and vignetting each training photo was
+/// given (nothing is written when the photos were left as they are).
+pub fn write_gains(out: &Path, gains: &[(String, PhotoGain)]) -> anyhow::Result<()> {
+    if gains.iter().all(|(_, g)| *g == PhotoGain::default()) {
+        return Ok(());
+    }
+    let rows: Vec<serde_json::Value> = gains
+        .iter()
+        .map(|(name, gain)| serde_json::json!({ "view": name, "gain": gain }))
+        .collect();
+    let path = out.join("photo_gains.json");
+    fewview_scene::atomic::write_bytes(&path, &serde_json::to_vec_pretty(&rows)?)
+        .with_context(|| format!("cannot write {}", path.display()))
 }
 
 /// Trains one fusion run with a progress bar.
@@ -164,7 +186,8 @@ pub fn train_with_progress(
 }
 
 /// Renders and scores the run's transition; on the demo scene against its ray-traced truth
-/// (with LPIPS when `lpips`).
+/// (with LPIPS when `lpips`), whose exposure follows the training photos' gains log-linearly
+/// between the two photos a frame lies between.
 pub fn transition(
     ds: &Dataset,
     demo: Option<&DemoOptions>,
@@ -172,10 +195,20 @@ pub fn transition(
     lpips: bool,
 ) -> anyhow::Result<TransitionReport> {
     eprintln!("rendering and scoring the transition ...");
-    let truth = demo.map(|opts| move |c: &fewview_scene::Camera| demo_render(c, opts));
+    let truth = demo.map(|opts| {
+        let gains: Vec<PhotoGain> = ds.train.iter().map(|&i| opts.jitter.gain(i)).collect();
+        move |f: &PathFrame<'_>| -> Image {
+            let neutral = demo_render(f.camera, opts);
+            if opts.jitter.is_none() {
+                neutral
+            } else {
+                PhotoGain::apply_between(&gains[f.from], &gains[f.to], f.t, &neutral)
+            }
+        }
+    });
     let truth_ref = truth
         .as_ref()
-        .map(|f| f as &(dyn Fn(&fewview_scene::Camera) -> fewview_scene::Image + Sync));
+        .map(|f| f as &(dyn Fn(&PathFrame<'_>) -> Image + Sync));
     let lpips = lpips
         .then(fewview_metrics::lpips::Lpips::default_st_alex)
         .transpose()?;
@@ -187,8 +220,13 @@ pub fn print_transition(r: &TransitionReport) {
         "path warping err {:.5} (Δ {:.5}), warp PSNR {:.2} dB",
         r.warping_error.mean, r.warping_error.delta.mean, r.warp_psnr.mean
     );
-    if let Some(l) = r.held_out_lpips {
-        println!("held-out LPIPS   {l:.4} (ST-LPIPS AlexNet)");
+    println!(
+        "local popping    {:.4} ({:.1} of 255 levels; 99th percentile over frames and pixels)",
+        r.popping.p99,
+        r.popping.p99 * 255.0
+    );
+    if let (Some(l), Some(g)) = (r.held_out_lpips, r.held_out_lpips_gain_matched) {
+        println!("held-out LPIPS   {l:.4}, gain-matched {g:.4} (ST-LPIPS AlexNet)");
     }
     if let Some(t) = &r.truth {
         println!(
@@ -201,20 +239,33 @@ pub fn print_transition(r: &TransitionReport) {
                 .map(|l| format!(", LPIPS {:.4}", l.mean))
                 .unwrap_or_default()
         );
+        println!("truth's popping  {:.4}", t.truth_popping.p99);
     }
 }
 
-fn load(args: &Args) -> anyhow::Result<(Dataset, Option<DemoOptions>)> {
+/// The dataset with its jittered training photos, the demo's options when it is the demo, and
+/// each training photo's gain.
+#[allow(clippy::type_complexity)]
+fn load(args: &Args) -> anyhow::Result<(Dataset, Option<DemoOptions>, Vec<(String, PhotoGain)>)> {
+    let jitter = args.jitter.jitter();
     if args.demo {
-        let mut opts = DemoOptions {
+        let mut opts = args.scene.apply(DemoOptions {
             width: args.width,
             height: args.width * 3 / 4,
+            jitter,
             ..DemoOptions::default()
-        };
+        })?;
         if let Some(train) = &args.train_views {
             opts.train = train.0.clone();
         }
-        return Ok((demo_dataset(&opts), Some(opts)));
+        let ds = demo_dataset(&opts);
+        let gains = training_gains(&ds, &jitter);
+        return Ok((ds, Some(opts), gains));
+    }
+    if args.scene.is_set() {
+        bail!(
+            "--specular, --mirror-floor and --baseline-scale change the demo scene; they need --demo"
+        );
     }
     let folder = args
         .data
@@ -227,9 +278,10 @@ fn load(args: &Args) -> anyhow::Result<(Dataset, Option<DemoOptions>)> {
         test_views: args.test_views.clone().map(|v| v.0),
         ..Default::default()
     };
-    let ds = fewview_scene::load_dataset(folder, &options)
+    let mut ds = fewview_scene::load_dataset(folder, &options)
         .with_context(|| format!("cannot load dataset {}", folder.display()))?;
-    Ok((ds, None))
+    let gains = jitter_training_photos(&mut ds, &jitter);
+    Ok((ds, None, gains))
 }
 
 fn print_table(runs: &[PathBuf]) -> anyhow::Result<()> {

@@ -15,6 +15,7 @@ mod human;
 mod mcubes;
 mod number_args;
 mod output_paths;
+mod photo_args;
 mod pose_error;
 mod progress;
 mod register;

@@ -120,6 +120,10 @@ pub fn print_summary(s: &RunSummary, out: &std::path::Path) {
     println!("held-out views   {}", s.test.views.len());
     println!("held-out PSNR    {:.3} dB", s.test.mean_psnr);
     println!("held-out SSIM    {:.4}", s.test.mean_ssim);
+    println!(
+        "gain-matched     PSNR {:.3} dB, SSIM {:.4} (a least-squares gain per channel first)",
+        s.test.mean_gain_matched_psnr, s.test.mean_gain_matched_ssim
+    );
     if let (Some(p), Some(q)) = (s.test.mean_masked_psnr, s.test.mean_masked_ssim) {
         println!("masked PSNR      {p:.3} dB");
         println!("masked SSIM      {q:.4}");

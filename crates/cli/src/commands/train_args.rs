@@ -7,7 +7,7 @@ use clap::{Args, ValueEnum};
 use fewview_splat::ComputeDevice;
 use fewview_splat::pipeline::{InitStrategy, MAX_INIT_POINTS, RunConfig};
 use fewview_splat::stereo_start::{DepthFrom, StereoInit};
-use fewview_splat::train::TrainConfig;
+use fewview_splat::train::{AppearanceConfig, AppearanceModel, TrainConfig};
 
 /// What the Gaussians are composited over during training on images with alpha.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -61,6 +61,37 @@ pub struct TrainArgs {
     /// DX12; builds with `--features gpu`). The two agree to rounding, not bit for bit.
     #[arg(long, value_enum, default_value_t = DeviceArg::Cpu)]
     pub device: DeviceArg,
+    /// Per-photo appearance: `affine` learns a 3×4 colour transform per training photo, applied
+    /// to the render before the loss (identity at the start, pulled towards it), so photos whose
+    /// exposure or white balance differ need not be explained by the Gaussians' colours; new
+    /// views are rendered without it (gsplat's appearance optimisation, a bilateral grid of one
+    /// cell). `none` compares renders with the photos as they are.
+    #[arg(long, value_enum, default_value_t = AppearanceArg::None)]
+    pub appearance: AppearanceArg,
+    /// Adam learning rate of the colour transforms.
+    #[arg(long, value_name = "LR", default_value_t = AppearanceConfig::default().lr,
+          value_parser = super::number_args::non_negative_f32)]
+    pub appearance_lr: f32,
+    /// Weight of the squared distance of each colour transform to the identity.
+    #[arg(long, value_name = "W", default_value_t = AppearanceConfig::default().weight,
+          value_parser = super::number_args::non_negative_f32)]
+    pub appearance_weight: f32,
+}
+
+/// `--appearance`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum AppearanceArg {
+    None,
+    Affine,
+}
+
+impl From<AppearanceArg> for AppearanceModel {
+    fn from(a: AppearanceArg) -> Self {
+        match a {
+            AppearanceArg::None => Self::None,
+            AppearanceArg::Affine => Self::Affine,
+        }
+    }
 }
 
 /// `--device`.
@@ -92,6 +123,11 @@ impl TrainArgs {
         train.background = background;
         train.random_background = self.train_background == TrainBackground::Random;
         train.checkpoint_interval = self.checkpoint_every;
+        train.appearance = AppearanceConfig {
+            model: self.appearance.into(),
+            lr: self.appearance_lr,
+            weight: self.appearance_weight,
+        };
         if let Err(m) = train.validate() {
             bail!("invalid training options: {m}");
         }

@@ -56,6 +56,46 @@ pub enum DisparityRange {
     Fixed { min: i32, count: usize },
 }
 
+/// How the two photos of a pair are brought to one brightness before they are matched.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Photometry {
+    /// As they are (OpenCV's `StereoSGBM`, whose cost compares intensities directly).
+    AsIs,
+    /// The right rectified image scaled per channel so that its mean over the pixels it saw
+    /// equals the left one's: a difference of exposure or white balance between the photos
+    /// (a phone's automatic exposure) would otherwise read to the matcher's absolute-difference
+    /// cost and to the refinement's intensity fit as a change of surface. The global form of
+    /// the per-pair normalisation of multi-view stereo's normalised cross-correlation costs.
+    #[default]
+    GainMatched,
+}
+
+/// Scales `right` per channel so that its mean over its `inside` pixels equals `left`'s
+/// (values clipped to `[0, 1]`); returns the gains. A channel without signal keeps gain 1.
+pub fn match_gains(left: &RectifiedImage, right: &mut RectifiedImage) -> Vec<f64> {
+    let c = left.image.channels;
+    let means = |r: &RectifiedImage| {
+        let mut sum = vec![0.0f64; c];
+        let mut n = 0usize;
+        for (p, _) in r.inside.iter().enumerate().filter(|(_, i)| **i) {
+            for (k, s) in sum.iter_mut().enumerate() {
+                *s += r.image.data[p * c + k] as f64;
+            }
+            n += 1;
+        }
+        sum.into_iter().map(move |s| s / n.max(1) as f64)
+    };
+    let gains: Vec<f64> = means(left)
+        .zip(means(right))
+        .map(|(l, r)| if l > 0.0 && r > 0.0 { l / r } else { 1.0 })
+        .collect();
+    for (i, v) in right.image.data.iter_mut().enumerate() {
+        *v = (*v as f64 * gains[i % c]).clamp(0.0, 1.0) as f32;
+    }
+    gains
+}
+
 /// The most disparities searched when the range comes from depth bounds.
 pub const MAX_DISPARITIES: usize = 256;
 
@@ -84,8 +124,8 @@ pub fn disparity_range(rect: &Rectification, near: f64, far: f64) -> (i32, usize
     (lo, count.div_ceil(16) * 16)
 }
 
-/// Rectifies `first` and `second`, matches them both ways and maps the disparities back to depth
-/// in the original cameras. `range` picks the disparity search range (with
+/// Rectifies `first` and `second`, brings them to one brightness (`photometry`), matches them
+/// both ways and maps the disparities back to depth in the original cameras. `range` picks the disparity search range (with
 /// [`DisparityRange::FromDepthBounds`] both views need depth bounds; see
 /// [`super::pairs::with_depth_bounds`]).
 pub fn match_pair(
@@ -94,6 +134,7 @@ pub fn match_pair(
     params: &SgmParams,
     range: DisparityRange,
     refine_options: Option<&RefineOptions>,
+    photometry: Photometry,
 ) -> Result<PairStereo> {
     let pair_name = || format!("views {} and {}", first.name, second.name);
     let baseline = second.camera.center() - first.camera.center();
@@ -118,10 +159,13 @@ pub fn match_pair(
         })?;
         (params.min_disparity, params.num_disparities) = disparity_range(&rect, near, far);
     }
-    let (left, right) = rayon::join(
+    let (left, mut right) = rayon::join(
         || rect.rectify_image(Side::Left, l.image),
         || rect.rectify_image(Side::Right, r.image),
     );
+    if photometry == Photometry::GainMatched {
+        match_gains(&left, &mut right);
+    }
     let (lu8, ru8) = (eight_bit_rgb(&left.image), eight_bit_rgb(&right.image));
     let (w, h) = (left.image.width, left.image.height);
     let lg = GrayOrRgb::new(w, h, 3, &lu8)?;
@@ -232,6 +276,7 @@ pub struct SgmSource<'a> {
     pub range: DisparityRange,
     /// Sub-pixel refinement of the disparities (`None`: SGM's own).
     pub refine: Option<RefineOptions>,
+    pub photometry: Photometry,
 }
 
 impl DepthSource for SgmSource<'_> {
@@ -246,6 +291,7 @@ impl DepthSource for SgmSource<'_> {
             &self.params,
             self.range,
             self.refine.as_ref(),
+            self.photometry,
         )?;
         Ok(pair.depths)
     }

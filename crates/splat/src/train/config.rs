@@ -4,6 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::adam::AdamConfig;
+use super::appearance::AppearanceConfig;
 
 /// Learning rates (the fusion paper §3; Kerbl et al. 2023).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -91,6 +92,10 @@ pub struct TrainConfig {
     pub near_plane: f64,
     /// Save a checkpoint every this many iterations (0: only at the end).
     pub checkpoint_interval: usize,
+    /// A learned colour transform per training photo (off by default; see
+    /// [`super::appearance`]).
+    #[serde(default)]
+    pub appearance: AppearanceConfig,
 }
 
 impl TrainConfig {
@@ -120,6 +125,7 @@ impl TrainConfig {
             random_background: false,
             near_plane: 0.2,
             checkpoint_interval: 1000,
+            appearance: AppearanceConfig::default(),
         }
     }
 
@@ -188,7 +194,7 @@ impl TrainConfig {
         if self.densify.interval == 0 {
             return Err("densify interval must be at least 1".into());
         }
-        Ok(())
+        self.appearance.validate()
     }
 }
 

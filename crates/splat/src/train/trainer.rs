@@ -11,6 +11,7 @@ use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
+use super::appearance::{self, Affine, AppearanceState};
 use super::config::TrainConfig;
 use super::densify::{
     DensifyReport, DensifyStats, ModelAdam, clone_and_split, densify_and_prune, plan, reset_opacity,
@@ -163,6 +164,8 @@ pub struct LossContext<'a> {
     pub extent: f32,
     /// The photometric render of this iteration.
     pub render: &'a RenderTensors,
+    /// The training photos' colour transforms, when the run learns them (by view index).
+    pub appearance: &'a [Affine],
     host: HostModel<'a>,
 }
 
@@ -256,6 +259,8 @@ pub struct TrainState {
     pub model: GaussianModel,
     pub adam: ModelAdam,
     pub stats: DensifyStats,
+    /// The training photos' colour transforms (empty without an appearance model).
+    pub appearance: AppearanceState,
 }
 
 /// A training run.
@@ -307,6 +312,7 @@ impl Trainer {
             iteration: 0,
             adam: ModelAdam::new(&model),
             stats: DensifyStats::new(model.len()),
+            appearance: AppearanceState::new(config.appearance.model, views.len()),
             model,
         };
         Ok(Self {
@@ -438,8 +444,11 @@ impl Trainer {
         };
         let n = gaussians.opacity_logits.dims()[0];
         let probe = Tensor::<2>::zeros([n, 2], &self.device).require_grad();
-        let (loss, loss_value, radii) = self.loss(it, &gaussians, &probe)?;
+        let (loss, loss_value, radii, transform) = self.loss(it, &gaussians, &probe)?;
         let grads = loss.backward();
+        if let Some((view, m)) = transform {
+            self.step_appearance(it, view, m.grad(&grads))?;
+        }
         let grads = Gradients::of(&gaussians, &probe, &grads);
         drop(gaussians);
         let densified = if self.resident.is_some() {
@@ -467,14 +476,41 @@ impl Trainer {
         })
     }
 
-    /// The iteration's loss (photometric plus the terms), its value, and the render's screen
-    /// radii. A loss that is not finite stops training.
+    /// One Adam step of the colour transform of `view` (see [`super::appearance`]). A gradient
+    /// that is not finite stops training.
+    fn step_appearance(
+        &mut self,
+        it: usize,
+        view: usize,
+        grad: Option<Tensor<2>>,
+    ) -> Result<(), TrainError> {
+        let Some(grad) = grad else {
+            return Ok(());
+        };
+        let grad = f32_values(grad, "gradient of the colour transform")?;
+        if grad.iter().any(|g| !g.is_finite()) {
+            return Err(TrainError::Diverged {
+                iteration: it,
+                loss: f32::NAN,
+            });
+        }
+        let lr = self.config.appearance.lr;
+        self.state
+            .appearance
+            .step(view, &grad, lr, &self.config.adam);
+        Ok(())
+    }
+
+    /// The iteration's loss (photometric plus the terms), its value, the render's screen
+    /// radii, and the trained view's colour transform when the run learns one. A loss that is
+    /// not finite stops training.
+    #[allow(clippy::type_complexity)]
     fn loss(
         &mut self,
         it: usize,
         gaussians: &GaussianTensors,
         probe: &Tensor<2>,
-    ) -> Result<(Tensor<1>, f32, Tensor<1>), TrainError> {
+    ) -> Result<(Tensor<1>, f32, Tensor<1>, Option<(usize, Tensor<2>)>), TrainError> {
         let view_index = self.view_of(it);
         let mut settings = self.settings(it);
         let (background, target) = self.background_and_target(it, &self.views[view_index]);
@@ -489,12 +525,23 @@ impl Trainer {
             },
         );
         let [h, w, _] = out.image.dims();
-        let rgb = out.image.clone().slice([0..h, 0..w, 0..3]);
+        let mut rgb = out.image.clone().slice([0..h, 0..w, 0..3]);
+        let transform = self
+            .state
+            .appearance
+            .transform(view_index)
+            .map(|m| (view_index, appearance::tracked(m, &self.device)));
+        if let Some((_, m)) = &transform {
+            rgb = appearance::apply(rgb, m.clone());
+        }
         let (rgb, target) = match &view.valid {
             Some(valid) => (rgb * valid.clone(), target * valid.clone()),
             None => (rgb, target),
         };
         let mut loss = photometric_loss(rgb, target, self.config.lambda_dssim);
+        if let Some((_, m)) = &transform {
+            loss = loss + appearance::regularization(m.clone(), self.config.appearance.weight);
+        }
         let ctx = LossContext {
             iteration: it,
             view_index,
@@ -503,6 +550,7 @@ impl Trainer {
             settings: &settings,
             extent: self.extent,
             render: &out,
+            appearance: &self.state.appearance.transforms,
             host: match self.resident {
                 Some(_) => HostModel::OnDemand(OnceCell::new()),
                 None => HostModel::Ready(&self.state.model),
@@ -523,7 +571,7 @@ impl Trainer {
                 loss: loss_value,
             });
         }
-        Ok((loss, loss_value, out.radii))
+        Ok((loss, loss_value, out.radii, transform))
     }
 
     /// Densification and Adam on the host state. A gradient that is not finite stops training.
