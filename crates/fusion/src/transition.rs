@@ -21,7 +21,7 @@ use fewview_geom::colormap::colorize_range;
 use fewview_metrics::flow::path_flows;
 use fewview_metrics::gain::gain_matched;
 use fewview_metrics::lpips::Lpips;
-use fewview_metrics::popping::{Popping, local_popping};
+use fewview_metrics::popping::{Popping, local_popping, local_popping_with};
 use fewview_metrics::psnr::psnr_from_mse;
 use fewview_metrics::ssim::SsimOptions;
 use fewview_metrics::temporal::{MetricSeries, evaluate_sequence, warping_errors};
@@ -151,6 +151,8 @@ pub struct PathTruth {
     pub truth_warping_error: MetricSeries,
     /// The truth's own local popping under the same flows (a moving highlight pops a little).
     pub truth_popping: Popping,
+    /// The same without the low-pass.
+    pub truth_popping_per_pixel: Popping,
 }
 
 /// How smooth a transition is (see the module docs).
@@ -163,8 +165,11 @@ pub struct TransitionReport {
     /// `PSNR(frame_t, warp(frame_{t−1}))` per transition, its mean and Δ.
     pub warp_psnr: MetricSeries,
     /// Local popping ([`fewview_metrics::popping`]): the 99th percentile over transitions of
-    /// the 99th percentile over co-visible pixels of `|frame_t − warp(frame_{t−1})|`.
+    /// the 99th percentile over co-visible pixels of `|frame_t − warp(frame_{t−1})|`, the frames
+    /// low-passed with a Gaussian of one pixel.
     pub popping: Popping,
+    /// The same without the low-pass: resampling of sharp edges counts too.
+    pub popping_per_pixel: Popping,
     /// Fraction of pixels the flows trust (mean over transitions).
     pub flow_coverage: f64,
     pub truth: Option<PathTruth>,
@@ -190,6 +195,7 @@ pub fn score_transition(
     let flows = path_flows(&path.cameras, &path.depths)?;
     let errors = warping_errors(&path.frames, &flows)?;
     let (popping, popping_maps) = local_popping(&path.frames, &flows)?;
+    let popping_per_pixel = local_popping_with(&path.frames, &flows, 0.0)?.0;
     // The warping error sums the squared difference over the 3 channels.
     let warp_psnr: Vec<f64> = errors.iter().map(|e| psnr_from_mse(e / 3.0)).collect();
     let coverage = flows
@@ -213,6 +219,7 @@ pub fn score_transition(
                     warping_errors(gt, &flows)?,
                 ),
                 truth_popping: local_popping(gt, &flows)?.0,
+                truth_popping_per_pixel: local_popping_with(gt, &flows, 0.0)?.0,
             })
         }
         None => None,
@@ -223,6 +230,7 @@ pub fn score_transition(
         warping_error: MetricSeries::new("warping_error", errors),
         warp_psnr: MetricSeries::new("warp_psnr", warp_psnr),
         popping,
+        popping_per_pixel,
         flow_coverage: coverage,
         truth,
         held_out_lpips: None,

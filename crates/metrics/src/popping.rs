@@ -7,6 +7,7 @@
 //! warping error (Lai et al. 2018) averages over the frame and cannot tell the two apart. Local
 //! popping looks at the tail instead:
 //!
+//! * both frames low-passed with a Gaussian of [`POPPING_SIGMA`] pixels;
 //! * per transition `t`, the difference map `|frame_t − warp(frame_{t−1})|` over the pixels both
 //!   frames show (the exact backward flow and its occlusion mask, bilinear sampling), each
 //!   pixel's value the largest of its channels' absolute differences;
@@ -14,15 +15,25 @@
 //! * **local popping** = the 99th percentile of that over the transitions: the worst moments of
 //!   the clip, ignoring a single outlier frame.
 //!
-//! Percentiles are nearest-rank (`⌈q·n⌉`-th smallest).
+//! The low-pass is the one step beyond the literal per-pixel difference. Bilinear resampling of
+//! a sharp edge leaves a difference of up to a tenth of the edge's contrast where nothing
+//! changed (by the per-pixel measure a ray-traced truth pops more than a blurry render, and a
+//! checkered floor more than a patch that switches colour); a Gaussian of one pixel makes the
+//! frames smooth enough for bilinear sampling to follow them, while a patch that switches colour
+//! keeps its switch. [`local_popping_with`] with σ = 0 gives the per-pixel form. Percentiles are
+//! nearest-rank (`⌈q·n⌉`-th smallest).
 
 use fewview_scene::Image;
 
 use crate::error::{MetricsError, Result, check_same_shape};
 use crate::temporal::{Flow, bilinear};
+use fewview_geom::blend::gaussian_blur;
 
 /// The percentile of local popping, over pixels and over transitions.
 pub const POPPING_PERCENTILE: f64 = 0.99;
+
+/// Standard deviation (pixels) of the Gaussian the frames are low-passed with.
+pub const POPPING_SIGMA: f32 = 1.0;
 
 /// Local popping of a clip (see the module docs).
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -78,6 +89,24 @@ pub fn difference_map(previous: &Image, current: &Image, flow: &Flow) -> Result<
     Ok(map)
 }
 
+/// `image` with each channel blurred by a Gaussian of `sigma` pixels (mirror border; `sigma`
+/// 0 leaves it as it is).
+pub fn low_pass(image: &Image, sigma: f32) -> Image {
+    if sigma <= 0.0 {
+        return image.clone();
+    }
+    let (w, h, c) = (image.width, image.height, image.channels);
+    let mut out = image.clone();
+    for k in 0..c {
+        let plane: Vec<f32> = image.data.iter().skip(k).step_by(c).copied().collect();
+        let blurred = gaussian_blur(&plane, w, h, sigma);
+        for (p, v) in blurred.into_iter().enumerate() {
+            out.data[p * c + k] = v;
+        }
+    }
+    out
+}
+
 /// The nearest-rank `q`-quantile (`0 < q ≤ 1`) of the finite values, `None` when there are none.
 pub fn percentile(values: impl IntoIterator<Item = f64>, q: f64) -> Option<f64> {
     let mut v: Vec<f64> = values.into_iter().filter(|x| x.is_finite()).collect();
@@ -89,9 +118,19 @@ pub fn percentile(values: impl IntoIterator<Item = f64>, q: f64) -> Option<f64> 
     Some(v[rank - 1])
 }
 
-/// Local popping of `frames` under `flows` (one backward flow per transition), and the
-/// difference map of every transition (for pictures of where it pops).
+/// Local popping of `frames` under `flows` (one backward flow per transition), frames
+/// low-passed with [`POPPING_SIGMA`], and the difference map of every transition (for pictures
+/// of where it pops).
 pub fn local_popping(frames: &[Image], flows: &[Flow]) -> Result<(Popping, Vec<Vec<f32>>)> {
+    local_popping_with(frames, flows, POPPING_SIGMA)
+}
+
+/// [`local_popping`] with another low-pass (σ in pixels; 0: the frames as they are).
+pub fn local_popping_with(
+    frames: &[Image],
+    flows: &[Flow],
+    sigma: f32,
+) -> Result<(Popping, Vec<Vec<f32>>)> {
     if frames.len() < 2 || flows.len() + 1 != frames.len() {
         return Err(MetricsError::ShapeMismatch(format!(
             "{} flows for {} frames (need at least 2 frames and one flow per transition)",
@@ -99,6 +138,7 @@ pub fn local_popping(frames: &[Image], flows: &[Flow]) -> Result<(Popping, Vec<V
             frames.len()
         )));
     }
+    let frames: Vec<Image> = frames.iter().map(|f| low_pass(f, sigma)).collect();
     let maps = (1..frames.len())
         .map(|t| {
             difference_map(&frames[t - 1], &frames[t], &flows[t - 1])
@@ -169,7 +209,7 @@ mod tests {
             .map(|i| frame(0.3 + 0.01 * i as f32, 0.3 + 0.01 * i as f32))
             .collect();
         let flows = vec![still(w, h); 4];
-        let (p, maps) = local_popping(&ramp, &flows).unwrap();
+        let (p, maps) = local_popping_with(&ramp, &flows, 0.0).unwrap();
         assert!((p.p99 - 0.01).abs() < 1e-5, "{p:?}");
         assert_eq!(maps.len(), 4);
         // A 4×4 patch (4 % of the frame) switches its green channel by 0.3 at one transition:
@@ -178,7 +218,7 @@ mod tests {
         for f in &mut pop[3..] {
             *f = frame(0.3, 0.6);
         }
-        let (p, maps) = local_popping(&pop, &flows).unwrap();
+        let (p, maps) = local_popping_with(&pop, &flows, 0.0).unwrap();
         assert!((p.per_transition[2] - 0.3).abs() < 1e-5, "{p:?}");
         assert_eq!(p.per_transition[0], 0.0);
         assert!((p.p99 - 0.3).abs() < 1e-5);
@@ -186,6 +226,57 @@ mod tests {
         // The warping error of the switch is small: it averages over the frame.
         let we = crate::temporal::warping_error(&pop[2], &pop[3], &flows[2]).unwrap();
         assert!(we < 0.004, "{we}");
+    }
+
+    /// A sharp edge moving by a fraction of a pixel: the scene does not change, bilinear
+    /// resampling of the edge does; a patch that switches colour does change.
+    #[test]
+    fn the_low_pass_quiets_a_moving_edge_but_not_a_switching_patch() {
+        let (w, h) = (40, 30);
+        // Columns box-filtered from a step at x = e (pixel i covers [i, i + 1)).
+        let edge = |e: f32| {
+            let mut img = Image::new(w, h, 3);
+            for y in 0..h {
+                for x in 0..w {
+                    let cover = (x as f32 + 1.0 - e).clamp(0.0, 1.0);
+                    img.set(x, y, 0, 0.2 + 0.6 * cover);
+                }
+            }
+            img
+        };
+        // Frame 1 is frame 0 moved 0.5 px right: its pixel x shows frame 0's x − 0.5.
+        let frames = [edge(20.25), edge(20.75)];
+        let mut flow = still(w, h);
+        flow.data.iter_mut().for_each(|d| *d = [-0.5, 0.0]);
+        let raw = local_popping_with(&frames, std::slice::from_ref(&flow), 0.0).unwrap().0;
+        let smooth = local_popping(&frames, std::slice::from_ref(&flow)).unwrap().0;
+        assert!(raw.p99 > 0.05, "{raw:?}");
+        assert!(smooth.p99 < 0.3 * raw.p99, "{smooth:?} vs {raw:?}");
+        // A 10×10 patch switching by 0.2 keeps most of its switch after the low-pass.
+        let base = Image::filled(w, h, &[0.5, 0.5, 0.5]);
+        let mut patch = base.clone();
+        for y in 10..20 {
+            for x in 10..20 {
+                patch.set(x, y, 0, 0.7);
+            }
+        }
+        let still_flow = [still(w, h)];
+        let p = local_popping(&[base, patch], &still_flow).unwrap().0;
+        assert!(p.p99 > 0.18, "{p:?}");
+    }
+
+    #[test]
+    fn the_low_pass_is_a_per_channel_gaussian() {
+        let mut img = Image::new(9, 9, 3);
+        img.set(4, 4, 1, 1.0);
+        let blurred = low_pass(&img, 1.0);
+        // The impulse response: a normalised Gaussian in green, nothing in the other channels.
+        let g = |d: f32| (-d * d / 2.0).exp();
+        let norm: f32 = (-3..=3).map(|d| g(d as f32)).sum::<f32>();
+        let expect = g(1.0) * g(0.0) / (norm * norm);
+        assert!((blurred.get(5, 4, 1) - expect).abs() < 1e-6);
+        assert_eq!(blurred.get(5, 4, 0), 0.0);
+        assert_eq!(low_pass(&img, 0.0), img);
     }
 
     #[test]

@@ -100,6 +100,10 @@ pub struct Args {
     /// Continue the run in `--out` from its last checkpoint (same flags).
     #[arg(long)]
     pub resume: bool,
+    /// Do not train: render and score the transition of the finished run in `--out` again
+    /// (same dataset flags), e.g. after a change of the scores.
+    #[arg(long, conflicts_with_all = ["resume", "no_transition"])]
+    pub rescore: bool,
 }
 
 fn parse_variant(s: &str) -> Result<Variant, String> {
@@ -116,6 +120,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return write_study(&args.study, &out);
     }
     let (ds, demo, gains) = load(&args)?;
+    if args.rescore {
+        if !out.join("point_cloud.ply").exists() {
+            bail!("{}: no finished run to rescore (point_cloud.ply is missing)", out.display());
+        }
+        let report = transition(&ds, demo.as_ref(), &out, !args.no_lpips)?;
+        print_transition(&report);
+        return Ok(());
+    }
     let default = if demo.is_some() {
         2000
     } else {
@@ -221,9 +233,9 @@ pub fn print_transition(r: &TransitionReport) {
         r.warping_error.mean, r.warping_error.delta.mean, r.warp_psnr.mean
     );
     println!(
-        "local popping    {:.4} ({:.1} of 255 levels; 99th percentile over frames and pixels)",
-        r.popping.p99,
-        r.popping.p99 * 255.0
+        "local popping    {:.1} levels of 255 (frames low-passed, σ 1 px; unfiltered {:.1})",
+        r.popping.p99 * 255.0,
+        r.popping_per_pixel.p99 * 255.0
     );
     if let (Some(l), Some(g)) = (r.held_out_lpips, r.held_out_lpips_gain_matched) {
         println!("held-out LPIPS   {l:.4}, gain-matched {g:.4} (ST-LPIPS AlexNet)");
@@ -239,7 +251,11 @@ pub fn print_transition(r: &TransitionReport) {
                 .map(|l| format!(", LPIPS {:.4}", l.mean))
                 .unwrap_or_default()
         );
-        println!("truth's popping  {:.4}", t.truth_popping.p99);
+        println!(
+            "truth's popping  {:.1} levels (unfiltered {:.1})",
+            t.truth_popping.p99 * 255.0,
+            t.truth_popping_per_pixel.p99 * 255.0
+        );
     }
 }
 
