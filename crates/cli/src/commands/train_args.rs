@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 use clap::{Args, ValueEnum};
+use fewview_geom::stereo::source::Photometry;
 use fewview_splat::ComputeDevice;
 use fewview_splat::pipeline::{InitStrategy, MAX_INIT_POINTS, RunConfig};
 use fewview_splat::stereo_start::{DepthFrom, StereoInit};
@@ -41,6 +42,12 @@ pub struct TrainArgs {
     /// `auto` choosing it).
     #[arg(long, default_value_t = 0.1, value_parser = super::number_args::fraction)]
     pub stereo_fraction: f64,
+    /// How the stereo start brings each pair's photos to one brightness before matching: `as-is`
+    /// (OpenCV's matcher, robust to moderate exposure differences) or `gain-matched` (a gain per
+    /// channel first; keeps more points when the photos' exposures differ by more than about
+    /// one EV).
+    #[arg(long, value_enum, default_value_t = StereoPhotometryArg::AsIs)]
+    pub stereo_photometry: StereoPhotometryArg,
     /// Number of random initial points.
     #[arg(long, default_value_t = 20_000)]
     pub init_points: usize,
@@ -76,6 +83,22 @@ pub struct TrainArgs {
     #[arg(long, value_name = "W", default_value_t = AppearanceConfig::default().weight,
           value_parser = super::number_args::non_negative_f32)]
     pub appearance_weight: f32,
+}
+
+/// `--stereo-photometry`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum StereoPhotometryArg {
+    AsIs,
+    GainMatched,
+}
+
+impl From<StereoPhotometryArg> for Photometry {
+    fn from(a: StereoPhotometryArg) -> Self {
+        match a {
+            StereoPhotometryArg::AsIs => Self::AsIs,
+            StereoPhotometryArg::GainMatched => Self::GainMatched,
+        }
+    }
 }
 
 /// `--appearance`.
@@ -135,6 +158,7 @@ impl TrainArgs {
         let stereo = StereoInit {
             depth,
             fraction: self.stereo_fraction,
+            photometry: self.stereo_photometry.into(),
             ..StereoInit::default()
         };
         if self.init_points == 0 {
