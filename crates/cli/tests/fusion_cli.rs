@@ -72,7 +72,7 @@ fn fusion_writes_its_run_transition_table_and_study() {
     let table = String::from_utf8_lossy(&table.stdout);
     assert_eq!(table.lines().count(), 4, "{table}");
     assert!(
-        table.contains("| demo | gf |") && table.contains("| demo | plain |"),
+        table.contains("| demo | gf | 0 |") && table.contains("| demo | plain | 0 |"),
         "{table}"
     );
 

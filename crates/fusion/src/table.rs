@@ -111,6 +111,19 @@ pub fn read_row(dir: &Path) -> Result<TableRow, FusionError> {
     })
 }
 
+/// A run's folder and its parent's name (`jitter/gf`), which tell runs of one dataset apart.
+fn run_label(run: &Path) -> String {
+    let name = |p: Option<&Path>| {
+        p.and_then(Path::file_name)
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    match name(run.parent()) {
+        parent if parent.is_empty() => name(Some(run)),
+        parent => format!("{parent}/{}", name(Some(run))),
+    }
+}
+
 /// The rows as a Markdown table (one dataset per table is the caller's choice). Popping is in
 /// 8-bit levels (× 255).
 pub fn markdown(rows: &[TableRow]) -> String {
@@ -119,14 +132,15 @@ pub fn markdown(rows: &[TableRow]) -> String {
             .unwrap_or_else(|| "–".into())
     };
     let mut out = String::from(
-        "| dataset | variant | seed | held-out PSNR raw / gain-matched | SSIM raw / g.-m. \
+        "| run | dataset | variant | seed | held-out PSNR raw / gain-matched | SSIM raw / g.-m. \
          | LPIPS (ST-Alex) raw / g.-m. | local popping (levels) | path warping error ×10³ \
          | path PSNR vs truth | path ΔPSNR | path LPIPS | truth's popping | train s |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         out.push_str(&format!(
-            "| {} | {} | {} | {:.2} / {:.2} | {:.4} / {:.4} | {} / {} | {:.1} | {:.4} | {} | {} | {} | {} | {:.0} |\n",
+            "| {} | {} | {} | {} | {:.2} / {:.2} | {:.4} / {:.4} | {} / {} | {:.1} | {:.4} | {} | {} | {} | {} | {:.0} |\n",
+            run_label(&r.run),
             r.dataset,
             r.variant,
             r.seed,
