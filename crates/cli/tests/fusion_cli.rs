@@ -95,6 +95,24 @@ fn bad_variants_views_and_studies_are_refused_with_nothing_written() {
         &["gradient", "knn-color"],
     );
     assert!(!out.exists());
+    // Photometric jitter out of range, and an appearance model (d) and (e) cannot take.
+    for (flag, value, needle) in [
+        ("--exposure-jitter", "3.5", "exposure"),
+        ("--exposure-jitter", "-0.5", "exposure"),
+        ("--white-balance-jitter", "0.8", "white-balance"),
+        ("--vignetting", "nan", "vignetting"),
+        ("--mirror-floor", "1.5", "mirror"),
+        ("--specular", "0.4", "KS,EXP"),
+    ] {
+        let arg = format!("{flag}={value}");
+        assert_clean_error(&short_run("gf", &out, &[&arg]), &[needle]);
+        assert!(!out.exists(), "{arg} wrote {}", out.display());
+    }
+    for variant in ["poisson", "l1-virtual"] {
+        let run = short_run(variant, &out, &["--appearance", "affine"]);
+        assert_clean_error(&run, &["affine", variant]);
+        assert!(!out.exists());
+    }
     // The two ends of the demo arc: 50° apart, they share too little for virtual views.
     let run = short_run("gf", &out, &["--train-views", "0,23"]);
     assert_clean_error(&run, &["view_00", "view_23", "overlap"]);

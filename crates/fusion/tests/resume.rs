@@ -2,16 +2,18 @@
 //! where the uninterrupted run ends: the terms are pure functions of the iteration and the model.
 //! The interrupted and resumed halves keep their state on the device (the GPU's default, here
 //! on the CPU backend), where the terms read the host model on demand; the straight run keeps
-//! it on the host.
+//! it on the host. With a per-photo appearance model, its colour transforms resume as well.
 
 use burn::tensor::Device;
 use fewview_fusion::run::{fusion_terms, training_pairs};
 use fewview_fusion::{FusionConfig, Variant};
 use fewview_scene::Dataset;
+use fewview_scene::photometric::PhotoJitter;
 use fewview_scene::synthetic::{DemoOptions, demo_dataset};
 use fewview_splat::pipeline::{RunConfig, initial_model};
 use fewview_splat::raster::RenderCamera;
-use fewview_splat::train::{TrainConfig, TrainView, Trainer};
+use fewview_splat::train::appearance::IDENTITY;
+use fewview_splat::train::{AppearanceModel, TrainConfig, TrainView, Trainer};
 
 fn trainer(ds: &Dataset, cfg: &RunConfig, fusion: &FusionConfig) -> Trainer {
     let device = Device::flex().autodiff();
@@ -31,14 +33,27 @@ fn trainer(ds: &Dataset, cfg: &RunConfig, fusion: &FusionConfig) -> Trainer {
 
 #[test]
 fn a_resumed_fusion_run_equals_the_uninterrupted_one() {
+    // Photos with per-photo exposure, so that the colour transforms have something to learn.
     let ds = demo_dataset(&DemoOptions {
         width: 64,
         height: 48,
+        jitter: PhotoJitter {
+            exposure_ev: 0.5,
+            white_balance: 0.05,
+            ..PhotoJitter::default()
+        },
         ..DemoOptions::default()
     });
-    let mut cfg = RunConfig::new(TrainConfig::sparse_view(45));
-    cfg.train.background = ds.background;
-    for variant in [Variant::Gf, Variant::KnnColor] {
+    let mut base = RunConfig::new(TrainConfig::sparse_view(45));
+    base.train.background = ds.background;
+    let cases = [
+        (Variant::Gf, AppearanceModel::None),
+        (Variant::KnnColor, AppearanceModel::None),
+        (Variant::Gf, AppearanceModel::Affine),
+    ];
+    for (variant, appearance) in cases {
+        let mut cfg = base.clone();
+        cfg.train.appearance.model = appearance;
         let fusion = FusionConfig {
             variant,
             refresh_interval: 15,
@@ -66,8 +81,13 @@ fn a_resumed_fusion_run_equals_the_uninterrupted_one() {
         assert_eq!(
             resumed.state().unwrap(),
             straight.state().unwrap(),
-            "{variant}"
+            "{variant} {appearance:?}"
         );
+        if appearance == AppearanceModel::Affine {
+            let transforms = &straight.state().unwrap().appearance.transforms;
+            assert_eq!(transforms.len(), 3);
+            assert!(transforms.iter().all(|m| *m != IDENTITY), "{transforms:?}");
+        }
         // ... and the term changed the result (the comparison is not vacuous).
         let plain = FusionConfig {
             variant: Variant::Plain,

@@ -248,8 +248,12 @@ mod tests {
         let frames = [edge(20.25), edge(20.75)];
         let mut flow = still(w, h);
         flow.data.iter_mut().for_each(|d| *d = [-0.5, 0.0]);
-        let raw = local_popping_with(&frames, std::slice::from_ref(&flow), 0.0).unwrap().0;
-        let smooth = local_popping(&frames, std::slice::from_ref(&flow)).unwrap().0;
+        let raw = local_popping_with(&frames, std::slice::from_ref(&flow), 0.0)
+            .unwrap()
+            .0;
+        let smooth = local_popping(&frames, std::slice::from_ref(&flow))
+            .unwrap()
+            .0;
         assert!(raw.p99 > 0.05, "{raw:?}");
         assert!(smooth.p99 < 0.3 * raw.p99, "{smooth:?} vs {raw:?}");
         // A 10×10 patch switching by 0.2 keeps most of its switch after the low-pass.

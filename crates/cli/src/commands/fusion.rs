@@ -122,7 +122,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (ds, demo, gains) = load(&args)?;
     if args.rescore {
         if !out.join("point_cloud.ply").exists() {
-            bail!("{}: no finished run to rescore (point_cloud.ply is missing)", out.display());
+            bail!(
+                "{}: no finished run to rescore (point_cloud.ply is missing)",
+                out.display()
+            );
         }
         let report = transition(&ds, demo.as_ref(), &out, !args.no_lpips)?;
         print_transition(&report);
