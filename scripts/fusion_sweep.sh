@@ -6,6 +6,8 @@
 #
 #   scripts/fusion_sweep.sh OUT [CONDITION ...]
 #
+# With RESCORE=1, finished runs are not trained again but their transitions scored again
+# (`fusion --rescore`), e.g. after a change of the scores.
 # About 4-6 minutes a run on 2 cores; 11 conditions x 2 variants.
 set -euo pipefail
 out="${1:?usage: $0 OUT_DIR [CONDITION ...]}"
@@ -33,7 +35,11 @@ for c in "${order[@]}"; do
   [[ -v "conditions[$c]" ]] || { echo "unknown condition $c" >&2; exit 2; }
   for v in plain gf; do
     dir="$out/$c/$v"
-    if [[ ! -f "$dir/transition.json" ]]; then
+    if [[ -f "$dir/transition.json" && "${RESCORE:-0}" == 1 ]]; then
+      # shellcheck disable=SC2086
+      "$bin" fusion --demo ${conditions[$c]} --variant "$v" --seed 0 --rescore --out "$dir" \
+        > "$out/$c/$v.rescore.log" 2>&1
+    elif [[ ! -f "$dir/transition.json" ]]; then
       mkdir -p "$out/$c"
       # shellcheck disable=SC2086
       "$bin" fusion --demo ${conditions[$c]} --variant "$v" --seed 0 --out "$dir" \

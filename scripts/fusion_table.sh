@@ -1,34 +1,60 @@
 #!/usr/bin/env bash
-# The fusion paper's method and its alternatives side by side: plain and (a)-(f), seed 0, on the demo
-# scene and on LLFF fern 3-view, then one Markdown table per scene (README, "Gradient-domain
-# fusion").
+# The fusion paper's method, its alternatives and the per-photo appearance model side by side:
+# plain, (a)-(e), gf, affine (plain with a colour transform per photo) and gf+affine, seeds 0
+# and 1, on the demo scene with a phone's exposure (0.5 EV, 5 % white balance) and its highlight
+# at full strength (0.4, 40), and on LLFF fern 3-view with the same jitter; then one Markdown
+# table per scene (README, "Gradient-domain fusion").
 #
-#   scripts/fusion_table.sh OUT [demo|fern|all]
+#   scripts/fusion_table.sh OUT [demo|fern|all] [SEED ...]
 #
-# About 5 minutes a demo run and 8-10 a fern run on 2 cores (the knn-color and poisson variants
-# are slower).
+# About 5 minutes a demo run and 6-12 a fern run on 2 cores (knn-color, l1-virtual and poisson
+# are the slow ones). Finished runs are kept: run it again to fill in what is missing, or with
+# RESCORE=1 to score their transitions again without training.
 set -euo pipefail
-out="${1:?usage: $0 OUT_DIR [demo|fern|all]}"
+out="${1:?usage: $0 OUT_DIR [demo|fern|all] [SEED ...]}"
 which="${2:-all}"
+shift $(( $# < 2 ? $# : 2 ))
+seeds=("${@:-0 1}")
+read -r -a seeds <<< "${seeds[*]}"
 bin="${FEWVIEW_BIN:-target/release/fewview}"
-variants=(plain sparse-init knn-color tv l1-virtual poisson gf)
+jitter=(--exposure-jitter 0.5 --white-balance-jitter 0.05)
+# name, then the flags of that variant
+variants=(
+  "plain|--variant plain"
+  "sparse-init|--variant sparse-init"
+  "knn-color|--variant knn-color"
+  "tv|--variant tv"
+  "l1-virtual|--variant l1-virtual"
+  "poisson|--variant poisson"
+  "gf|--variant gf"
+  "affine|--variant plain --appearance affine"
+  "gf+affine|--variant gf --appearance affine"
+)
 run_scene() {
   local scene="$1"; shift
-  mkdir -p "$out/$scene"
   local runs=()
-  for v in "${variants[@]}"; do
-    if [[ ! -f "$out/$scene/$v/transition.json" ]]; then
-      "$bin" fusion "$@" --variant "$v" --seed 0 --out "$out/$scene/$v" > "$out/$scene/$v.log" 2>&1
-    fi
-    runs+=("$out/$scene/$v")
+  for seed in "${seeds[@]}"; do
+    for entry in "${variants[@]}"; do
+      local name="${entry%%|*}" flags="${entry#*|}"
+      local dir="$out/$scene/seed$seed/$name"
+      if [[ -f "$dir/transition.json" && "${RESCORE:-0}" == 1 ]]; then
+        # shellcheck disable=SC2086
+        "$bin" fusion "$@" $flags --seed "$seed" --rescore --out "$dir" > "$dir.rescore.log" 2>&1
+      elif [[ ! -f "$dir/transition.json" ]]; then
+        mkdir -p "$out/$scene/seed$seed"
+        # shellcheck disable=SC2086
+        "$bin" fusion "$@" $flags --seed "$seed" --out "$dir" > "$dir.log" 2>&1
+      fi
+      runs+=("$dir")
+    done
   done
   "$bin" fusion --table "${runs[@]}" | tee "$out/$scene/table.md"
 }
 case "$which" in
-  demo) run_scene demo --demo ;;
-  fern) run_scene fern --data "${FEWVIEW_DATA:?set FEWVIEW_DATA}/llff/fern" ;;
+  demo) run_scene demo --demo "${jitter[@]}" --specular 0.4,40 ;;
+  fern) run_scene fern --data "${FEWVIEW_DATA:?set FEWVIEW_DATA}/llff/fern" "${jitter[@]}" ;;
   all)
-    run_scene demo --demo
-    run_scene fern --data "${FEWVIEW_DATA:?set FEWVIEW_DATA}/llff/fern" ;;
+    run_scene demo --demo "${jitter[@]}" --specular 0.4,40
+    run_scene fern --data "${FEWVIEW_DATA:?set FEWVIEW_DATA}/llff/fern" "${jitter[@]}" ;;
   *) echo "unknown scene set $which (demo, fern or all)" >&2; exit 2 ;;
 esac

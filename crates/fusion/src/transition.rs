@@ -166,7 +166,7 @@ pub struct TransitionReport {
     pub warp_psnr: MetricSeries,
     /// Local popping ([`fewview_metrics::popping`]): the 99th percentile over transitions of
     /// the 99th percentile over co-visible pixels of `|frame_t − warp(frame_{t−1})|`, the frames
-    /// low-passed with a Gaussian of one pixel.
+    /// low-passed with a Gaussian of two pixels and motion boundaries left out.
     pub popping: Popping,
     /// The same without the low-pass: resampling of sharp edges counts too.
     pub popping_per_pixel: Popping,

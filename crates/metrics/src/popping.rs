@@ -7,7 +7,9 @@
 //! warping error (Lai et al. 2018) averages over the frame and cannot tell the two apart. Local
 //! popping looks at the tail instead:
 //!
-//! * both frames low-passed with a Gaussian of [`POPPING_SIGMA`] pixels;
+//! * both frames low-passed with a Gaussian of [`POPPING_SIGMA`] pixels, and the pixels within
+//!   2σ of a motion boundary (an occlusion edge, where the low-pass mixes surfaces that move
+//!   differently) left out;
 //! * per transition `t`, the difference map `|frame_t − warp(frame_{t−1})|` over the pixels both
 //!   frames show (the exact backward flow and its occlusion mask, bilinear sampling), each
 //!   pixel's value the largest of its channels' absolute differences;
@@ -16,11 +18,13 @@
 //!   the clip, ignoring a single outlier frame.
 //!
 //! The low-pass is the one step beyond the literal per-pixel difference. Bilinear resampling of
-//! a sharp edge leaves a difference of up to a tenth of the edge's contrast where nothing
-//! changed (by the per-pixel measure a ray-traced truth pops more than a blurry render, and a
-//! checkered floor more than a patch that switches colour); a Gaussian of one pixel makes the
-//! frames smooth enough for bilinear sampling to follow them, while a patch that switches colour
-//! keeps its switch. [`local_popping_with`] with σ = 0 gives the per-pixel form. Percentiles are
+//! a sharp edge, and texture finer than the pixels (which aliases differently in every frame),
+//! leave differences of a tenth of the contrast where nothing changed: by the per-pixel measure
+//! a ray-traced truth seen along its exact flow pops more than a blurry render, and a checkered
+//! floor more than a patch that switches colour. A Gaussian of two pixels makes the frames
+//! smooth enough for bilinear sampling to follow them (the demo's Lambertian truth along its
+//! exact flow: 33 levels of 255 per pixel, 9 after a one-pixel Gaussian, 5 after two), while a
+//! patch that switches colour keeps its switch. [`local_popping_with`] with σ = 0 gives the per-pixel form. Percentiles are
 //! nearest-rank (`⌈q·n⌉`-th smallest).
 
 use fewview_scene::Image;
@@ -33,7 +37,7 @@ use fewview_geom::blend::gaussian_blur;
 pub const POPPING_PERCENTILE: f64 = 0.99;
 
 /// Standard deviation (pixels) of the Gaussian the frames are low-passed with.
-pub const POPPING_SIGMA: f32 = 1.0;
+pub const POPPING_SIGMA: f32 = 2.0;
 
 /// Local popping of a clip (see the module docs).
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -89,6 +93,59 @@ pub fn difference_map(previous: &Image, current: &Image, flow: &Flow) -> Result<
     Ok(map)
 }
 
+/// Largest flow difference (pixels) between neighbours that still counts as one motion.
+pub const MOTION_BOUNDARY: f32 = 0.25;
+
+/// Pixels within `reach` pixels (a square) of a motion boundary: a pixel whose flow differs
+/// from a 4-neighbour's by more than [`MOTION_BOUNDARY`], or whose neighbour's flow is not
+/// trusted. A low-pass mixes the two sides of such a boundary, which move differently, so no
+/// single flow warps the mixture.
+pub fn near_motion_boundaries(flow: &Flow, reach: usize) -> Vec<bool> {
+    let (w, h) = (flow.width, flow.height);
+    let trusted = |i: usize| flow.valid.as_ref().is_none_or(|v| v[i]);
+    let mut edge = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let differs = |j: usize| {
+                !trusted(i) || !trusted(j) || {
+                    let (a, b) = (flow.data[i], flow.data[j]);
+                    (a[0] - b[0]).hypot(a[1] - b[1]) > MOTION_BOUNDARY
+                }
+            };
+            for j in [(x + 1 < w).then_some(i + 1), (y + 1 < h).then_some(i + w)]
+                .into_iter()
+                .flatten()
+            {
+                if differs(j) {
+                    edge[i] = true;
+                    edge[j] = true;
+                }
+            }
+        }
+    }
+    dilate(&edge, w, h, reach)
+}
+
+/// `mask` grown by `reach` pixels in a square (separable maximum).
+fn dilate(mask: &[bool], w: usize, h: usize, reach: usize) -> Vec<bool> {
+    let mut rows = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let (lo, hi) = (x.saturating_sub(reach), (x + reach).min(w - 1));
+            rows[y * w + x] = (lo..=hi).any(|k| mask[y * w + k]);
+        }
+    }
+    let mut out = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let (lo, hi) = (y.saturating_sub(reach), (y + reach).min(h - 1));
+            out[y * w + x] = (lo..=hi).any(|k| rows[k * w + x]);
+        }
+    }
+    out
+}
+
 /// `image` with each channel blurred by a Gaussian of `sigma` pixels (mirror border; `sigma`
 /// 0 leaves it as it is).
 pub fn low_pass(image: &Image, sigma: f32) -> Image {
@@ -139,10 +196,20 @@ pub fn local_popping_with(
         )));
     }
     let frames: Vec<Image> = frames.iter().map(|f| low_pass(f, sigma)).collect();
+    let reach = (2.0 * sigma).ceil() as usize;
     let maps = (1..frames.len())
         .map(|t| {
-            difference_map(&frames[t - 1], &frames[t], &flows[t - 1])
-                .map_err(|e| MetricsError::invalid(format!("transition {t}: {e}")))
+            let mut map = difference_map(&frames[t - 1], &frames[t], &flows[t - 1])
+                .map_err(|e| MetricsError::invalid(format!("transition {t}: {e}")))?;
+            if reach > 0 {
+                let near = near_motion_boundaries(&flows[t - 1], reach);
+                for (v, n) in map.iter_mut().zip(near) {
+                    if n {
+                        *v = f32::NAN;
+                    }
+                }
+            }
+            Ok(map)
         })
         .collect::<Result<Vec<_>>>()?;
     let per_transition: Vec<f64> = maps
@@ -267,6 +334,45 @@ mod tests {
         let still_flow = [still(w, h)];
         let p = local_popping(&[base, patch], &still_flow).unwrap().0;
         assert!(p.p99 > 0.18, "{p:?}");
+    }
+
+    #[test]
+    fn motion_boundaries_and_untrusted_pixels_are_left_out_with_their_surroundings() {
+        let (w, h) = (12, 5);
+        // The left half is still, the right half moves one pixel: a boundary between x 5 and 6.
+        let mut flow = still(w, h);
+        for y in 0..h {
+            for x in 6..w {
+                flow.data[y * w + x] = [1.0, 0.0];
+            }
+        }
+        let near = near_motion_boundaries(&flow, 2);
+        for y in 0..h {
+            for x in 0..w {
+                // Columns 5 and 6 border each other; two pixels around them.
+                assert_eq!(near[y * w + x], (3..=8).contains(&x), "({x}, {y})");
+            }
+        }
+        // An untrusted pixel is a boundary too; a small flow difference is not.
+        let mut gentle = still(w, h);
+        gentle
+            .data
+            .iter_mut()
+            .enumerate()
+            .for_each(|(i, d)| *d = [0.02 * (i % w) as f32, 0.0]);
+        gentle.valid = Some((0..w * h).map(|i| i != 2 * w + 10).collect());
+        let near = near_motion_boundaries(&gentle, 1);
+        // The untrusted pixel and its four neighbours, grown by one pixel.
+        let expect = |x: usize, y: usize| {
+            [(10, 2), (9, 2), (11, 2), (10, 1), (10, 3)]
+                .iter()
+                .any(|&(ex, ey): &(usize, usize)| ex.abs_diff(x) <= 1 && ey.abs_diff(y) <= 1)
+        };
+        for y in 0..h {
+            for x in 0..w {
+                assert_eq!(near[y * w + x], expect(x, y), "({x}, {y})");
+            }
+        }
     }
 
     #[test]

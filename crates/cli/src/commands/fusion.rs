@@ -236,7 +236,7 @@ pub fn print_transition(r: &TransitionReport) {
         r.warping_error.mean, r.warping_error.delta.mean, r.warp_psnr.mean
     );
     println!(
-        "local popping    {:.1} levels of 255 (frames low-passed, σ 1 px; unfiltered {:.1})",
+        "local popping    {:.1} levels of 255 (frames low-passed, σ 2 px; unfiltered {:.1})",
         r.popping.p99 * 255.0,
         r.popping_per_pixel.p99 * 255.0
     );
