@@ -84,6 +84,56 @@ pub fn guidance_field(f: &Reference, g: &Reference, t: f32) -> GuidanceField {
     field
 }
 
+/// The fewest pixels both references must share for [`exposure_ratio`] to trust its estimate.
+pub const MIN_SHARED_FRACTION: f64 = 0.01;
+
+/// Per-channel gain `r` with `g* ≈ r·f*` on the pixels both references show (least squares,
+/// `Σ f·g / Σ f²`): how much brighter the second photo is than the first where they see the
+/// same surface. 1 where they share less than [`MIN_SHARED_FRACTION`] of the image or the
+/// estimate leaves `[1/4, 4]`.
+pub fn exposure_ratio(f: &Reference, g: &Reference) -> [f32; 3] {
+    let (mut fg, mut ff) = ([0.0f64; 3], [0.0f64; 3]);
+    let mut shared = 0usize;
+    for p in 0..f.valid.len() {
+        if f.valid[p] && g.valid[p] {
+            shared += 1;
+            for c in 0..3 {
+                let (a, b) = (f.image[p * 3 + c] as f64, g.image[p * 3 + c] as f64);
+                fg[c] += a * b;
+                ff[c] += a * a;
+            }
+        }
+    }
+    if (shared as f64) < MIN_SHARED_FRACTION * f.valid.len() as f64 {
+        return [1.0; 3];
+    }
+    std::array::from_fn(|c| {
+        let r = fg[c] / ff[c];
+        if r.is_finite() && (0.25..=4.0).contains(&r) {
+            r as f32
+        } else {
+            1.0
+        }
+    })
+}
+
+/// The two references brought to one exposure: the gain `t` of the way from the first photo's
+/// to the second's, log-linearly (`f*·r^t` and `g*·r^(t−1)`, `r` from [`exposure_ratio`]), the
+/// natural colour transition between two photos whose exposure or white balance differ. Without
+/// it the guidance field carries the first photo's gain where only it sees the surface, the
+/// second's where only that one does, and their blend where both do.
+pub fn exposure_matched(f: &Reference, g: &Reference, t: f32) -> (Reference, Reference) {
+    let r = exposure_ratio(f, g);
+    let scaled = |reference: &Reference, power: f32| {
+        let mut out = reference.clone();
+        for (i, v) in out.image.iter_mut().enumerate() {
+            *v *= r[i % 3].powf(power);
+        }
+        out
+    };
+    (scaled(f, t), scaled(g, t - 1.0))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -131,6 +181,37 @@ mod tests {
         }
         // The same with the roles swapped: t does not matter where one reference is valid.
         assert_eq!(guidance_field(&g, &f, 0.9), field);
+    }
+
+    #[test]
+    fn matched_exposures_meet_at_the_interpolated_gain() {
+        let (w, h) = (10, 8);
+        let f = reference(w, h, 3, |x, _| x < 7);
+        // g is f's scene at twice the exposure in red, half in blue, seen on x ≥ 3.
+        let gains = [2.0f32, 1.0, 0.5];
+        let mut g = f.clone();
+        for (i, v) in g.image.iter_mut().enumerate() {
+            *v *= gains[i % 3];
+        }
+        g.valid = (0..w * h).map(|p| p % w >= 3).collect();
+        let r = exposure_ratio(&f, &g);
+        for c in 0..3 {
+            assert!((r[c] - gains[c]).abs() < 1e-5, "{r:?}");
+        }
+        let t = 0.25;
+        let (fm, gm) = exposure_matched(&f, &g, t);
+        for p in 0..w * h {
+            for c in 0..3 {
+                // Both carry the log-linear gain 2^(t·log2 r) of f's colours.
+                let want = f.image[p * 3 + c] * gains[c].powf(t);
+                assert!((fm.image[p * 3 + c] - want).abs() < 1e-5);
+                assert!((gm.image[p * 3 + c] - want).abs() < 1e-5);
+            }
+        }
+        // Too little shared: no correction.
+        let mut apart = g.clone();
+        apart.valid = (0..w * h).map(|p| p % w >= 7).collect();
+        assert_eq!(exposure_ratio(&f, &apart), [1.0; 3]);
     }
 
     #[test]

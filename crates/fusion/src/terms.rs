@@ -15,7 +15,7 @@ use fewview_splat::train::{LossContext, LossTerm, TrainConfig, TrainError};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 
-use crate::guidance::guidance_field;
+use crate::guidance::{exposure_matched, guidance_field};
 use crate::losses::{gradient_fusion_loss, masked_l1, total_variation};
 use crate::reproject::{Reference, reference_mesh, reproject, surface_depth};
 use crate::variant::{FusionConfig, KnnColorOptions, Variant};
@@ -167,7 +167,12 @@ impl VirtualViewTerm {
             )
             .map_err(|e| e.to_string())
         };
-        Ok([one(n[0])?, one(n[1])?])
+        let (f, g) = (one(n[0])?, one(n[1])?);
+        if self.config.match_exposure {
+            let (f, g) = exposure_matched(&f, &g, v.t as f32);
+            return Ok([f, g]);
+        }
+        Ok([f, g])
     }
 
     /// The variant's loss on the rendered virtual view, and the fraction of pixels it covers.

@@ -132,6 +132,11 @@ pub struct FusionConfig {
     pub every: usize,
     /// The training views' depth is re-rendered and re-meshed every this many iterations.
     pub refresh_interval: usize,
+    /// Bring the two references of a virtual view to one exposure before they are used
+    /// ([`crate::guidance::exposure_matched`]): for photos whose exposure or white balance
+    /// differ. Off by default (the paper's guidance field takes the reprojections as they are).
+    #[serde(default)]
+    pub match_exposure: bool,
     pub reproject: ReprojectOptions,
     pub knn: KnnColorOptions,
 }
@@ -145,6 +150,7 @@ impl Default for FusionConfig {
             start_fraction: 0.2,
             every: 3,
             refresh_interval: 500,
+            match_exposure: false,
             reproject: ReprojectOptions::default(),
             knn: KnnColorOptions::default(),
         }

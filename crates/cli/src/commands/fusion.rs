@@ -79,6 +79,11 @@ pub struct Args {
     /// Re-render and re-mesh the training views' depth every N iterations.
     #[arg(long, default_value_t = 500, value_parser = super::number_args::positive_count)]
     pub refresh: usize,
+    /// Bring the two photos reprojected into a virtual view to one exposure (their gain ratio
+    /// where both see the surface, interpolated log-linearly) before the guidance field (or the
+    /// pseudo ground truth of l1-virtual and poisson) is built from them.
+    #[arg(long)]
+    pub match_exposure: bool,
     /// Skip the transition video and its scores.
     #[arg(long)]
     pub no_transition: bool,
@@ -142,6 +147,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         weight: args.weight,
         every: args.every,
         refresh_interval: args.refresh,
+        match_exposure: args.match_exposure,
         ..FusionConfig::default()
     };
     if let Err(m) = fusion.validate() {
