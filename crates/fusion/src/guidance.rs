@@ -195,8 +195,8 @@ mod tests {
         }
         g.valid = (0..w * h).map(|p| p % w >= 3).collect();
         let r = exposure_ratio(&f, &g);
-        for c in 0..3 {
-            assert!((r[c] - gains[c]).abs() < 1e-5, "{r:?}");
+        for (got, want) in r.iter().zip(gains) {
+            assert!((got - want).abs() < 1e-5, "{r:?}");
         }
         let t = 0.25;
         let (fm, gm) = exposure_matched(&f, &g, t);
