@@ -8,10 +8,15 @@
 //! its mesh depth must agree with the virtual view's rendered depth within 1 % (relative), so a
 //! photo does not paint what it saw onto a surface that hides it from the virtual camera. The
 //! mask is then eroded by 1 px, dropping the half-covered pixels at its border.
+//!
+//! That test trusts the virtual view's own depth, so a floater in it hides the references
+//! behind it from the loss. [`Occlusion::Meshes`] tests the two references against each other
+//! instead (a pixel is kept unless the other mesh lies in front of it): what the photos saw
+//! stands, whatever the virtual view renders in front of it.
 
 use fewview_geom::depth::{TAU_DEPTH, depth_to_mesh};
 use fewview_geom::mesh::Mesh;
-use fewview_geom::raster::rasterize_mesh_colors;
+use fewview_geom::raster::{Rasterized, rasterize_mesh_colors};
 use fewview_scene::{Camera, Image};
 
 use crate::error::FusionError;
@@ -27,9 +32,22 @@ pub struct Reference {
     pub valid: Vec<bool>,
 }
 
+/// What decides that a reprojected pixel shows what the virtual camera sees.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Occlusion {
+    /// The virtual view's own rendered depth (our reading of the supplement's occlusion test).
+    #[default]
+    OwnDepth,
+    /// The two references' meshes: a pixel is hidden when the other mesh lies in front of it.
+    Meshes,
+}
+
 /// How reprojections are validated.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ReprojectOptions {
+    #[serde(default)]
+    pub occlusion: Occlusion,
     /// Largest relative difference between the mesh depth and the virtual view's own depth.
     pub depth_tolerance: f32,
     /// Pixels eroded from the mask's border (3×3 square per step).
@@ -42,6 +60,7 @@ pub struct ReprojectOptions {
 impl Default for ReprojectOptions {
     fn default() -> Self {
         Self {
+            occlusion: Occlusion::OwnDepth,
             depth_tolerance: 0.01,
             erode: 1,
             min_alpha: 0.5,
@@ -104,14 +123,59 @@ pub fn reproject(
             d.len()
         )));
     }
-    let near = 1e-6_f32;
-    let raster = rasterize_mesh_colors(mesh, camera, near)?;
+    let raster = rasterize_mesh_colors(mesh, camera, NEAR)?;
     let agrees = |p: usize| match own_depth {
         None => true,
         Some(d) => d[p] > 0.0 && (raster.depth[p] - d[p]).abs() <= options.depth_tolerance * d[p],
     };
+    Ok(reference_where(&raster, width, height, options, agrees))
+}
+
+/// The two reference meshes reprojected into `camera` under `options.occlusion`: against the
+/// virtual view's `own_depth` ([`reproject`]), or against each other.
+pub fn reproject_pair(
+    meshes: [&Mesh; 2],
+    camera: &Camera,
+    own_depth: &[f32],
+    options: &ReprojectOptions,
+) -> Result<[Reference; 2], FusionError> {
+    if options.occlusion == Occlusion::OwnDepth {
+        return Ok([
+            reproject(meshes[0], camera, Some(own_depth), options)?,
+            reproject(meshes[1], camera, Some(own_depth), options)?,
+        ]);
+    }
+    let (width, height) = (camera.width() as usize, camera.height() as usize);
+    let rasters = [
+        rasterize_mesh_colors(meshes[0], camera, NEAR)?,
+        rasterize_mesh_colors(meshes[1], camera, NEAR)?,
+    ];
+    let in_front = |a: &Rasterized, b: &Rasterized, p: usize| {
+        !b.covered(p) || a.depth[p] <= b.depth[p] * (1.0 + options.depth_tolerance)
+    };
+    Ok([
+        reference_where(&rasters[0], width, height, options, |p| {
+            in_front(&rasters[0], &rasters[1], p)
+        }),
+        reference_where(&rasters[1], width, height, options, |p| {
+            in_front(&rasters[1], &rasters[0], p)
+        }),
+    ])
+}
+
+/// Nearer than this (camera z) nothing is rasterised.
+const NEAR: f32 = 1e-6;
+
+/// The reference of `raster` valid where it is covered and `keep` holds, eroded.
+fn reference_where(
+    raster: &Rasterized,
+    width: usize,
+    height: usize,
+    options: &ReprojectOptions,
+    keep: impl Fn(usize) -> bool,
+) -> Reference {
     let visible: Vec<bool> = (0..width * height)
-        .map(|p| raster.covered(p) && agrees(p))
+        .map(|p| raster.covered(p) && keep(p))
         .collect();
     let valid = erode(&visible, width, height, options.erode);
     let image = (0..width * height * 3)
@@ -123,12 +187,12 @@ pub fn reproject(
             }
         })
         .collect();
-    Ok(Reference {
+    Reference {
         width,
         height,
         image,
         valid,
-    })
+    }
 }
 
 /// `steps` erosions of a mask by a 3×3 square; pixels at the image border count as outside.
@@ -169,6 +233,41 @@ mod tests {
         assert_eq!(once, want);
         assert_eq!(erode(&mask, w, h, 0), mask);
         assert!(erode(&mask, w, h, 3).iter().all(|&v| !v));
+    }
+
+    #[test]
+    fn references_tested_against_each_other_keep_the_nearer_surface() {
+        use fewview_scene::{Intrinsics, Se3};
+        let (w, h) = (30, 20);
+        let camera = Camera::new(
+            Intrinsics::centered(25.0, w as u32, h as u32),
+            Se3::identity(),
+        );
+        // f sees a plane at depth 2 on the left two thirds, g one at depth 3 on the right two.
+        let plane = |z: f32, cols: std::ops::Range<usize>| -> Vec<f32> {
+            (0..w * h)
+                .map(|p| if cols.contains(&(p % w)) { z } else { 0.0 })
+                .collect()
+        };
+        let photo = Image::filled(w, h, &[0.5, 0.5, 0.5]);
+        let f = reference_mesh(&plane(2.0, 0..20), &camera, &photo).unwrap();
+        let g = reference_mesh(&plane(3.0, 10..30), &camera, &photo).unwrap();
+        let options = ReprojectOptions {
+            occlusion: Occlusion::Meshes,
+            ..ReprojectOptions::default()
+        };
+        // The virtual view renders a floater at depth 1 everywhere: with its own depth as the
+        // test nothing would be valid.
+        let floater = vec![1.0f32; w * h];
+        let [rf, rg] = reproject_pair([&f, &g], &camera, &floater, &options).unwrap();
+        let row = h / 2;
+        let at = |r: &Reference, x: usize| r.valid[row * w + x];
+        assert!(at(&rf, 5) && at(&rf, 15), "f is in front wherever it is");
+        assert!(!at(&rg, 15), "g is hidden behind f where both are");
+        assert!(at(&rg, 25), "g alone stands");
+        let own = ReprojectOptions::default();
+        let [of, og] = reproject_pair([&f, &g], &camera, &floater, &own).unwrap();
+        assert!(!of.valid.iter().any(|&v| v) && !og.valid.iter().any(|&v| v));
     }
 
     #[test]

@@ -17,7 +17,7 @@ use rand::rngs::StdRng;
 
 use crate::guidance::{exposure_matched, guidance_field};
 use crate::losses::{gradient_fusion_loss, masked_l1, total_variation};
-use crate::reproject::{Reference, reference_mesh, reproject, surface_depth};
+use crate::reproject::{Reference, reference_mesh, reproject_pair, surface_depth};
 use crate::variant::{FusionConfig, KnnColorOptions, Variant};
 use crate::virtual_view::{Neighbours, VirtualView, sample_virtual};
 
@@ -157,17 +157,12 @@ impl VirtualViewTerm {
 
     /// The two neighbours reprojected into the virtual view whose own surface depth is `depth`.
     fn references(&self, v: &VirtualView, depth: &[f32]) -> Result<[Reference; 2], String> {
-        let n = [v.neighbours.first, v.neighbours.second];
-        let one = |i: usize| {
-            reproject(
-                &self.meshes[i],
-                &v.camera,
-                Some(depth),
-                &self.config.reproject,
-            )
-            .map_err(|e| e.to_string())
-        };
-        let (f, g) = (one(n[0])?, one(n[1])?);
+        let meshes = [
+            &self.meshes[v.neighbours.first],
+            &self.meshes[v.neighbours.second],
+        ];
+        let [f, g] = reproject_pair(meshes, &v.camera, depth, &self.config.reproject)
+            .map_err(|e| e.to_string())?;
         if self.config.match_exposure {
             let (f, g) = exposure_matched(&f, &g, v.t as f32);
             return Ok([f, g]);

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
+use fewview_fusion::reproject::{Occlusion, ReprojectOptions};
 use fewview_fusion::transition::{PathFrame, TransitionReport, transition_of_run};
 use fewview_fusion::{FusionConfig, Variant, fusion_run};
 use fewview_scene::photometric::{PhotoGain, jitter_training_photos, training_gains};
@@ -84,6 +85,12 @@ pub struct Args {
     /// pseudo ground truth of l1-virtual and poisson) is built from them.
     #[arg(long)]
     pub match_exposure: bool,
+    /// What decides that a photo reprojected into a virtual view shows what that view sees:
+    /// `own-depth` (the virtual view's rendered depth must agree; a floater there hides the
+    /// photos behind it from the loss) or `meshes` (the two photos' meshes against each other,
+    /// whatever the virtual view renders in front).
+    #[arg(long, value_enum, default_value_t = OcclusionArg::OwnDepth)]
+    pub occlusion: OcclusionArg,
     /// Skip the transition video and its scores.
     #[arg(long)]
     pub no_transition: bool,
@@ -109,6 +116,22 @@ pub struct Args {
     /// (same dataset flags), e.g. after a change of the scores.
     #[arg(long, conflicts_with_all = ["resume", "no_transition"])]
     pub rescore: bool,
+}
+
+/// `--occlusion`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum OcclusionArg {
+    OwnDepth,
+    Meshes,
+}
+
+impl From<OcclusionArg> for Occlusion {
+    fn from(a: OcclusionArg) -> Self {
+        match a {
+            OcclusionArg::OwnDepth => Self::OwnDepth,
+            OcclusionArg::Meshes => Self::Meshes,
+        }
+    }
 }
 
 fn parse_variant(s: &str) -> Result<Variant, String> {
@@ -148,6 +171,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         every: args.every,
         refresh_interval: args.refresh,
         match_exposure: args.match_exposure,
+        reproject: ReprojectOptions {
+            occlusion: args.occlusion.into(),
+            ..ReprojectOptions::default()
+        },
         ..FusionConfig::default()
     };
     if let Err(m) = fusion.validate() {
