@@ -145,7 +145,7 @@ fn a_demo_run_in_the_browser_matches_fewview_render() {
         2 * 21,
         "21 held-out renders beside their truth"
     );
-    assert_eq!(result["videos"], 1, "transition.mp4");
+    assert_eq!(result["videos"], 2, "transition.mp4 and popping.mp4");
     assert_eq!(result["selected"], "1", "clicking a camera selects it");
 
     let page_png = out.join("camera.png");
