@@ -10,18 +10,24 @@
 //!   held-out PSNR/SSIM/LPIPS.
 //! * **Local popping** ([`fewview_metrics::popping`]): the tail of the same warped differences,
 //!   which sees a seam or a patch that switches colour where the mean does not; its per-transition
-//!   maps are written as a video.
+//!   maps are written as a video. It is reported over the whole frame and over the pixels at
+//!   least two training photos' frusta hold ([`OVERLAP_VIEWS`]), where colours are fused
+//!   between photos; the rest of a frame (its borders as the camera swings) shows what one photo
+//!   or none constrains.
 //! * With a **ground truth along the path** (the demo scene's ray tracer): per-frame PSNR, SSIM,
 //!   LPIPS against the true frames, their Δ, and the truth's own warping error and popping (its
 //!   view-dependent highlight moves, so an exact render's warping error is that, not 0). When the
 //!   training photos' exposures differ, the truth of a frame between two photos has their gains
 //!   interpolated log-linearly ([`fewview_scene::photometric`]): the natural colour transition.
+//!   The path PSNR is also given after one gain per channel for the whole clip
+//!   ([`fewview_metrics::gain::sequence_gain_matched`]): a model trained with per-photo colour
+//!   transforms renders in a colour space of its own, and one gain undoes that but not a ramp.
 
 use fewview_geom::colormap::colorize_range;
-use fewview_metrics::flow::path_flows;
-use fewview_metrics::gain::gain_matched;
+use fewview_metrics::flow::{path_flows, views_seeing};
+use fewview_metrics::gain::{gain_matched, sequence_gain_matched};
 use fewview_metrics::lpips::Lpips;
-use fewview_metrics::popping::{Popping, local_popping, local_popping_with};
+use fewview_metrics::popping::{Popping, local_popping, local_popping_with, popping_of_maps};
 use fewview_metrics::psnr::psnr_from_mse;
 use fewview_metrics::ssim::SsimOptions;
 use fewview_metrics::temporal::{MetricSeries, evaluate_sequence, warping_errors};
@@ -144,6 +150,8 @@ pub fn render_path(
 #[derive(Clone, Debug, Serialize)]
 pub struct PathTruth {
     pub psnr: MetricSeries,
+    /// PSNR after one least-squares gain per channel for the whole clip.
+    pub psnr_gain_matched: MetricSeries,
     pub ssim: MetricSeries,
     /// ST-LPIPS AlexNet, when computed.
     pub lpips: Option<MetricSeries>,
@@ -170,6 +178,8 @@ pub struct TransitionReport {
     pub popping: Popping,
     /// The same without the low-pass: resampling of sharp edges counts too.
     pub popping_per_pixel: Popping,
+    /// Local popping over the pixels at least [`OVERLAP_VIEWS`] training photos' frusta hold.
+    pub popping_overlap: Popping,
     /// Fraction of pixels the flows trust (mean over transitions).
     pub flow_coverage: f64,
     pub truth: Option<PathTruth>,
@@ -185,16 +195,36 @@ pub struct ScoredPath {
     pub popping_maps: Vec<Vec<f32>>,
 }
 
-/// Scores a rendered path; `truth` (one image per frame) adds the ground-truth scores, `lpips`
-/// the perceptual ones.
+/// Training photos whose frusta must hold a pixel for [`TransitionReport::popping_overlap`].
+pub const OVERLAP_VIEWS: u8 = 2;
+
+/// Per transition `t = 1..T−1`, the pixels of frame `t` that at least [`OVERLAP_VIEWS`] of
+/// `training` could show (frusta only, [`views_seeing`]).
+pub fn overlap_masks(
+    path: &RenderedPath,
+    training: &[&Camera],
+) -> Result<Vec<Vec<bool>>, FusionError> {
+    (1..path.cameras.len())
+        .into_par_iter()
+        .map(|t| {
+            let counts = views_seeing(&path.cameras[t], &path.depths[t], training)?;
+            Ok(counts.into_iter().map(|c| c >= OVERLAP_VIEWS).collect())
+        })
+        .collect()
+}
+
+/// Scores a rendered path through the `training` cameras; `truth` (one image per frame) adds
+/// the ground-truth scores, `lpips` the perceptual ones.
 pub fn score_transition(
     path: &RenderedPath,
+    training: &[&Camera],
     truth: Option<&[Image]>,
     lpips: Option<&Lpips>,
 ) -> Result<ScoredPath, FusionError> {
     let flows = path_flows(&path.cameras, &path.depths)?;
     let errors = warping_errors(&path.frames, &flows)?;
     let (popping, popping_maps) = local_popping(&path.frames, &flows)?;
+    let popping_overlap = popping_of_maps(&popping_maps, Some(&overlap_masks(path, training)?))?;
     let popping_per_pixel = local_popping_with(&path.frames, &flows, 0.0)?.0;
     // The warping error sums the squared difference over the 3 channels.
     let warp_psnr: Vec<f64> = errors.iter().map(|e| psnr_from_mse(e / 3.0)).collect();
@@ -210,8 +240,11 @@ pub fn score_transition(
         Some(gt) => {
             let perceptual = lpips.map(|l| l as &dyn fewview_metrics::temporal::PerceptualDistance);
             let r = evaluate_sequence(&path.frames, gt, &SsimOptions::default(), perceptual, None)?;
+            let matched = sequence_gain_matched(&path.frames, gt)?;
+            let matched = evaluate_sequence(&matched, gt, &SsimOptions::default(), None, None)?;
             Some(PathTruth {
                 psnr: r.psnr,
+                psnr_gain_matched: matched.psnr,
                 ssim: r.ssim,
                 lpips: r.lpips,
                 truth_warping_error: MetricSeries::new(
@@ -231,6 +264,7 @@ pub fn score_transition(
         warp_psnr: MetricSeries::new("warp_psnr", warp_psnr),
         popping,
         popping_per_pixel,
+        popping_overlap,
         flow_coverage: coverage,
         truth,
         held_out_lpips: None,
@@ -287,7 +321,7 @@ pub fn transition_of_run(
     let ScoredPath {
         mut report,
         popping_maps,
-    } = score_transition(&rendered, truth_frames.as_deref(), lpips)?;
+    } = score_transition(&rendered, &cameras, truth_frames.as_deref(), lpips)?;
     if let Some(l) = lpips {
         let (raw, matched) = held_out_lpips(ds, &model, &settings, l)?;
         report.held_out_lpips = Some(raw);

@@ -137,6 +137,31 @@ fn check_depth(which: &str, camera: &Camera, depth: &[f32]) -> Result<()> {
     Ok(())
 }
 
+/// How many of `others` have each pixel's 3D point of `camera` (z-depth map `depth`, as
+/// [`flow_between`] takes it) in front of them and inside their image (`[0, w] × [0, h]` in
+/// pixel coordinates); 0 where `camera` sees no surface. Occlusion is not tested: this is the
+/// frusta's overlap, the part of a frame that photos taken from `others` could show.
+pub fn views_seeing(camera: &Camera, depth: &[f32], others: &[&Camera]) -> Result<Vec<u8>> {
+    check_depth("frame", camera, depth)?;
+    let w = camera.width() as usize;
+    Ok(depth
+        .par_iter()
+        .enumerate()
+        .map(|(i, &z)| {
+            if !(z.is_finite() && z > 0.0) {
+                return 0;
+            }
+            let p = camera.unproject((i % w) as f64 + 0.5, (i / w) as f64 + 0.5, z as f64);
+            let inside = |o: &&&Camera| {
+                o.project(&p).is_some_and(|(u, v, _)| {
+                    (0.0..=o.width() as f64).contains(&u) && (0.0..=o.height() as f64).contains(&v)
+                })
+            };
+            others.iter().filter(inside).count().min(u8::MAX as usize) as u8
+        })
+        .collect())
+}
+
 /// Where each pixel of `from` (depth `depth`) lands in `to`, as a displacement in pixels; `None`
 /// where `from` sees no surface or the point is behind `to`.
 fn displacements(from: &Camera, depth: &[f32], to: &Camera) -> Vec<Option<[f64; 2]>> {
@@ -453,5 +478,35 @@ mod tests {
                 .unwrap()
                 .is_empty()
         );
+    }
+
+    #[test]
+    fn views_seeing_counts_the_frusta_a_point_lies_in() {
+        // Three cameras facing the plane z = 4 from z = 0; the second is shifted right by a
+        // third of the footprint, the third looks away. Pixel columns the shifted camera sees:
+        // world x ≥ its left edge.
+        let id = Rotation3::identity();
+        let a = camera(id, Vector3::zeros());
+        let b = camera(id, Vector3::new(1.55, 0.0, 0.0));
+        let away = camera(
+            Rotation3::from_axis_angle(&Vector3::y_axis(), std::f64::consts::PI),
+            Vector3::zeros(),
+        );
+        let depth = plane_depth(&a, Vector3::z(), 4.0);
+        let counts = views_seeing(&a, &depth, &[&a, &b, &away]).unwrap();
+        let k = intrinsics();
+        for (i, &count) in counts.iter().enumerate() {
+            let u = (i % W) as f64 + 0.5;
+            // World x of the pixel, and where that point lands in b.
+            let x = (u - k.cx) / k.fx * 4.0;
+            let ub = k.fx * (x - 1.55) / 4.0 + k.cx;
+            let want = 1 + u8::from((0.0..=W as f64).contains(&ub));
+            assert_eq!(count, want, "pixel {i}");
+        }
+        assert!(counts.contains(&1) && counts.contains(&2));
+        let mut sky = depth.clone();
+        sky[0] = 0.0;
+        assert_eq!(views_seeing(&a, &sky, &[&a, &b]).unwrap()[0], 0);
+        assert!(views_seeing(&a, &depth[1..], &[&b]).is_err());
     }
 }

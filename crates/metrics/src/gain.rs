@@ -54,6 +54,41 @@ pub fn gain_matched(render: &Image, photo: &Image, mask: Option<&Image>) -> Resu
     Ok(out)
 }
 
+/// Every frame of `frames` multiplied by one set of per-channel gains, fitted by least squares
+/// over the whole sequence against `truth`, and clipped to `[0, 1]`. One fit for the clip removes
+/// a model's overall colour offset and keeps what changes along it (a transition's exposure
+/// ramp); a fit per frame would remove that too.
+pub fn sequence_gain_matched(frames: &[Image], truth: &[Image]) -> Result<Vec<Image>> {
+    if frames.len() != truth.len() || frames.is_empty() {
+        return Err(MetricsError::ShapeMismatch(format!(
+            "{} frames against {} true frames (need the same number, at least one)",
+            frames.len(),
+            truth.len()
+        )));
+    }
+    let stack = |images: &[Image]| -> Result<Image> {
+        let first = &images[0];
+        let mut out = Image::new(first.width, first.height * images.len(), first.channels);
+        for (i, im) in images.iter().enumerate() {
+            check_same_shape(first, im)?;
+            let n = im.data.len();
+            out.data[i * n..(i + 1) * n].copy_from_slice(&im.data);
+        }
+        Ok(out)
+    };
+    let gains = gain_fit(&stack(frames)?, &stack(truth)?, None)?;
+    Ok(frames
+        .iter()
+        .map(|f| {
+            let mut out = f.clone();
+            for (i, v) in out.data.iter_mut().enumerate() {
+                *v = (*v as f64 * gains[i % f.channels]).clamp(0.0, 1.0) as f32;
+            }
+            out
+        })
+        .collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -125,5 +160,30 @@ mod tests {
             vec![1.0, 0.5, 1.0]
         );
         assert!(gain_fit(&render, &Image::filled(2, 3, &[0.0, 0.0, 0.0]), None).is_err());
+    }
+
+    #[test]
+    fn one_gain_for_a_sequence_keeps_its_ramp() {
+        // Truth: a texture brightening along the clip; render: the same ramp at 0.8 of the
+        // exposure. One gain for the clip restores every frame; the ramp survives.
+        let (photo, _) = photo_and_render();
+        let scaled = |im: &Image, g: f32| {
+            let mut out = im.clone();
+            out.data.iter_mut().for_each(|v| *v *= g);
+            out
+        };
+        let truth: Vec<Image> = (0..4)
+            .map(|t| scaled(&photo, 0.8 + 0.05 * t as f32))
+            .collect();
+        let frames: Vec<Image> = truth.iter().map(|im| scaled(im, 0.8)).collect();
+        let matched = sequence_gain_matched(&frames, &truth).unwrap();
+        for (m, t) in matched.iter().zip(&truth) {
+            assert!(psnr(m, t).unwrap() > 90.0);
+        }
+        // A render that lacks the ramp keeps its error: one gain cannot make it up.
+        let flat: Vec<Image> = (0..4).map(|_| scaled(&photo, 0.7)).collect();
+        let matched = sequence_gain_matched(&flat, &truth).unwrap();
+        assert!(psnr(&matched[0], &truth[0]).unwrap() < 40.0);
+        assert!(sequence_gain_matched(&frames[..2], &truth).is_err());
     }
 }

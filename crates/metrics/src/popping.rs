@@ -212,9 +212,32 @@ pub fn local_popping_with(
             Ok(map)
         })
         .collect::<Result<Vec<_>>>()?;
+    Ok((popping_of_maps(&maps, None)?, maps))
+}
+
+/// Local popping from the difference maps of [`local_popping_with`] (one per transition,
+/// `NaN` where a pixel is not scored), over the pixels `keep` marks (all without it; one mask
+/// per map). The region of a clip a method can be asked about, e.g. where two training photos
+/// overlap, is the caller's choice.
+pub fn popping_of_maps(maps: &[Vec<f32>], keep: Option<&[Vec<bool>]>) -> Result<Popping> {
+    if let Some(k) = keep
+        && (k.len() != maps.len() || k.iter().zip(maps).any(|(k, m)| k.len() != m.len()))
+    {
+        return Err(MetricsError::ShapeMismatch(
+            "one mask per difference map, of its size".into(),
+        ));
+    }
     let per_transition: Vec<f64> = maps
         .iter()
-        .map(|m| percentile(m.iter().map(|&v| v as f64), POPPING_PERCENTILE).unwrap_or(f64::NAN))
+        .enumerate()
+        .map(|(t, m)| {
+            let kept = m
+                .iter()
+                .enumerate()
+                .filter(|&(p, _)| keep.is_none_or(|k| k[t][p]))
+                .map(|(_, &v)| v as f64);
+            percentile(kept, POPPING_PERCENTILE).unwrap_or(f64::NAN)
+        })
         .collect();
     let p99 = percentile(per_transition.iter().copied(), POPPING_PERCENTILE).ok_or_else(|| {
         MetricsError::invalid("no transition has a co-visible pixel: popping is undefined")
@@ -225,14 +248,11 @@ pub fn local_popping_with(
         .filter(|v| v.is_finite())
         .collect();
     let mean = finite.iter().sum::<f64>() / finite.len() as f64;
-    Ok((
-        Popping {
-            per_transition,
-            p99,
-            mean,
-        },
-        maps,
-    ))
+    Ok(Popping {
+        per_transition,
+        p99,
+        mean,
+    })
 }
 
 #[cfg(test)]
@@ -293,6 +313,29 @@ mod tests {
         // The warping error of the switch is small: it averages over the frame.
         let we = crate::temporal::warping_error(&pop[2], &pop[3], &flows[2]).unwrap();
         assert!(we < 0.004, "{we}");
+    }
+
+    #[test]
+    fn a_mask_scores_only_the_pixels_it_keeps() {
+        // Two transitions of 10 pixels: values 0.0..0.9, and a single hot pixel in the second.
+        let first: Vec<f32> = (0..10).map(|i| i as f32 / 10.0).collect();
+        let mut second = vec![0.05f32; 10];
+        second[9] = 1.0;
+        second[0] = f32::NAN;
+        let maps = vec![first, second];
+        let all = popping_of_maps(&maps, None).unwrap();
+        assert_eq!(all.per_transition, vec![0.9f32 as f64, 1.0]);
+        // Keeping the first five pixels of each: 0.4 and 0.05 (the NaN stays out).
+        let keep: Vec<Vec<bool>> = (0..2).map(|_| (0..10).map(|p| p < 5).collect()).collect();
+        let kept = popping_of_maps(&maps, Some(&keep)).unwrap();
+        assert_eq!(kept.per_transition, vec![0.4f32 as f64, 0.05f32 as f64]);
+        assert_eq!(kept.p99, 0.4f32 as f64);
+        assert!(((kept.mean - (0.4 + 0.05) / 2.0) as f32).abs() < 1e-6);
+        // A transition with nothing kept is NaN and left out of the percentile.
+        let none: Vec<Vec<bool>> = vec![vec![false; 10], vec![true; 10]];
+        let p = popping_of_maps(&maps, Some(&none)).unwrap();
+        assert!(p.per_transition[0].is_nan() && p.p99 == 1.0);
+        assert!(popping_of_maps(&maps, Some(&none[..1])).is_err());
     }
 
     /// A sharp edge moving by a fraction of a pixel: the scene does not change, bilinear

@@ -269,18 +269,21 @@ pub fn print_transition(r: &TransitionReport) {
         r.warping_error.mean, r.warping_error.delta.mean, r.warp_psnr.mean
     );
     println!(
-        "local popping    {:.1} levels of 255 (frames low-passed, σ 2 px; unfiltered {:.1})",
+        "local popping    {:.1} levels of 255 (frames low-passed, σ 2 px; unfiltered {:.1}; \
+         where two photos overlap {:.1})",
         r.popping.p99 * 255.0,
-        r.popping_per_pixel.p99 * 255.0
+        r.popping_per_pixel.p99 * 255.0,
+        r.popping_overlap.p99 * 255.0
     );
     if let (Some(l), Some(g)) = (r.held_out_lpips, r.held_out_lpips_gain_matched) {
         println!("held-out LPIPS   {l:.4}, gain-matched {g:.4} (ST-LPIPS AlexNet)");
     }
     if let Some(t) = &r.truth {
         println!(
-            "path vs truth    PSNR {:.2} dB (Δ {:.3}), SSIM {:.4}{}",
+            "path vs truth    PSNR {:.2} dB (Δ {:.3}; {:.2} after one gain for the clip), SSIM {:.4}{}",
             t.psnr.mean,
             t.psnr.delta.mean,
+            t.psnr_gain_matched.mean,
             t.ssim.mean,
             t.lpips
                 .as_ref()
