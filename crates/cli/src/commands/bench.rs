@@ -530,13 +530,13 @@ fn print_training(r: &Report) {
     if let Some(a) = &r.appearance_demo {
         println!(
             "{:<46} {:>14.2} {:>14.2}",
-            "demo it/s with colour transforms (vs without)",
-            a.affine.iterations_per_second,
-            a.plain.iterations_per_second
+            "demo it/CPU-s with colour transforms (vs without)",
+            a.affine.iterations_per_cpu_second,
+            a.plain.iterations_per_cpu_second
         );
         println!(
             "{:<46} {:>14.3} {:>14}",
-            "  transforms' cost per step (fraction)", a.overhead, ""
+            "  transforms' cost per step (fraction, CPU time)", a.overhead, ""
         );
     }
     if let Some(s) = &r.train_surface {
