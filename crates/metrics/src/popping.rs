@@ -29,8 +29,8 @@
 
 use fewview_scene::Image;
 
-use crate::error::{MetricsError, Result, check_same_shape};
-use crate::temporal::{Flow, bilinear};
+use crate::error::{MetricsError, Result};
+use crate::temporal::{Flow, for_each_warped_pixel};
 use fewview_geom::blend::gaussian_blur;
 
 /// The percentile of local popping, over pixels and over transitions.
@@ -53,43 +53,14 @@ pub struct Popping {
 /// Per-pixel `max_c |current − warp(previous)|` where the flow is trusted and lands inside
 /// `previous`; `NaN` elsewhere.
 pub fn difference_map(previous: &Image, current: &Image, flow: &Flow) -> Result<Vec<f32>> {
-    check_same_shape(previous, current)?;
-    let (w, h, c) = (current.width, current.height, current.channels);
-    if flow.width != w || flow.height != h || flow.data.len() != w * h {
-        return Err(MetricsError::ShapeMismatch(format!(
-            "flow is {}x{}, frames are {w}x{h}",
-            flow.width, flow.height
-        )));
-    }
-    if flow.valid.as_ref().is_some_and(|v| v.len() != w * h) {
-        return Err(MetricsError::ShapeMismatch(
-            "flow validity mask size".into(),
-        ));
-    }
-    let mut sample = vec![0.0f32; c];
-    let mut map = vec![f32::NAN; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            if flow.valid.as_ref().is_some_and(|v| !v[i]) {
-                continue;
-            }
-            let [dx, dy] = flow.data[i];
-            if !(dx.is_finite() && dy.is_finite()) {
-                return Err(MetricsError::invalid(format!(
-                    "flow is not finite at pixel ({x}, {y})"
-                )));
-            }
-            if bilinear(previous, x as f32 + dx, y as f32 + dy, &mut sample) {
-                map[i] = current
-                    .pixel(x, y)
-                    .iter()
-                    .zip(&sample)
-                    .map(|(a, b)| (a - b).abs())
-                    .fold(0.0, f32::max);
-            }
-        }
-    }
+    let mut map = vec![f32::NAN; current.num_pixels()];
+    for_each_warped_pixel(previous, current, flow, |i, now, before| {
+        map[i] = now
+            .iter()
+            .zip(before)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
+    })?;
     Ok(map)
 }
 

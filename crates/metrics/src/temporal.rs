@@ -242,6 +242,32 @@ pub fn warping_errors(frames: &[Image], flows: &[Flow]) -> Result<Vec<f64>> {
 
 /// Warping error between `previous` warped by `flow` and `current`.
 pub fn warping_error(previous: &Image, current: &Image, flow: &Flow) -> Result<f64> {
+    let (mut sum, mut count) = (0.0f64, 0usize);
+    for_each_warped_pixel(previous, current, flow, |_, now, before| {
+        sum += now
+            .iter()
+            .zip(before)
+            .map(|(a, b)| ((a - b) as f64).powi(2))
+            .sum::<f64>();
+        count += 1;
+    })?;
+    if count == 0 {
+        return Err(MetricsError::invalid(
+            "no valid pixel: the flow leaves the frame everywhere or the mask is empty",
+        ));
+    }
+    Ok(sum / count as f64)
+}
+
+/// Calls `visit(i, current pixel, previous sampled at i + flow)` for every pixel `i` of
+/// `current` whose flow is trusted and lands inside `previous` (bilinear sampling). Checks the
+/// shapes and that the flow is finite first.
+pub(crate) fn for_each_warped_pixel(
+    previous: &Image,
+    current: &Image,
+    flow: &Flow,
+    mut visit: impl FnMut(usize, &[f32], &[f32]),
+) -> Result<()> {
     check_same_shape(previous, current)?;
     let (w, h, c) = (current.width, current.height, current.channels);
     if flow.width != w || flow.height != h || flow.data.len() != w * h {
@@ -257,7 +283,6 @@ pub fn warping_error(previous: &Image, current: &Image, flow: &Flow) -> Result<f
             "flow validity mask size".into(),
         ));
     }
-    let (mut sum, mut count) = (0.0f64, 0usize);
     let mut sample = vec![0.0f32; c];
     for y in 0..h {
         for x in 0..w {
@@ -271,24 +296,12 @@ pub fn warping_error(previous: &Image, current: &Image, flow: &Flow) -> Result<f
                     "flow is not finite at pixel ({x}, {y})"
                 )));
             }
-            if !bilinear(previous, x as f32 + dx, y as f32 + dy, &mut sample) {
-                continue;
+            if bilinear(previous, x as f32 + dx, y as f32 + dy, &mut sample) {
+                visit(i, current.pixel(x, y), &sample);
             }
-            sum += current
-                .pixel(x, y)
-                .iter()
-                .zip(&sample)
-                .map(|(a, b)| ((a - b) as f64).powi(2))
-                .sum::<f64>();
-            count += 1;
         }
     }
-    if count == 0 {
-        return Err(MetricsError::invalid(
-            "no valid pixel: the flow leaves the frame everywhere or the mask is empty",
-        ));
-    }
-    Ok(sum / count as f64)
+    Ok(())
 }
 
 /// Bilinear sample at continuous pixel coordinates (pixel centres at integers); `false` if the
