@@ -150,7 +150,9 @@ pub fn render_path(
 #[derive(Clone, Debug, Serialize)]
 pub struct PathTruth {
     pub psnr: MetricSeries,
-    /// PSNR after one least-squares gain per channel for the whole clip.
+    /// PSNR after one least-squares gain per channel for the whole clip. The gain minimises the
+    /// clip's squared error, not the mean of the frames' PSNR, so where frames near the photos
+    /// are much sharper than those between them this can read below the raw figure.
     pub psnr_gain_matched: MetricSeries,
     pub ssim: MetricSeries,
     /// ST-LPIPS AlexNet, when computed.
