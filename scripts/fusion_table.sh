@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The fusion paper's method, its alternatives and the per-photo appearance model side by side:
-# plain, (a)-(e), gf, affine (plain with a colour transform per photo) and gf+affine, seeds 0
+# plain, (a)-(e), gf, affine (plain with a colour transform per photo), gf+affine and gf with
+# its references brought to one exposure and tested against each other (gf-me-occ), seeds 0
 # and 1, on the demo scene with a phone's exposure (0.5 EV, 5 % white balance) and its highlight
 # at full strength (0.4, 40), and on LLFF fern 3-view with the same jitter; then one Markdown
 # table per scene (README, "Gradient-domain fusion").
@@ -29,6 +30,7 @@ variants=(
   "gf|--variant gf"
   "affine|--variant plain --appearance affine"
   "gf+affine|--variant gf --appearance affine"
+  "gf-me-occ|--variant gf --match-exposure --occlusion meshes"
 )
 run_scene() {
   local scene="$1"; shift
