@@ -7,6 +7,9 @@
 //! mask's border. Where both references have a gradient, `w = (1 − t)·∇f* + t·∇g*` (the nearer
 //! view weighs more); where one has, `w` is that one's; where neither has, there is no guidance.
 
+use fewview_metrics::gain::gain_fit;
+use fewview_scene::Image;
+
 use crate::reproject::Reference;
 
 /// A guidance field over a `width × height` image with 3 channels: the x differences live on
@@ -87,29 +90,39 @@ pub fn guidance_field(f: &Reference, g: &Reference, t: f32) -> GuidanceField {
 /// The fewest pixels both references must share for [`exposure_ratio`] to trust its estimate.
 pub const MIN_SHARED_FRACTION: f64 = 0.01;
 
-/// Per-channel gain `r` with `g* ≈ r·f*` on the pixels both references show (least squares,
-/// `Σ f·g / Σ f²`): how much brighter the second photo is than the first where they see the
-/// same surface. 1 where they share less than [`MIN_SHARED_FRACTION`] of the image or the
-/// estimate leaves `[1/4, 4]`.
+/// Per-channel gain `r` with `g* ≈ r·f*` on the pixels both references show (the least-squares
+/// gain of [`gain_fit`], `Σ f·g / Σ f²`): how much brighter the second photo is than the first
+/// where they see the same surface. 1 where they share less than [`MIN_SHARED_FRACTION`] of the
+/// image or the estimate leaves `[1/4, 4]`.
 pub fn exposure_ratio(f: &Reference, g: &Reference) -> [f32; 3] {
-    let (mut fg, mut ff) = ([0.0f64; 3], [0.0f64; 3]);
-    let mut shared = 0usize;
-    for p in 0..f.valid.len() {
-        if f.valid[p] && g.valid[p] {
-            shared += 1;
-            for c in 0..3 {
-                let (a, b) = (f.image[p * 3 + c] as f64, g.image[p * 3 + c] as f64);
-                fg[c] += a * b;
-                ff[c] += a * a;
-            }
-        }
-    }
+    let both: Vec<f32> = f
+        .valid
+        .iter()
+        .zip(&g.valid)
+        .map(|(&a, &b)| f32::from(u8::from(a && b)))
+        .collect();
+    let shared = both.iter().filter(|&&m| m > 0.0).count();
     if (shared as f64) < MIN_SHARED_FRACTION * f.valid.len() as f64 {
         return [1.0; 3];
     }
+    let image = |r: &Reference| Image {
+        width: r.width,
+        height: r.height,
+        channels: 3,
+        data: r.image.clone(),
+    };
+    let mask = Image {
+        width: f.width,
+        height: f.height,
+        channels: 1,
+        data: both,
+    };
+    let Ok(gains) = gain_fit(&image(f), &image(g), Some(&mask)) else {
+        return [1.0; 3];
+    };
     std::array::from_fn(|c| {
-        let r = fg[c] / ff[c];
-        if r.is_finite() && (0.25..=4.0).contains(&r) {
+        let r = gains[c];
+        if (0.25..=4.0).contains(&r) {
             r as f32
         } else {
             1.0

@@ -163,11 +163,12 @@ impl VirtualViewTerm {
         ];
         let [f, g] = reproject_pair(meshes, &v.camera, depth, &self.config.reproject)
             .map_err(|e| e.to_string())?;
-        if self.config.match_exposure {
+        Ok(if self.config.match_exposure {
             let (f, g) = exposure_matched(&f, &g, v.t as f32);
-            return Ok([f, g]);
-        }
-        Ok([f, g])
+            [f, g]
+        } else {
+            [f, g]
+        })
     }
 
     /// The variant's loss on the rendered virtual view, and the fraction of pixels it covers.

@@ -28,7 +28,7 @@ use fewview_metrics::flow::{path_flows, views_seeing};
 use fewview_metrics::gain::{gain_matched, sequence_gain_matched};
 use fewview_metrics::lpips::Lpips;
 use fewview_metrics::popping::{Popping, local_popping, local_popping_with, popping_of_maps};
-use fewview_metrics::psnr::psnr_from_mse;
+use fewview_metrics::psnr::{psnr, psnr_from_mse};
 use fewview_metrics::ssim::SsimOptions;
 use fewview_metrics::temporal::{MetricSeries, evaluate_sequence, warping_errors};
 use std::path::Path;
@@ -242,11 +242,14 @@ pub fn score_transition(
         Some(gt) => {
             let perceptual = lpips.map(|l| l as &dyn fewview_metrics::temporal::PerceptualDistance);
             let r = evaluate_sequence(&path.frames, gt, &SsimOptions::default(), perceptual, None)?;
-            let matched = sequence_gain_matched(&path.frames, gt)?;
-            let matched = evaluate_sequence(&matched, gt, &SsimOptions::default(), None, None)?;
+            let matched = sequence_gain_matched(&path.frames, gt)?
+                .iter()
+                .zip(gt)
+                .map(|(m, g)| psnr(m, g))
+                .collect::<Result<Vec<f64>, _>>()?;
             Some(PathTruth {
                 psnr: r.psnr,
-                psnr_gain_matched: matched.psnr,
+                psnr_gain_matched: MetricSeries::new("psnr", matched),
                 ssim: r.ssim,
                 lpips: r.lpips,
                 truth_warping_error: MetricSeries::new(

@@ -45,13 +45,16 @@ pub fn gain_fit(render: &Image, photo: &Image, mask: Option<&Image>) -> Result<V
 
 /// `render` with the gains of [`gain_fit`] applied and clipped to `[0, 1]`.
 pub fn gain_matched(render: &Image, photo: &Image, mask: Option<&Image>) -> Result<Image> {
-    let gains = gain_fit(render, photo, mask)?;
-    let c = render.channels;
-    let mut out = render.clone();
+    Ok(with_gains(render, &gain_fit(render, photo, mask)?))
+}
+
+/// `image` with channel `c` multiplied by `gains[c]`, clipped to `[0, 1]`.
+fn with_gains(image: &Image, gains: &[f64]) -> Image {
+    let mut out = image.clone();
     for (i, v) in out.data.iter_mut().enumerate() {
-        *v = (*v as f64 * gains[i % c]).clamp(0.0, 1.0) as f32;
+        *v = (*v as f64 * gains[i % image.channels]).clamp(0.0, 1.0) as f32;
     }
-    Ok(out)
+    out
 }
 
 /// Every frame of `frames` multiplied by one set of per-channel gains, fitted by least squares
@@ -77,16 +80,7 @@ pub fn sequence_gain_matched(frames: &[Image], truth: &[Image]) -> Result<Vec<Im
         Ok(out)
     };
     let gains = gain_fit(&stack(frames)?, &stack(truth)?, None)?;
-    Ok(frames
-        .iter()
-        .map(|f| {
-            let mut out = f.clone();
-            for (i, v) in out.data.iter_mut().enumerate() {
-                *v = (*v as f64 * gains[i % f.channels]).clamp(0.0, 1.0) as f32;
-            }
-            out
-        })
-        .collect())
+    Ok(frames.iter().map(|f| with_gains(f, &gains)).collect())
 }
 
 #[cfg(test)]
