@@ -10,10 +10,11 @@
 //!   held-out PSNR/SSIM/LPIPS.
 //! * **Local popping** ([`fewview_metrics::popping`]): the tail of the same warped differences,
 //!   which sees a seam or a patch that switches colour where the mean does not; its per-transition
-//!   maps are written as a video. It is reported over the whole frame and over the pixels at
-//!   least two training photos' frusta hold ([`OVERLAP_VIEWS`]), where colours are fused
-//!   between photos; the rest of a frame (its borders as the camera swings) shows what one photo
-//!   or none constrains.
+//!   maps are written as a video. It is reported over the whole frame and over the pixels whose
+//!   surface at least two training views show ([`OVERLAP_VIEWS`]; in their frusta and not
+//!   behind a nearer surface of their rendered depth), where colours are fused between photos;
+//!   the rest of a frame (its borders as the camera swings, what one photo sees past an edge)
+//!   shows what one photo or none constrains.
 //! * With a **ground truth along the path** (the demo scene's ray tracer): per-frame PSNR, SSIM,
 //!   LPIPS against the true frames, their Δ, and the truth's own warping error and popping (its
 //!   view-dependent highlight moves, so an exact render's warping error is that, not 0). When the
@@ -24,7 +25,7 @@
 //!   transforms renders in a colour space of its own, and one gain undoes that but not a ramp.
 
 use fewview_geom::colormap::colorize_range;
-use fewview_metrics::flow::{path_flows, views_seeing};
+use fewview_metrics::flow::{Onlooker, path_flows, views_seeing};
 use fewview_metrics::gain::{gain_matched, sequence_gain_matched};
 use fewview_metrics::lpips::Lpips;
 use fewview_metrics::popping::{Popping, local_popping, local_popping_with, popping_of_maps};
@@ -180,7 +181,8 @@ pub struct TransitionReport {
     pub popping: Popping,
     /// The same without the low-pass: resampling of sharp edges counts too.
     pub popping_per_pixel: Popping,
-    /// Local popping over the pixels at least [`OVERLAP_VIEWS`] training photos' frusta hold.
+    /// Local popping over the pixels whose surface at least [`OVERLAP_VIEWS`] training views show
+    /// ([`overlap_masks`]).
     pub popping_overlap: Popping,
     /// Fraction of pixels the flows trust (mean over transitions).
     pub flow_coverage: f64,
@@ -197,29 +199,40 @@ pub struct ScoredPath {
     pub popping_maps: Vec<Vec<f32>>,
 }
 
-/// Training photos whose frusta must hold a pixel for [`TransitionReport::popping_overlap`].
+/// Training views that must show a pixel's surface for [`TransitionReport::popping_overlap`].
 pub const OVERLAP_VIEWS: u8 = 2;
 
-/// Per transition `t = 1..T−1`, the pixels of frame `t` that at least [`OVERLAP_VIEWS`] of
-/// `training` could show (frusta only, [`views_seeing`]).
+/// Per transition `t = 1..T−1`, the pixels of frame `t` whose surface at least
+/// [`OVERLAP_VIEWS`] of the `training` views show (in their frusta and not hidden behind a
+/// nearer surface of their rendered depth, [`views_seeing`]): where the photos' colours meet.
 pub fn overlap_masks(
     path: &RenderedPath,
-    training: &[&Camera],
+    training: &RenderedPath,
 ) -> Result<Vec<Vec<bool>>, FusionError> {
+    let onlookers: Vec<Onlooker<'_>> = training
+        .cameras
+        .iter()
+        .zip(&training.depths)
+        .map(|(camera, depth)| Onlooker {
+            camera,
+            depth: Some(depth),
+        })
+        .collect();
     (1..path.cameras.len())
         .into_par_iter()
         .map(|t| {
-            let counts = views_seeing(&path.cameras[t], &path.depths[t], training)?;
+            let counts = views_seeing(&path.cameras[t], &path.depths[t], &onlookers)?;
             Ok(counts.into_iter().map(|c| c >= OVERLAP_VIEWS).collect())
         })
         .collect()
 }
 
-/// Scores a rendered path through the `training` cameras; `truth` (one image per frame) adds
-/// the ground-truth scores, `lpips` the perceptual ones.
+/// Scores a rendered path through the `training` views (rendered by the same model, for their
+/// depth); `truth` (one image per frame) adds the ground-truth scores, `lpips` the perceptual
+/// ones.
 pub fn score_transition(
     path: &RenderedPath,
-    training: &[&Camera],
+    training: &RenderedPath,
     truth: Option<&[Image]>,
     lpips: Option<&Lpips>,
 ) -> Result<ScoredPath, FusionError> {
@@ -310,6 +323,8 @@ pub fn transition_of_run(
         .map(|p| cameras[order[p.from]].interpolate(cameras[order[p.to]], p.t))
         .collect();
     let rendered = render_path(&model, &path, &settings);
+    let keys: Vec<Camera> = cameras.iter().map(|&c| c.clone()).collect();
+    let at_keys = render_path(&model, &keys, &settings);
     let truth_frames: Option<Vec<Image>> = truth.map(|f| {
         path.par_iter()
             .zip(&positions)
@@ -326,7 +341,7 @@ pub fn transition_of_run(
     let ScoredPath {
         mut report,
         popping_maps,
-    } = score_transition(&rendered, &cameras, truth_frames.as_deref(), lpips)?;
+    } = score_transition(&rendered, &at_keys, truth_frames.as_deref(), lpips)?;
     if let Some(l) = lpips {
         let (raw, matched) = held_out_lpips(ds, &model, &settings, l)?;
         report.held_out_lpips = Some(raw);

@@ -137,12 +137,29 @@ fn check_depth(which: &str, camera: &Camera, depth: &[f32]) -> Result<()> {
     Ok(())
 }
 
-/// How many of `others` have each pixel's 3D point of `camera` (z-depth map `depth`, as
-/// [`flow_between`] takes it) in front of them and inside their image (`[0, w] × [0, h]` in
-/// pixel coordinates); 0 where `camera` sees no surface. Occlusion is not tested: this is the
-/// frusta's overlap, the part of a frame that photos taken from `others` could show.
-pub fn views_seeing(camera: &Camera, depth: &[f32], others: &[&Camera]) -> Result<Vec<u8>> {
+/// Another camera a frame's pixels may be seen from, with its z-depth map (0 = no surface) when
+/// occlusion is to be tested.
+#[derive(Clone, Copy)]
+pub struct Onlooker<'a> {
+    pub camera: &'a Camera,
+    pub depth: Option<&'a [f32]>,
+}
+
+/// Relative depth margin within which a point counts as the surface another view shows.
+pub const VISIBILITY_TOLERANCE: f64 = 0.05;
+
+/// How many of `others` see each pixel's 3D point of `camera` (z-depth map `depth`, as
+/// [`flow_between`] takes it): in front of them and inside their image (`[0, w] × [0, h]` in
+/// pixel coordinates) and, for an onlooker with a depth map, not behind the surface it shows
+/// there (the point's depth at most [`VISIBILITY_TOLERANCE`] beyond the largest of the four
+/// depths around where it lands). 0 where `camera` sees no surface.
+pub fn views_seeing(camera: &Camera, depth: &[f32], others: &[Onlooker<'_>]) -> Result<Vec<u8>> {
     check_depth("frame", camera, depth)?;
+    for o in others {
+        if let Some(d) = o.depth {
+            check_depth("onlooker", o.camera, d)?;
+        }
+    }
     let w = camera.width() as usize;
     Ok(depth
         .par_iter()
@@ -152,14 +169,34 @@ pub fn views_seeing(camera: &Camera, depth: &[f32], others: &[&Camera]) -> Resul
                 return 0;
             }
             let p = camera.unproject((i % w) as f64 + 0.5, (i / w) as f64 + 0.5, z as f64);
-            let inside = |o: &&&Camera| {
-                o.project(&p).is_some_and(|(u, v, _)| {
-                    (0.0..=o.width() as f64).contains(&u) && (0.0..=o.height() as f64).contains(&v)
+            let sees = |o: &&Onlooker<'_>| {
+                let c = o.camera;
+                c.project(&p).is_some_and(|(u, v, zo)| {
+                    (0.0..=c.width() as f64).contains(&u)
+                        && (0.0..=c.height() as f64).contains(&v)
+                        && o.depth.is_none_or(|d| in_front_of(d, c, u, v, zo))
                 })
             };
-            others.iter().filter(inside).count().min(u8::MAX as usize) as u8
+            others.iter().filter(sees).count().min(u8::MAX as usize) as u8
         })
         .collect())
+}
+
+/// Whether depth `z` at pixel coordinates `(u, v)` of `camera` is not behind the surface of
+/// its depth map `depth` (the largest of the four pixels around, with the tolerance).
+fn in_front_of(depth: &[f32], camera: &Camera, u: f64, v: f64, z: f64) -> bool {
+    let (w, h) = (camera.width() as usize, camera.height() as usize);
+    let (x0, y0) = ((u - 0.5).floor(), (v - 0.5).floor());
+    let surface = [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)]
+        .iter()
+        .map(|(dx, dy)| {
+            let x = (x0 + dx).clamp(0.0, (w - 1) as f64) as usize;
+            let y = (y0 + dy).clamp(0.0, (h - 1) as f64) as usize;
+            depth[y * w + x]
+        })
+        .filter(|d| d.is_finite() && *d > 0.0)
+        .fold(0.0f32, f32::max);
+    surface > 0.0 && z <= surface as f64 * (1.0 + VISIBILITY_TOLERANCE)
 }
 
 /// Where each pixel of `from` (depth `depth`) lands in `to`, as a displacement in pixels; `None`
@@ -493,7 +530,15 @@ mod tests {
             Vector3::zeros(),
         );
         let depth = plane_depth(&a, Vector3::z(), 4.0);
-        let counts = views_seeing(&a, &depth, &[&a, &b, &away]).unwrap();
+        fn frusta<'a>(cams: &[&'a Camera]) -> Vec<Onlooker<'a>> {
+            cams.iter()
+                .map(|&camera| Onlooker {
+                    camera,
+                    depth: None,
+                })
+                .collect()
+        }
+        let counts = views_seeing(&a, &depth, &frusta(&[&a, &b, &away])).unwrap();
         let k = intrinsics();
         for (i, &count) in counts.iter().enumerate() {
             let u = (i % W) as f64 + 0.5;
@@ -506,7 +551,50 @@ mod tests {
         assert!(counts.contains(&1) && counts.contains(&2));
         let mut sky = depth.clone();
         sky[0] = 0.0;
-        assert_eq!(views_seeing(&a, &sky, &[&a, &b]).unwrap()[0], 0);
-        assert!(views_seeing(&a, &depth[1..], &[&b]).is_err());
+        assert_eq!(views_seeing(&a, &sky, &frusta(&[&a, &b])).unwrap()[0], 0);
+        assert!(views_seeing(&a, &depth[1..], &frusta(&[&b])).is_err());
+    }
+
+    #[test]
+    fn views_seeing_leaves_out_a_view_that_shows_a_nearer_surface() {
+        // Camera b, shifted right, sees the plane z = 4 except through a wall at z = 2 over its
+        // left half: points of a's plane behind the wall count for a but not for b.
+        let id = Rotation3::identity();
+        let a = camera(id, Vector3::zeros());
+        let b = camera(id, Vector3::new(1.55, 0.0, 0.0));
+        let depth = plane_depth(&a, Vector3::z(), 4.0);
+        let mut b_depth = plane_depth(&b, Vector3::z(), 4.0);
+        for (i, d) in b_depth.iter_mut().enumerate() {
+            if i % W < W / 2 {
+                *d = 2.0;
+            }
+        }
+        let onlookers = [
+            Onlooker {
+                camera: &a,
+                depth: Some(&depth),
+            },
+            Onlooker {
+                camera: &b,
+                depth: Some(&b_depth),
+            },
+        ];
+        let counts = views_seeing(&a, &depth, &onlookers).unwrap();
+        let k = intrinsics();
+        for (i, &count) in counts.iter().enumerate() {
+            let u = (i % W) as f64 + 0.5;
+            let ub = k.fx * ((u - k.cx) / k.fx * 4.0 - 1.55) / 4.0 + k.cx;
+            // Clear of the wall's edge by a pixel, b sees the point where it lands right of it.
+            if (ub - W as f64 / 2.0).abs() > 1.5 && ub < W as f64 - 1.0 {
+                let want = 1 + u8::from(ub > W as f64 / 2.0);
+                assert_eq!(count, want, "pixel {i}, lands at {ub:.1} in b");
+            }
+        }
+        assert!(counts.contains(&1) && counts.contains(&2));
+        let bad = [Onlooker {
+            camera: &b,
+            depth: Some(&b_depth[1..]),
+        }];
+        assert!(views_seeing(&a, &depth, &bad).is_err());
     }
 }
