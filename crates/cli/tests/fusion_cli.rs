@@ -118,6 +118,26 @@ fn bad_variants_views_and_studies_are_refused_with_nothing_written() {
     assert_clean_error(&run, &["view_00", "view_23", "overlap"]);
     assert!(!out.exists(), "a refused run wrote {}", out.display());
 
+    // A surface start from a folder that is no surface run, or a run of other data; masks
+    // the demo does not have.
+    let elsewhere = dir.path().join("surface-of-scan65");
+    std::fs::create_dir_all(&elsewhere).unwrap();
+    let metrics = r#"{"dataset": "scan65", "train_views": [22, 25, 28]}"#;
+    std::fs::write(elsewhere.join("metrics.json"), metrics).unwrap();
+    for (surface, needle) in [
+        (dir.path().join("no-such-run"), "not a finished surface run"),
+        (elsewhere, "a surface run of `scan65`"),
+    ] {
+        let init = format!("surface:{}", surface.display());
+        assert_clean_error(&short_run("gf", &out, &["--init", &init]), &[needle]);
+        assert!(!out.exists(), "--init {init} wrote {}", out.display());
+    }
+    assert_clean_error(
+        &short_run("gf", &out, &["--object-only"]),
+        &["--object-only"],
+    );
+    assert!(!out.exists());
+
     // A study over runs of different data.
     let (a, b) = (dir.path().join("a"), dir.path().join("b"));
     assert!(

@@ -87,6 +87,29 @@ impl Dataset {
     pub fn camera_extent(&self) -> (Vector3<f64>, f64) {
         camera_extent(self.train_views().map(|v| &v.camera))
     }
+
+    /// Makes every view's separate foreground mask (DTU's) its photo's alpha: the photo becomes
+    /// `rgb·mask + (1 − mask)·background`, so training and scores see the object alone, as
+    /// IDR/NeuS-style methods train on DTU with masks. Returns how many views changed; views
+    /// without a mask, or whose mask already is their alpha, keep their photos.
+    pub fn composite_masks_as_alpha(&mut self) -> usize {
+        let background = self.background;
+        let mut changed = 0;
+        for view in &mut self.views {
+            let Some(mask) = view.mask.as_ref().filter(|_| !view.mask_is_alpha) else {
+                continue;
+            };
+            let c = view.image.channels;
+            for (pixel, &a) in view.image.data.chunks_mut(c).zip(&mask.data) {
+                for (v, b) in pixel.iter_mut().zip(background) {
+                    *v = *v * a + (1.0 - a) * b;
+                }
+            }
+            view.mask_is_alpha = true;
+            changed += 1;
+        }
+        changed
+    }
 }
 
 /// Centre and radius of a set of cameras, as 3DGS's `getNerfppNorm`: the radius is 1.1 × the
@@ -102,4 +125,48 @@ pub fn camera_extent<'a>(cameras: impl Iterator<Item = &'a Camera>) -> (Vector3<
         .map(|c| (c - mean).norm())
         .fold(0.0f64, f64::max);
     (mean, (max * 1.1).max(1e-6))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::{Intrinsics, Se3};
+
+    fn view(mask: Option<Image>, mask_is_alpha: bool) -> View {
+        View {
+            name: "v".into(),
+            camera: Camera::new(Intrinsics::centered(10.0, 2, 1), Se3::identity()),
+            image: Image::from_vec(2, 1, 3, vec![0.2, 0.4, 0.6, 0.8, 0.6, 0.4]),
+            mask,
+            mask_is_alpha,
+            valid: None,
+            depth_bounds: None,
+            source_index: 0,
+        }
+    }
+
+    #[test]
+    fn separate_masks_become_alpha_over_the_background() {
+        let half = Image::from_vec(2, 1, 1, vec![1.0, 0.5]);
+        let mut ds = Dataset {
+            name: "d".into(),
+            views: vec![
+                view(Some(half.clone()), false),
+                view(None, false),
+                view(Some(half), true),
+            ],
+            train: vec![0, 1, 2],
+            test: Vec::new(),
+            points: None,
+            background: [0.0, 1.0, 0.0],
+            to_source_world: None,
+        };
+        assert_eq!(ds.composite_masks_as_alpha(), 1);
+        // The first pixel is inside the mask; the second half-covered over green.
+        assert_eq!(ds.views[0].image.data, vec![0.2, 0.4, 0.6, 0.4, 0.8, 0.2]);
+        assert!(ds.views[0].mask_is_alpha);
+        // No mask, or a mask that already is the alpha: the photo stays.
+        assert_eq!(ds.views[1].image.data, ds.views[2].image.data);
+        assert_eq!(ds.composite_masks_as_alpha(), 0);
+    }
 }

@@ -22,6 +22,7 @@ pub mod real;
 pub mod sh;
 pub mod stereo_pair;
 pub mod stereo_start;
+pub mod surface_start;
 pub mod train;
 
 pub use device::{ComputeDevice, DeviceError};

@@ -53,6 +53,8 @@ pub enum InitStrategy {
     /// training views' stereo pairs ([`crate::stereo_start`]), built as [`RunConfig::stereo`]
     /// says.
     Stereo,
+    /// Gaussians on the mesh of the surface run in this folder ([`crate::surface_start`]).
+    Surface(PathBuf),
 }
 
 /// Everything that defines a run besides the data.
@@ -68,6 +70,15 @@ pub struct RunConfig {
     /// device.
     #[serde(default)]
     pub device: ComputeDevice,
+    /// Weight of the surface mesh's depth in the training views
+    /// ([`crate::surface_start::SurfaceDepthTerm`]) when the run starts from a surface run;
+    /// 0: none.
+    #[serde(default = "default_surface_depth_weight")]
+    pub surface_depth_weight: f32,
+}
+
+fn default_surface_depth_weight() -> f32 {
+    crate::surface_start::SURFACE_DEPTH_WEIGHT
 }
 
 /// The most random initial points a run accepts. Each Gaussian costs about 1 KB while training
@@ -83,6 +94,7 @@ impl RunConfig {
             init_points: 20_000,
             stereo: StereoInit::default(),
             device: ComputeDevice::Cpu,
+            surface_depth_weight: default_surface_depth_weight(),
         }
     }
 }
@@ -326,6 +338,7 @@ impl InitStrategy {
             InitStrategy::RandomBox { .. } => "box",
             InitStrategy::Ply(_) => "ply",
             InitStrategy::Stereo => "stereo",
+            InitStrategy::Surface(_) => "surface",
         }
     }
 }
@@ -413,6 +426,10 @@ pub fn initial_model_and_start(
                 )));
             }
             m
+        }
+        InitStrategy::Surface(dir) => {
+            let run = crate::surface_start::SurfaceRun::load(&dir, ds)?;
+            crate::surface_start::surface_model(ds, &run, degree)?
         }
         InitStrategy::Auto => unreachable!("resolved above"),
     };
@@ -547,6 +564,16 @@ pub fn train_run_with(
     };
     for term in terms {
         trainer.add_term(term);
+    }
+    if let InitStrategy::Surface(surface_dir) = &cfg.init
+        && cfg.surface_depth_weight > 0.0
+    {
+        let surface = crate::surface_start::SurfaceRun::load(surface_dir, ds)?;
+        trainer.add_term(Box::new(crate::surface_start::SurfaceDepthTerm::new(
+            ds,
+            &surface.mesh,
+            cfg.surface_depth_weight,
+        )?));
     }
     let resumed_from = (trainer.iteration() > 0).then_some(trainer.iteration());
     let start = Instant::now();

@@ -57,6 +57,11 @@ pub struct DatasetArgs {
     /// INTER_CUBIC: sharper, slight ringing at hard edges). Each kernel has its own cache entries.
     #[arg(long, default_value = "bilinear", value_name = "KERNEL")]
     pub resample: Resample,
+    /// Use the dataset's separate foreground masks (DTU's `mask/`) as the photos' alpha: each
+    /// photo is composited over the background and training sees the object alone, as IDR/NeuS
+    /// and the surface method train on DTU; scores are then the object's.
+    #[arg(long)]
+    pub object_only: bool,
 }
 
 impl DatasetArgs {
@@ -83,8 +88,14 @@ impl DatasetArgs {
 
     pub fn load(&self) -> anyhow::Result<Dataset> {
         let folder = self.folder()?;
-        let (ds, report) = load_dataset_with_report(folder, &self.load_options())
+        let (mut ds, report) = load_dataset_with_report(folder, &self.load_options())
             .with_context(|| format!("cannot load dataset {}", folder.display()))?;
+        if self.object_only && ds.composite_masks_as_alpha() == 0 {
+            anyhow::bail!(
+                "--object-only: {} has no separate foreground masks to use as alpha",
+                folder.display()
+            );
+        }
         for w in &report.warnings {
             eprintln!("warning: {w}");
         }

@@ -12,6 +12,7 @@ use fewview_scene::photometric::{PhotoGain, jitter_training_photos, training_gai
 use fewview_scene::synthetic::{DemoOptions, demo_dataset, demo_render};
 use fewview_scene::{Dataset, Image};
 use fewview_splat::pipeline::{RunConfig, RunSummary, default_iterations};
+use fewview_splat::surface_start::adopt_surface_poses;
 
 use super::dataset_args::{ViewList, parse_views};
 use super::output_paths::check_folder;
@@ -61,6 +62,10 @@ pub struct Args {
     /// Explicit held-out views.
     #[arg(long, value_name = "LIST", value_parser = parse_views)]
     pub test_views: Option<ViewList>,
+    /// Use the dataset's separate foreground masks (DTU's `mask/`) as the photos' alpha:
+    /// training and scores see the object alone, as IDR/NeuS and the surface method on DTU.
+    #[arg(long)]
+    pub object_only: bool,
     #[command(flatten)]
     pub train: TrainArgs,
     #[command(flatten)]
@@ -147,7 +152,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !args.study.is_empty() {
         return write_study(&args.study, &out);
     }
-    let (ds, demo, gains) = load(&args)?;
+    let (mut ds, demo, gains) = load(&args)?;
+    let default = if demo.is_some() {
+        2000
+    } else {
+        default_iterations(&ds)
+    };
+    let cfg = args.train.run_config(ds.background, default)?;
+    if let Some(line) = adopt_surface_poses(&mut ds, &cfg, args.train.surface_poses.into())? {
+        eprintln!("{line}");
+    }
     if args.rescore {
         if !out.join("point_cloud.ply").exists() {
             bail!(
@@ -159,12 +173,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         print_transition(&report);
         return Ok(());
     }
-    let default = if demo.is_some() {
-        2000
-    } else {
-        default_iterations(&ds)
-    };
-    let cfg = args.train.run_config(ds.background, default)?;
     let fusion = FusionConfig {
         variant: args.variant,
         weight: args.weight,
@@ -303,6 +311,9 @@ pub fn print_transition(r: &TransitionReport) {
 #[allow(clippy::type_complexity)]
 fn load(args: &Args) -> anyhow::Result<(Dataset, Option<DemoOptions>, Vec<(String, PhotoGain)>)> {
     let jitter = args.jitter.jitter();
+    if args.demo && args.object_only {
+        bail!("--object-only uses a dataset's foreground masks; the demo scene has none");
+    }
     if args.demo {
         let mut opts = args.scene.apply(DemoOptions {
             width: args.width,
@@ -335,6 +346,12 @@ fn load(args: &Args) -> anyhow::Result<(Dataset, Option<DemoOptions>, Vec<(Strin
     };
     let mut ds = fewview_scene::load_dataset(folder, &options)
         .with_context(|| format!("cannot load dataset {}", folder.display()))?;
+    if args.object_only && ds.composite_masks_as_alpha() == 0 {
+        bail!(
+            "--object-only: {} has no separate foreground masks to use as alpha",
+            folder.display()
+        );
+    }
     let gains = jitter_training_photos(&mut ds, &jitter);
     Ok((ds, None, gains))
 }

@@ -8,6 +8,7 @@ use fewview_scene::split;
 use fewview_splat::pipeline::{
     RunConfig, RunSummary, default_iterations, initial_model, train_run,
 };
+use fewview_splat::surface_start::adopt_surface_poses;
 
 use super::dataset_args::DatasetArgs;
 use super::output_paths::check_folder;
@@ -35,7 +36,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let ds = args.dataset.load()?;
+    let mut ds = args.dataset.load()?;
     // The standard splits are disjoint; explicit `--train-views` / `--test-views` could overlap
     // them or each other, and the held-out PSNR would then be measured on training views.
     if let Err(e) = split::check_disjoint(&ds.train, &ds.test, args.dataset.folder()?) {
@@ -44,6 +45,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let cfg = args
         .train
         .run_config(ds.background, default_iterations(&ds))?;
+    if let Some(line) = adopt_surface_poses(&mut ds, &cfg, args.train.surface_poses.into())? {
+        eprintln!("{line}");
+    }
     let out = args.out.clone().unwrap_or_else(|| {
         let name = args
             .dataset

@@ -34,9 +34,22 @@ pub struct TrainArgs {
     /// random in a box), `stereo` (the fusion paper's supplement §2: the hierarchical
     /// point cloud of the training views' stereo pairs, by Semi-Global Matching), `depth:DIR`
     /// (the same from your own depth maps, `DIR/<view>.npy` float z-depth or 16-bit `.png` in
-    /// millimetres), `points`, `frustum`, `box`, `box:HALF_SIZE`, or `ply:FILE`.
+    /// millimetres), `points`, `frustum`, `box`, `box:HALF_SIZE`, `ply:FILE`, or `surface:DIR`
+    /// (Gaussians on the mesh of the `surface` run in DIR, flat along its normals, for views
+    /// too far apart for stereo; the run must be of the same dataset and training views).
     #[arg(long, default_value = "auto", value_name = "HOW")]
     pub init: String,
+    /// With `--init surface:DIR`: train with the surface run's refined poses (`refined`), the
+    /// dataset's (`dataset`), or the refined ones when the surface run started from poses other
+    /// than the dataset's (`auto`).
+    #[arg(long, value_enum, default_value_t = SurfacePosesArg::Auto)]
+    pub surface_poses: SurfacePosesArg,
+    /// With `--init surface:DIR`: weight of the L1 distance between the rendered depth and the
+    /// mesh's depth in the training views, relative to the mesh's depth (0: none).
+    #[arg(long, value_name = "W",
+          default_value_t = fewview_splat::surface_start::SURFACE_DEPTH_WEIGHT,
+          value_parser = super::number_args::non_negative_f32)]
+    pub surface_depth_weight: f32,
     /// Fraction of the stereo point cloud that becomes Gaussians (the fusion paper: 0.1; its
     /// sparse alternative (a): 0.01), whenever the stereo start runs (`stereo`, `depth:DIR`, or
     /// `auto` choosing it).
@@ -97,6 +110,24 @@ impl From<StereoPhotometryArg> for Photometry {
         match a {
             StereoPhotometryArg::AsIs => Self::AsIs,
             StereoPhotometryArg::GainMatched => Self::GainMatched,
+        }
+    }
+}
+
+/// `--surface-poses`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SurfacePosesArg {
+    Auto,
+    Refined,
+    Dataset,
+}
+
+impl From<SurfacePosesArg> for fewview_splat::surface_start::SurfacePoses {
+    fn from(a: SurfacePosesArg) -> Self {
+        match a {
+            SurfacePosesArg::Auto => Self::Auto,
+            SurfacePosesArg::Refined => Self::Refined,
+            SurfacePosesArg::Dataset => Self::Dataset,
         }
     }
 }
@@ -177,6 +208,7 @@ impl TrainArgs {
             init_points: self.init_points,
             stereo,
             device: self.device.into(),
+            surface_depth_weight: self.surface_depth_weight,
         })
     }
 }
@@ -213,9 +245,10 @@ fn parse_init(s: &str) -> anyhow::Result<(InitStrategy, DepthFrom)> {
             InitStrategy::RandomBox { half_size: Some(v) }
         }
         _ if s.starts_with("ply:") => InitStrategy::Ply(PathBuf::from(&s[4..])),
+        _ if s.starts_with("surface:") => InitStrategy::Surface(PathBuf::from(&s[8..])),
         "stereo" => InitStrategy::Stereo,
         _ => bail!(
-            "--init {s}: expected auto, stereo, depth:DIR, points, frustum, box, box:HALF_SIZE or ply:FILE"
+            "--init {s}: expected auto, stereo, depth:DIR, points, frustum, box, box:HALF_SIZE, ply:FILE or surface:DIR"
         ),
     };
     Ok((strategy, DepthFrom::Sgm))

@@ -7,7 +7,9 @@
 //! - `checkpoint.bin` — the training state (resume with the same configuration);
 //! - `matches.json` — the correspondences (pixel coordinates, training-view indices,
 //!   confidences), their count and precision against the true poses;
-//! - `poses_initial.json`, `poses_refined.json` — cameras (intrinsics + world-to-camera), and
+//! - `poses_initial.json`, `poses_refined.json` — cameras (intrinsics + world-to-camera);
+//!   `poses_refined_aligned.json` — the refined cameras mapped by the Alg. 1 alignment into the
+//!   frame of the dataset's cameras as loaded (what a splat run on the same dataset trains in); and
 //!   the input's camera file with the refined poses mapped into the input's frame by the Alg. 1
 //!   alignment (`cameras_sphere_refined.npz`, `poses_bounds_refined.npy`,
 //!   `transforms_refined.json`, `sparse_refined/`, …; see [`fewview_scene::pose_export`]) when
@@ -497,6 +499,10 @@ fn evaluate(
     let rotation_at_sparf_eps = sparf_rotations(prep, stages, &refined)?;
     let refined_cams = prep.cameras(&refined);
     fewview_geom::io::cameras::write_cameras(&out.join("poses_refined.json"), &refined_cams)?;
+    fewview_geom::io::cameras::write_cameras(
+        &out.join("poses_refined_aligned.json"),
+        &prep.cameras(&final_err.aligned_world_to_camera),
+    )?;
     // The cameras the poses are scored against, and whose file frame the outputs go back to.
     let scored = inputs.truth.unwrap_or(inputs.dataset);
     let refined_pose_files = match inputs.source {
