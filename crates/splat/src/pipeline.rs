@@ -429,7 +429,7 @@ pub fn initial_model_and_start(
         }
         InitStrategy::Surface(dir) => {
             let run = crate::surface_start::SurfaceRun::load(&dir, ds)?;
-            crate::surface_start::surface_model(ds, &run, degree)?
+            crate::surface_start::surface_model(ds, &run, degree, seed)?
         }
         InitStrategy::Auto => unreachable!("resolved above"),
     };

@@ -5,10 +5,11 @@
 //! few wide-apart photos into a watertight mesh and corrected poses. This module carries both
 //! into splat training:
 //!
-//! * **Points** where the training views see the mesh: a grid of every [`SURFACE_STRIDE`]-th
-//!   pixel of each training view (inside its mask when it has one), each pixel's mesh point,
-//!   coloured from the photo. Scales come from the sampling density (the reference code's
-//!   nearest-neighbour scales, [`crate::init::knn_scales`]); each Gaussian is flat along the
+//! * **Points** where the training views see the mesh: spread uniformly over its area at the
+//!   density of every [`SURFACE_STRIDE`]-th pixel, kept where a training view shows them (in
+//!   its image and mask, not hidden), coloured from the view that sees each most squarely. Scales
+//!   come from the sampling density (the reference code's nearest-neighbour scales,
+//!   [`crate::init::knn_scales`], at most the intended spacing); each Gaussian is flat along the
 //!   mesh's normal (its normal axis [`FLATNESS`] times the others), as surface-aligned splats
 //!   (2D Gaussian splatting, Gaussian surfels) start.
 //! * **Poses**: the surface run's refined training cameras, mapped into the frame of the
@@ -38,7 +39,8 @@ use crate::pipeline::PipelineError;
 use crate::sh::SH_C0;
 use crate::train::{LossContext, LossTerm, TrainError};
 
-/// Pixel step of the sample grid in each training view.
+/// The surface start's density: a sample every this many pixels of the training views, at
+/// their median depth.
 pub const SURFACE_STRIDE: usize = 2;
 
 /// Scale along the normal relative to the tangent scales of a surface-start Gaussian.
@@ -197,6 +199,8 @@ pub struct SurfaceSample {
     pub cloud: PointCloud,
     /// Unit normals, facing the view that sampled the point.
     pub normals: Vec<[f32; 3]>,
+    /// The intended distance between neighbouring samples.
+    pub spacing: Vec<f32>,
 }
 
 /// Near plane for rasterising `mesh` into `camera`: far in front of the camera centre compared
@@ -228,43 +232,108 @@ fn counts(view: &View, i: usize) -> bool {
     inside(&view.mask) && inside(&view.valid)
 }
 
-/// Every `stride`-th pixel (both ways) of each view where it sees `mesh`: the mesh point,
-/// the photo's colour, and the face normal turned towards the view.
+/// The most points a surface start samples on its mesh.
+pub const MAX_SURFACE_SAMPLES: usize = 2_000_000;
+
+/// Relative depth margin within which a mesh point counts as the surface a view shows.
+const VISIBLE_WITHIN: f64 = 0.01;
+
+/// A view's mesh depth, for visibility tests.
+struct Seen<'a> {
+    view: &'a View,
+    depth: Vec<f32>,
+}
+
+impl Seen<'_> {
+    /// Where the view shows point `p`, and how squarely: its pixel and `|cos|` between the
+    /// ray and `normal`; `None` when the point is outside the image or the mask, or hidden.
+    fn sees(&self, p: &Vector3<f64>, normal: &Vector3<f64>) -> Option<(usize, f64)> {
+        let camera = &self.view.camera;
+        let (u, v, z) = camera.project(p)?;
+        let (w, h) = (camera.width() as f64, camera.height() as f64);
+        if !(0.0..w).contains(&u) || !(0.0..h).contains(&v) {
+            return None;
+        }
+        let i = v as usize * w as usize + u as usize;
+        let surface = self.depth[i] as f64;
+        if !counts(self.view, i) || surface <= 0.0 || z > surface * (1.0 + VISIBLE_WITHIN) {
+            return None;
+        }
+        let ray = (camera.center() - p).normalize();
+        Some((i, normal.dot(&ray).abs()))
+    }
+}
+
+/// The median of the finite positive values (0 when there are none).
+fn median_positive(values: impl Iterator<Item = f64>) -> f64 {
+    let mut v: Vec<f64> = values.filter(|x| x.is_finite() && *x > 0.0).collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Points spread uniformly over `mesh` at the density of every `stride`-th pixel of the views
+/// (at their median depth), kept where at least one view shows them (in its image and mask,
+/// not hidden): each with the colour of the view that sees it most squarely and the face
+/// normal turned towards that view. Uniform area sampling leaves no holes where every view
+/// sees the surface at a slant, as a sheet between two views 40° apart is.
 pub fn sample_surface_in_views(
     mesh: &Mesh,
     views: &[&View],
     stride: usize,
+    seed: u64,
 ) -> Result<SurfaceSample, PipelineError> {
-    let stride = stride.max(1);
+    let seen: Vec<Seen<'_>> = views
+        .iter()
+        .map(|&view| {
+            Ok(Seen {
+                view,
+                depth: mesh_depth(mesh, &view.camera)?.0,
+            })
+        })
+        .collect::<Result<_, PipelineError>>()?;
+    let depth = median_positive(seen.iter().flat_map(|s| s.depth.iter().map(|&d| d as f64)));
+    let focal = median_positive(
+        views
+            .iter()
+            .map(|v| v.camera.intrinsics.fx.min(v.camera.intrinsics.fy)),
+    );
     let mut sample = SurfaceSample::default();
-    for view in views {
-        let camera = &view.camera;
-        let (depth, triangle) = mesh_depth(mesh, camera)?;
-        let w = camera.width() as usize;
-        let h = camera.height() as usize;
-        for y in (stride / 2..h).step_by(stride) {
-            for x in (stride / 2..w).step_by(stride) {
-                let i = y * w + x;
-                if depth[i] <= 0.0 || !counts(view, i) {
-                    continue;
-                }
-                let p = camera.unproject(x as f64 + 0.5, y as f64 + 0.5, depth[i] as f64);
-                let mut n = mesh.face_cross(triangle[i] as usize).normalize();
-                if n.dot(&(camera.center() - p)) < 0.0 {
-                    n = -n;
-                }
-                if !n.iter().all(|v| v.is_finite()) {
-                    continue;
-                }
-                let rgb = view.image.pixel(x, y);
-                sample
-                    .cloud
-                    .positions
-                    .push([p.x as f32, p.y as f32, p.z as f32]);
-                sample.cloud.colors.push([rgb[0], rgb[1], rgb[2]]);
-                sample.normals.push([n.x as f32, n.y as f32, n.z as f32]);
-            }
+    if depth <= 0.0 || focal <= 0.0 {
+        return Ok(sample);
+    }
+    let spacing = stride.max(1) as f64 * depth / focal;
+    let wanted = (mesh.area() / (spacing * spacing)).ceil();
+    let n = (wanted as usize).clamp(1, MAX_SURFACE_SAMPLES);
+    let (points, faces) = fewview_geom::sampling::sample_surface_with_faces(mesh, n, seed)
+        .map_err(|e| PipelineError::Init(format!("sampling the surface mesh: {e}")))?;
+    for (q, &f) in points.iter().zip(&faces) {
+        let p = Vector3::new(q[0] as f64, q[1] as f64, q[2] as f64);
+        let normal = mesh.face_cross(f as usize).normalize();
+        if !normal.iter().all(|v| v.is_finite()) {
+            continue;
         }
+        let best = seen
+            .iter()
+            .filter_map(|s| s.sees(&p, &normal).map(|(i, c)| (s, i, c)))
+            .max_by(|a, b| a.2.total_cmp(&b.2));
+        let Some((s, i, _)) = best else {
+            continue;
+        };
+        let towards = s.view.camera.center() - p;
+        let n = if normal.dot(&towards) < 0.0 {
+            -normal
+        } else {
+            normal
+        };
+        let c = s.view.image.channels;
+        let rgb = &s.view.image.data[i * c..i * c + 3];
+        sample.cloud.positions.push(*q);
+        sample.cloud.colors.push([rgb[0], rgb[1], rgb[2]]);
+        sample.normals.push([n.x as f32, n.y as f32, n.z as f32]);
+        sample.spacing.push(spacing as f32);
     }
     Ok(sample)
 }
@@ -281,10 +350,14 @@ pub fn quat_z_to(n: [f32; 3]) -> [f32; 4] {
     q.map(|v| v / norm)
 }
 
-/// Gaussians at the sample's points: the photo's colour, scales from the sampling density,
-/// flat along the normal, opacity [`INITIAL_OPACITY`].
+/// Gaussians at the sample's points: the photo's colour, scales from the sampling density
+/// (the nearest neighbours', at most the sample's own spacing), flat along the normal,
+/// opacity [`INITIAL_OPACITY`].
 pub fn from_surface_sample(sample: &SurfaceSample, sh_degree: usize) -> GaussianModel {
-    let scales = knn_scales(&sample.cloud.positions);
+    let scales = knn_scales(&sample.cloud.positions)
+        .into_iter()
+        .zip(&sample.spacing)
+        .map(|(s, &spacing)| s.min(spacing));
     let mut model = GaussianModel::new(sh_degree);
     let positions = &sample.cloud.positions;
     for (((p, c), n), s) in positions
@@ -315,9 +388,10 @@ pub fn surface_model(
     ds: &Dataset,
     run: &SurfaceRun,
     sh_degree: usize,
+    seed: u64,
 ) -> Result<GaussianModel, PipelineError> {
     let views: Vec<&View> = ds.train_views().collect();
-    let sample = sample_surface_in_views(&run.mesh, &views, SURFACE_STRIDE)?;
+    let sample = sample_surface_in_views(&run.mesh, &views, SURFACE_STRIDE, seed)?;
     if sample.cloud.is_empty() {
         return Err(init_error(
             &run.dir,
@@ -464,9 +538,11 @@ mod tests {
     #[test]
     fn samples_lie_on_the_mesh_inside_the_mask_with_the_photos_colours() {
         let (mesh, view) = wall_and_view();
-        let sample = sample_surface_in_views(&mesh, &[&view], 2).unwrap();
-        // Pixels 1, 3, …, 23 of rows 1, 3, …, 23 in columns 17, 19, …, 31: 12 × 8.
-        assert_eq!(sample.cloud.len(), 96);
+        let sample = sample_surface_in_views(&mesh, &[&view], 2, 5).unwrap();
+        // Spacing 2 px at depth 4 and focal 20: 0.4; the wall's 64 square units get 400 samples,
+        // of which the masked right half of the view (3.2 × 4.8 of the wall) shows about 96.
+        let n = sample.cloud.len();
+        assert!((60..=130).contains(&n), "{n} samples");
         for ((p, c), n) in sample
             .cloud
             .positions
@@ -475,24 +551,43 @@ mod tests {
             .zip(&sample.normals)
         {
             assert!((p[2] - 4.0).abs() < 1e-4, "{p:?}");
-            // Back into the view: the pixel it came from, whose colour it carries.
+            // Back into the view: a pixel of the mask's half, whose colour it carries.
             let (u, v, _) = view
                 .camera
                 .project(&Vector3::new(p[0], p[1], p[2]).cast())
                 .unwrap();
-            let (x, y) = ((u - 0.5).round() as usize, (v - 0.5).round() as usize);
-            assert!(x >= 16 && x % 2 == 1 && y % 2 == 1, "({x}, {y})");
+            let (x, y) = (u as usize, v as usize);
+            assert!(x >= 16, "({x}, {y})");
             assert_eq!(c.as_slice(), &view.image.pixel(x, y)[..3]);
             assert_eq!(*n, [0.0, 0.0, -1.0], "faces the camera");
         }
+        assert!(sample.spacing.iter().all(|&s| (s - 0.4).abs() < 1e-5));
         // Flat Gaussians: the smallest axis along the normal, FLATNESS times the others.
         let model = from_surface_sample(&sample, 0);
         let g = model.get(0);
         assert!((g.log_scale[2] - g.log_scale[0] - FLATNESS.ln()).abs() < 1e-6);
+        assert!(g.log_scale[0] <= 0.4f32.ln() + 1e-6);
         assert_eq!(g.quat, quat_z_to([0.0, 0.0, -1.0]));
-        // The depth the term is trained towards: 4 on every pixel of the wall, none outside.
+        // The depth the term is trained towards: 4 on every pixel of the wall.
         let (depth, _) = mesh_depth(&mesh, &view.camera).unwrap();
         assert!(depth.iter().all(|d| (d - 4.0).abs() < 1e-4));
+        // A second wall behind the first is hidden: no sample lands on it.
+        let mut two = mesh.clone();
+        two.vertices.extend([
+            [-4.0, -4.0, 6.0],
+            [4.0, -4.0, 6.0],
+            [4.0, 4.0, 6.0],
+            [-4.0, 4.0, 6.0],
+        ]);
+        two.faces.extend([[4, 5, 6], [4, 6, 7]]);
+        let behind = sample_surface_in_views(&two, &[&view], 2, 5).unwrap();
+        assert!(
+            behind
+                .cloud
+                .positions
+                .iter()
+                .all(|p| (p[2] - 4.0).abs() < 1e-4)
+        );
     }
 
     #[test]

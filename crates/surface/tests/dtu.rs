@@ -284,6 +284,20 @@ fn refined_cameras_file_reloads_as_the_refined_poses(
         .unwrap_or_else(|e| panic!("{e}"));
     let alignment = &report.final_pose_error.alignment;
     let truth = load_dataset(scene, options).unwrap_or_else(|e| panic!("{e}"));
+    // `poses_refined_aligned.json`, what a splat run's `--init surface:DIR` trains with: the
+    // same aligned poses, in the frame of the dataset as loaded.
+    let aligned =
+        fewview_geom::io::cameras::read_cameras(&run_dir.join("poses_refined_aligned.json"))
+            .unwrap_or_else(|e| panic!("{e}"));
+    for (cam, a) in refined.iter().zip(&aligned) {
+        let expected = alignment.apply_to_pose(&cam.world_to_camera);
+        let r = (a.world_to_camera.rotation - expected.rotation).abs().max();
+        let t = (a.world_to_camera.translation - expected.translation).norm();
+        assert!(
+            r < 1e-7 && t < 1e-7,
+            "aligned camera off by {r:.2e}, {t:.2e}"
+        );
+    }
     for (k, (view, cam)) in [22, 25, 28].into_iter().zip(&refined).enumerate() {
         let got = &reloaded.views[view].camera;
         let expected = alignment.apply_to_pose(&cam.world_to_camera);
