@@ -110,6 +110,8 @@ pub enum PipelineError {
     Checkpoint { path: PathBuf, message: String },
     #[error("initialisation: {0}")]
     Init(String),
+    #[error("surface start: {0}")]
+    SurfaceStart(#[from] crate::surface_start::SurfaceStartError),
     #[error("evaluation: {0}")]
     Eval(String),
     #[error(transparent)]
@@ -340,6 +342,22 @@ impl InitStrategy {
             InitStrategy::Stereo => "stereo",
             InitStrategy::Surface(_) => "surface",
         }
+    }
+}
+
+/// When `cfg` starts from a surface run, gives `ds`'s training views the poses `choice` names
+/// ([`crate::surface_start::adopt_surface_poses`]) and returns a line saying which; `None` for
+/// other starts.
+pub fn adopt_init_poses(
+    ds: &mut Dataset,
+    cfg: &RunConfig,
+    choice: crate::surface_start::SurfacePoses,
+) -> Result<Option<String>, PipelineError> {
+    match &cfg.init {
+        InitStrategy::Surface(dir) => Ok(Some(crate::surface_start::adopt_surface_poses(
+            ds, dir, choice,
+        )?)),
+        _ => Ok(None),
     }
 }
 

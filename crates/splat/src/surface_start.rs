@@ -35,7 +35,6 @@ use nalgebra::Vector3;
 
 use crate::init::{INITIAL_OPACITY, knn_scales};
 use crate::model::{Gaussian, GaussianModel, inverse_sigmoid};
-use crate::pipeline::PipelineError;
 use crate::sh::SH_C0;
 use crate::train::{LossContext, LossTerm, TrainError};
 
@@ -61,13 +60,18 @@ pub struct SurfaceRun {
     pub initial_rotation_deg: f64,
 }
 
-fn init_error(path: &Path, message: impl std::fmt::Display) -> PipelineError {
-    PipelineError::Init(format!("{}: {message}", path.display()))
+/// Why a surface start cannot be built, naming the file or the step.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct SurfaceStartError(String);
+
+fn init_error(path: &Path, message: impl std::fmt::Display) -> SurfaceStartError {
+    SurfaceStartError(format!("{}: {message}", path.display()))
 }
 
 impl SurfaceRun {
     /// Reads the surface run in `dir` and checks that it reconstructed `ds`'s training views.
-    pub fn load(dir: &Path, ds: &Dataset) -> Result<Self, PipelineError> {
+    pub fn load(dir: &Path, ds: &Dataset) -> Result<Self, SurfaceStartError> {
         let metrics_path = dir.join("metrics.json");
         let text = std::fs::read_to_string(&metrics_path)
             .map_err(|e| init_error(&metrics_path, format!("{e} (not a finished surface run?)")))?;
@@ -162,16 +166,13 @@ pub enum SurfacePoses {
     Dataset,
 }
 
-/// When `cfg` starts from a surface run, gives `ds`'s training views the poses `choice` names
-/// and says which in a line for the user; `None` for other starts.
+/// Gives `ds`'s training views the poses `choice` names from the surface run in `dir`, and says
+/// which in a line for the user.
 pub fn adopt_surface_poses(
     ds: &mut Dataset,
-    cfg: &crate::pipeline::RunConfig,
+    dir: &Path,
     choice: SurfacePoses,
-) -> Result<Option<String>, PipelineError> {
-    let crate::pipeline::InitStrategy::Surface(dir) = &cfg.init else {
-        return Ok(None);
-    };
+) -> Result<String, SurfaceStartError> {
     let run = SurfaceRun::load(dir, ds)?;
     let refined = match choice {
         SurfacePoses::Auto => run.started_from_noise(),
@@ -179,17 +180,17 @@ pub fn adopt_surface_poses(
         SurfacePoses::Dataset => false,
     };
     if !refined {
-        return Ok(Some(format!(
+        return Ok(format!(
             "surface start from {}: training with the dataset's poses",
             dir.display()
-        )));
+        ));
     }
     run.adopt_poses(ds);
-    Ok(Some(format!(
+    Ok(format!(
         "surface start from {}: training with its refined poses (it started {:.2}° off)",
         dir.display(),
         run.initial_rotation_deg
-    )))
+    ))
 }
 
 /// Points on a mesh where views see it.
@@ -213,7 +214,7 @@ fn near_plane(mesh: &Mesh, camera: &Camera) -> f32 {
 
 /// The mesh's z-depth through every pixel centre of `camera` (0 where it shows no surface) and
 /// the triangle seen there.
-pub fn mesh_depth(mesh: &Mesh, camera: &Camera) -> Result<(Vec<f32>, Vec<u32>), PipelineError> {
+pub fn mesh_depth(mesh: &Mesh, camera: &Camera) -> Result<(Vec<f32>, Vec<u32>), SurfaceStartError> {
     let r = rasterize(
         &mesh.vertices,
         &mesh.faces,
@@ -222,7 +223,7 @@ pub fn mesh_depth(mesh: &Mesh, camera: &Camera) -> Result<(Vec<f32>, Vec<u32>), 
         camera,
         near_plane(mesh, camera),
     )
-    .map_err(|e| PipelineError::Init(format!("rasterising the surface mesh: {e}")))?;
+    .map_err(|e| SurfaceStartError(format!("rasterising the surface mesh: {e}")))?;
     Ok((r.depth, r.triangle))
 }
 
@@ -284,7 +285,7 @@ pub fn sample_surface_in_views(
     views: &[&View],
     stride: usize,
     seed: u64,
-) -> Result<SurfaceSample, PipelineError> {
+) -> Result<SurfaceSample, SurfaceStartError> {
     let seen: Vec<Seen<'_>> = views
         .iter()
         .map(|&view| {
@@ -293,7 +294,7 @@ pub fn sample_surface_in_views(
                 depth: mesh_depth(mesh, &view.camera)?.0,
             })
         })
-        .collect::<Result<_, PipelineError>>()?;
+        .collect::<Result<_, SurfaceStartError>>()?;
     let depth = median_positive(seen.iter().flat_map(|s| s.depth.iter().map(|&d| d as f64)));
     let focal = median_positive(
         views
@@ -308,7 +309,7 @@ pub fn sample_surface_in_views(
     let wanted = (mesh.area() / (spacing * spacing)).ceil();
     let n = (wanted as usize).clamp(1, MAX_SURFACE_SAMPLES);
     let (points, faces) = fewview_geom::sampling::sample_surface_with_faces(mesh, n, seed)
-        .map_err(|e| PipelineError::Init(format!("sampling the surface mesh: {e}")))?;
+        .map_err(|e| SurfaceStartError(format!("sampling the surface mesh: {e}")))?;
     for (q, &f) in points.iter().zip(&faces) {
         let p = Vector3::new(q[0] as f64, q[1] as f64, q[2] as f64);
         let normal = mesh.face_cross(f as usize).normalize();
@@ -389,7 +390,7 @@ pub fn surface_model(
     run: &SurfaceRun,
     sh_degree: usize,
     seed: u64,
-) -> Result<GaussianModel, PipelineError> {
+) -> Result<GaussianModel, SurfaceStartError> {
     let views: Vec<&View> = ds.train_views().collect();
     let sample = sample_surface_in_views(&run.mesh, &views, SURFACE_STRIDE, seed)?;
     if sample.cloud.is_empty() {
@@ -413,7 +414,7 @@ pub struct SurfaceDepthTerm {
 
 impl SurfaceDepthTerm {
     /// The term for `ds`'s training views (their current cameras) and `mesh`.
-    pub fn new(ds: &Dataset, mesh: &Mesh, weight: f32) -> Result<Self, PipelineError> {
+    pub fn new(ds: &Dataset, mesh: &Mesh, weight: f32) -> Result<Self, SurfaceStartError> {
         let depths = ds
             .train_views()
             .map(|v| {
@@ -424,7 +425,7 @@ impl SurfaceDepthTerm {
                     .map(|(i, &d)| if counts(v, i) { d } else { 0.0 })
                     .collect())
             })
-            .collect::<Result<_, PipelineError>>()?;
+            .collect::<Result<_, SurfaceStartError>>()?;
         Ok(Self { depths, weight })
     }
 }

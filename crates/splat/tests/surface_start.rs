@@ -9,10 +9,11 @@ use fewview_geom::depth::depth_to_mesh;
 use fewview_scene::synthetic::{DemoOptions, DemoShading, demo_dataset, demo_depth};
 use fewview_scene::{Camera, Dataset, Se3};
 use fewview_splat::eval::render_model;
+use fewview_splat::pipeline::adopt_init_poses;
 use fewview_splat::pipeline::{InitStrategy, RunConfig, initial_model, train_run};
 use fewview_splat::raster::{RenderCamera, RenderSettings};
 use fewview_splat::read_ply;
-use fewview_splat::surface_start::{SurfacePoses, adopt_surface_poses, mesh_depth};
+use fewview_splat::surface_start::{SurfacePoses, mesh_depth};
 use fewview_splat::train::TrainConfig;
 use nalgebra::Vector3;
 
@@ -127,7 +128,7 @@ fn refined_poses_replace_the_training_cameras_when_the_run_started_elsewhere() {
         let dir = tmp.path().join(format!("run-{initial_deg}-{choice:?}"));
         write_surface_run(&dir, &ds.name, &ds.train, &mesh, &moved, initial_deg);
         let mut now = ds.clone();
-        let line = adopt_surface_poses(&mut now, &surface_config(&dir, 10, 0.2), choice)
+        let line = adopt_init_poses(&mut now, &surface_config(&dir, 10, 0.2), choice)
             .unwrap()
             .unwrap();
         let want = if adopted {

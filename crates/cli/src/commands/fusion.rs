@@ -11,8 +11,8 @@ use fewview_fusion::{FusionConfig, Variant, fusion_run};
 use fewview_scene::photometric::{PhotoGain, jitter_training_photos, training_gains};
 use fewview_scene::synthetic::{DemoOptions, demo_dataset, demo_render};
 use fewview_scene::{Dataset, Image};
+use fewview_splat::pipeline::adopt_init_poses;
 use fewview_splat::pipeline::{RunConfig, RunSummary, default_iterations};
-use fewview_splat::surface_start::adopt_surface_poses;
 
 use super::dataset_args::{ViewList, parse_views};
 use super::output_paths::check_folder;
@@ -159,7 +159,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         default_iterations(&ds)
     };
     let cfg = args.train.run_config(ds.background, default)?;
-    if let Some(line) = adopt_surface_poses(&mut ds, &cfg, args.train.surface_poses.into())? {
+    if let Some(line) = adopt_init_poses(&mut ds, &cfg, args.train.surface_poses.into())? {
         eprintln!("{line}");
     }
     if args.rescore {

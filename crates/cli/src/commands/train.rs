@@ -5,10 +5,10 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
 use fewview_scene::split;
+use fewview_splat::pipeline::adopt_init_poses;
 use fewview_splat::pipeline::{
     RunConfig, RunSummary, default_iterations, initial_model, train_run,
 };
-use fewview_splat::surface_start::adopt_surface_poses;
 
 use super::dataset_args::DatasetArgs;
 use super::output_paths::check_folder;
@@ -45,7 +45,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let cfg = args
         .train
         .run_config(ds.background, default_iterations(&ds))?;
-    if let Some(line) = adopt_surface_poses(&mut ds, &cfg, args.train.surface_poses.into())? {
+    if let Some(line) = adopt_init_poses(&mut ds, &cfg, args.train.surface_poses.into())? {
         eprintln!("{line}");
     }
     let out = args.out.clone().unwrap_or_else(|| {
