@@ -134,6 +134,12 @@ pub fn rasterize(
     Ok(out)
 }
 
+/// A mesh's z-depth through every pixel centre of `camera`, 0 where it shows no surface
+/// ([`rasterize`] without attributes).
+pub fn mesh_depth(mesh: &Mesh, camera: &Camera, near: f32) -> Result<Vec<f32>> {
+    Ok(rasterize(&mesh.vertices, &mesh.faces, &[], 0, camera, near)?.depth)
+}
+
 /// [`rasterize`] with a mesh's vertex colours as the 3 attributes (an error if it has none).
 pub fn rasterize_mesh_colors(mesh: &Mesh, camera: &Camera, near: f32) -> Result<Rasterized> {
     let colors = mesh

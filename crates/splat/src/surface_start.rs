@@ -28,7 +28,6 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::{Tensor, TensorData};
 use fewview_geom::Mesh;
-use fewview_geom::raster::rasterize;
 use fewview_geom::similarity::Similarity;
 use fewview_scene::{Camera, Dataset, PointCloud, View};
 use nalgebra::Vector3;
@@ -212,19 +211,10 @@ fn near_plane(mesh: &Mesh, camera: &Camera) -> f32 {
     (1e-4 * (camera.center() - centre).norm()).max(1e-9) as f32
 }
 
-/// The mesh's z-depth through every pixel centre of `camera` (0 where it shows no surface) and
-/// the triangle seen there.
-pub fn mesh_depth(mesh: &Mesh, camera: &Camera) -> Result<(Vec<f32>, Vec<u32>), SurfaceStartError> {
-    let r = rasterize(
-        &mesh.vertices,
-        &mesh.faces,
-        &[],
-        0,
-        camera,
-        near_plane(mesh, camera),
-    )
-    .map_err(|e| SurfaceStartError(format!("rasterising the surface mesh: {e}")))?;
-    Ok((r.depth, r.triangle))
+/// The mesh's z-depth through every pixel centre of `camera`, 0 where it shows no surface.
+pub fn mesh_depth(mesh: &Mesh, camera: &Camera) -> Result<Vec<f32>, SurfaceStartError> {
+    fewview_geom::raster::mesh_depth(mesh, camera, near_plane(mesh, camera))
+        .map_err(|e| SurfaceStartError(format!("rasterising the surface mesh: {e}")))
 }
 
 /// Whether `view` counts pixel `i`: inside its mask and its valid region, when it has them.
@@ -291,7 +281,7 @@ pub fn sample_surface_in_views(
         .map(|&view| {
             Ok(Seen {
                 view,
-                depth: mesh_depth(mesh, &view.camera)?.0,
+                depth: mesh_depth(mesh, &view.camera)?,
             })
         })
         .collect::<Result<_, SurfaceStartError>>()?;
@@ -418,7 +408,7 @@ impl SurfaceDepthTerm {
         let depths = ds
             .train_views()
             .map(|v| {
-                let (depth, _) = mesh_depth(mesh, &v.camera)?;
+                let depth = mesh_depth(mesh, &v.camera)?;
                 Ok(depth
                     .iter()
                     .enumerate()
@@ -570,7 +560,7 @@ mod tests {
         assert!(g.log_scale[0] <= 0.4f32.ln() + 1e-6);
         assert_eq!(g.quat, quat_z_to([0.0, 0.0, -1.0]));
         // The depth the term is trained towards: 4 on every pixel of the wall.
-        let (depth, _) = mesh_depth(&mesh, &view.camera).unwrap();
+        let depth = mesh_depth(&mesh, &view.camera).unwrap();
         assert!(depth.iter().all(|d| (d - 4.0).abs() < 1e-4));
         // A second wall behind the first is hidden: no sample lands on it.
         let mut two = mesh.clone();

@@ -158,7 +158,7 @@ fn depth_error(ds: &Dataset, mesh: &Mesh, run: &Path) -> f64 {
     let (mut sum, mut n) = (0.0, 0usize);
     for v in ds.train_views() {
         let r = render_model(&model, &RenderCamera::from(&v.camera), &settings);
-        let (target, _) = mesh_depth(mesh, &v.camera).unwrap();
+        let target = mesh_depth(mesh, &v.camera).unwrap();
         for (d, t) in r.depth.data.iter().zip(target) {
             if t > 0.0 {
                 sum += ((d - t) / t).abs() as f64;

@@ -90,11 +90,8 @@ impl DatasetArgs {
         let folder = self.folder()?;
         let (mut ds, report) = load_dataset_with_report(folder, &self.load_options())
             .with_context(|| format!("cannot load dataset {}", folder.display()))?;
-        if self.object_only && ds.composite_masks_as_alpha() == 0 {
-            anyhow::bail!(
-                "--object-only: {} has no separate foreground masks to use as alpha",
-                folder.display()
-            );
+        if self.object_only {
+            object_only(&mut ds, folder)?;
         }
         for w in &report.warnings {
             eprintln!("warning: {w}");
@@ -109,6 +106,18 @@ impl DatasetArgs {
         }
         Ok(ds)
     }
+}
+
+/// `--object-only`: the separate foreground masks of `ds` (read from `folder`) become its
+/// photos' alpha ([`Dataset::composite_masks_as_alpha`]); an error when it has none.
+pub fn object_only(ds: &mut Dataset, folder: &Path) -> anyhow::Result<()> {
+    if ds.composite_masks_as_alpha() == 0 {
+        anyhow::bail!(
+            "--object-only: {} has no separate foreground masks to use as alpha",
+            folder.display()
+        );
+    }
+    Ok(())
 }
 
 /// The pinhole camera undistorted views share, as `fx,fy,cx,cy,w,h` (the form

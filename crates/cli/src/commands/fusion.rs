@@ -14,7 +14,7 @@ use fewview_scene::{Dataset, Image};
 use fewview_splat::pipeline::adopt_init_poses;
 use fewview_splat::pipeline::{RunConfig, RunSummary, default_iterations};
 
-use super::dataset_args::{ViewList, parse_views};
+use super::dataset_args::{ViewList, object_only, parse_views};
 use super::output_paths::check_folder;
 use super::photo_args::{DemoSceneArgs, JitterArgs};
 use super::progress;
@@ -346,11 +346,8 @@ fn load(args: &Args) -> anyhow::Result<(Dataset, Option<DemoOptions>, Vec<(Strin
     };
     let mut ds = fewview_scene::load_dataset(folder, &options)
         .with_context(|| format!("cannot load dataset {}", folder.display()))?;
-    if args.object_only && ds.composite_masks_as_alpha() == 0 {
-        bail!(
-            "--object-only: {} has no separate foreground masks to use as alpha",
-            folder.display()
-        );
+    if args.object_only {
+        object_only(&mut ds, folder)?;
     }
     let gains = jitter_training_photos(&mut ds, &jitter);
     Ok((ds, None, gains))

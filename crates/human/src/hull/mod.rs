@@ -220,11 +220,10 @@ impl Hull {
 
 /// A mesh's z-depth through every pixel centre of `camera`, 0 where none.
 pub fn render_depth(mesh: &Mesh, camera: &Camera) -> Result<DepthMap> {
-    let r = raster::rasterize(&mesh.vertices, &mesh.faces, &[], 0, camera, NEAR)?;
     Ok(DepthMap {
-        width: r.width,
-        height: r.height,
-        data: r.depth,
+        width: camera.width() as usize,
+        height: camera.height() as usize,
+        data: raster::mesh_depth(mesh, camera, NEAR)?,
     })
 }
 
