@@ -150,3 +150,64 @@ fn train_one_step(data: &Path, out: &Path, variant: &str) {
         variant,
     ]);
 }
+
+/// `human depth` on the fixture (no depth maps: no truth row) writes its report and strip; a
+/// camera that is not an input camera is refused before anything is written; and training with
+/// the dataset's depth as input on a capture without depth maps is refused the same way.
+#[test]
+fn human_depth_reports_stereo_and_refuses_what_the_capture_cannot_give() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = zju_fixture();
+    let depth = |out: &Path, extra: &[&str]| {
+        let mut a = vec!["human", "depth", "--data", s(&data), "--out", s(out)];
+        a.extend(["--input-cameras", "3"]);
+        a.extend(extra);
+        fewview(&a)
+    };
+    let bad = dir.path().join("bad");
+    assert_clean_error(
+        &depth(&bad, &["--camera", "3"]),
+        &["--camera 3", "input camera"],
+    );
+    assert!(!bad.exists(), "an output folder was written");
+
+    let out = dir.path().join("depth");
+    let done = depth(&out, &[]);
+    assert!(
+        done.status.success(),
+        "{}",
+        String::from_utf8_lossy(&done.stderr)
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("depth_report.json")).unwrap())
+            .unwrap();
+    assert!(report["truth"].is_null());
+    assert!(
+        report["stereo"]["flicker_m"]
+            .as_f64()
+            .is_some_and(f64::is_finite)
+    );
+    let strip = fewview_scene::Image::load(&out.join("depth_strip.png")).unwrap();
+    // Three frames of one camera, image + hull + stereo each.
+    assert_eq!(strip.width % 3, 0);
+
+    let run = dir.path().join("run");
+    let refused = fewview(&[
+        "human",
+        "train",
+        "--data",
+        s(&data),
+        "--out",
+        s(&run),
+        "--input-cameras",
+        "3",
+        "--train-frames",
+        "2",
+        "--iterations",
+        "1",
+        "--depth",
+        "dataset",
+    ]);
+    assert_clean_error(&refused, &["no depth maps"]);
+    assert!(!run.exists(), "an output folder was written");
+}

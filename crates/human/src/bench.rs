@@ -83,16 +83,19 @@ fn synthetic_view(index: usize, angle: f64, framing: &Framing) -> PreparedView {
     let joints = (0..17)
         .map(|j| [w as f64 / 2.0, h as f64 * (0.1 + 0.05 * j as f64)])
         .collect();
+    let hull_depth = DepthMap {
+        width: w,
+        height: h,
+        data: depth,
+    };
     PreparedView {
         camera_index: index,
         camera,
         image,
         mask: Mask::new(w, h, mask),
-        hull_depth: DepthMap {
-            width: w,
-            height: h,
-            data: depth,
-        },
+        input_depth: hull_depth.clone(),
+        stereo_matched: 0.0,
+        hull_depth,
         depth: None,
         joints,
     }

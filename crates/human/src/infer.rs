@@ -62,7 +62,7 @@ impl Model {
 /// features, TPS and the rest).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct FrameTimes {
-    /// Visual hull and crops of the input views.
+    /// Visual hull, crops and input depth of the input views.
     pub preparation: f64,
     pub network: ForwardTimes,
     pub tps: f64,
@@ -231,7 +231,8 @@ impl<'a> SequenceRenderer<'a> {
             frame,
             &hull_config(self.model.config.hull_voxel),
         )?;
-        prepare_frame(&self.inputs, frame, &mesh, &self.model.framing)
+        let depth = self.model.config.depth_settings();
+        prepare_frame(&self.inputs, frame, &mesh, &self.model.framing, &depth)
     }
 
     /// The network once on every needed input camera (one batch).

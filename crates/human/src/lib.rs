@@ -12,6 +12,8 @@
 //! - [`split`]: the paper's protocol (8 input cameras, held-out views, novel poses) and
 //!   [`TrainingView`], which cannot open anything outside the training set.
 //! - [`hull`]: the visual hull of the input masks and its depth in each source view.
+//! - [`depth`]: the depth the network reads (per-frame stereo bounded by the hull, the hull's,
+//!   or the capture's) and its flicker over frames; [`depth_report`] compares them on a capture.
 //! - [`gaussians`]: the heads' maps to one Gaussian per foreground pixel, the source views
 //!   nearest a target, and the differentiable render into it (fewview-splat's rasterizer).
 //! - [`net`]: the network (three encoders, a U-Net decoder, Gaussian-parameter heads), the pose
@@ -31,6 +33,8 @@ pub mod baseline;
 pub mod bench;
 pub mod capture;
 pub mod dataset;
+pub mod depth;
+pub mod depth_report;
 pub mod error;
 pub mod eval;
 pub mod gaussians;

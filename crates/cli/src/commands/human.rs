@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use clap::{Args as ClapArgs, Subcommand, ValueEnum};
+use fewview_human::depth::DepthInput;
 use fewview_human::net::Variant;
 use fewview_human::tps::TpsConfig;
 use fewview_human::train::{Preset, TrainConfig, Trainer};
@@ -19,7 +20,8 @@ use super::progress;
 /// `train` fits the network on the input cameras of the training frames (the split of
 /// PoseGaussian's protocol: on `seq_a`, cameras 2, 5, 8, 11 and frames 40–59 are never read);
 /// `render` draws any camera of the rig, or a path circling it, from the input cameras of each
-/// frame; `eval` scores the held-out cameras against the baselines.
+/// frame; `eval` scores the held-out cameras against the baselines; `depth` compares the input
+/// depths (hull, per-frame stereo, the capture's) and how much each flickers.
 #[derive(Debug, ClapArgs)]
 pub struct Args {
     #[command(subcommand)]
@@ -31,6 +33,30 @@ pub enum HumanCommand {
     Train(TrainArgs),
     Render(RenderArgs),
     Eval(EvalArgs),
+    Depth(DepthArgs),
+}
+
+/// The depth the network reads (`fewview_human::depth::DepthInput`).
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum DepthArg {
+    /// Two-view stereo per frame with the nearest input camera, searched over the visual
+    /// hull's depth range, the hull where it does not match (the paper's setting: per-frame
+    /// depth that flickers).
+    Stereo,
+    /// The visual hull of the input masks (smooth over time).
+    Hull,
+    /// The capture's own depth maps (an oracle; the synthetic capture has them).
+    Dataset,
+}
+
+impl From<DepthArg> for DepthInput {
+    fn from(d: DepthArg) -> Self {
+        match d {
+            DepthArg::Stereo => DepthInput::Stereo,
+            DepthArg::Hull => DepthInput::Hull,
+            DepthArg::Dataset => DepthInput::Dataset,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -93,6 +119,9 @@ pub struct TrainArgs {
     /// Feed the pose encoder zeros (the per-frame baseline of PoseGaussian's comparison).
     #[arg(long)]
     pub no_pose: bool,
+    /// The depth the network reads and refines.
+    #[arg(long, value_enum, default_value = "stereo")]
+    pub depth: DepthArg,
     /// Write a checkpoint every N iterations (and at the end).
     #[arg(long, default_value_t = 100)]
     pub checkpoint_every: usize,
@@ -122,21 +151,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         HumanCommand::Train(a) => train(a),
         HumanCommand::Render(a) => render(a),
         HumanCommand::Eval(a) => eval(a),
+        HumanCommand::Depth(a) => depth(a),
+    }
+}
+
+fn preset(arg: PresetArg) -> Preset {
+    match arg {
+        PresetArg::Cpu => Preset::Cpu,
+        PresetArg::Paper => Preset::Paper,
     }
 }
 
 fn config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     Ok(TrainConfig {
-        preset: match args.preset {
-            PresetArg::Cpu => Preset::Cpu,
-            PresetArg::Paper => Preset::Paper,
-        },
+        preset: preset(args.preset),
         variant: Variant::from_number(args.variant)?,
         iterations: args.iterations,
         learning_rate: args.lr,
         seed: args.seed,
         source_views: args.source_views,
         use_pose: !args.no_pose,
+        depth: args.depth.into(),
+        bracket: DepthInput::from(args.depth).bracket(),
         ..TrainConfig::default()
     })
 }
@@ -590,6 +626,99 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         t.tps,
         t.rendering,
         args.capture.out.display()
+    );
+    Ok(())
+}
+
+/// Compare the input depths of the input cameras over frames: writes `depth_report.json` (each
+/// depth's flicker between frames, its flicker beyond the person's motion and its error against
+/// the capture's depth) and `depth_strip.png` (one camera's frames: image, hull, stereo, truth).
+#[derive(Debug, ClapArgs)]
+pub struct DepthArgs {
+    #[command(flatten)]
+    pub capture: CaptureArgs,
+    /// Frames `A..=B` (default: all).
+    #[arg(long, value_name = "A..=B")]
+    pub frames: Option<String>,
+    /// The crops' size, as the network preset reads them.
+    #[arg(long, value_enum, default_value = "cpu")]
+    pub preset: PresetArg,
+    /// Input cameras, spread uniformly over the rig (as `train`).
+    #[arg(long, default_value_t = fewview_human::split::PAPER_INPUT_CAMERAS)]
+    pub input_cameras: usize,
+    /// The camera of `depth_strip.png` (default: the first input camera).
+    #[arg(long)]
+    pub camera: Option<usize>,
+}
+
+fn depth(args: DepthArgs) -> anyhow::Result<()> {
+    use fewview_human::depth_report::{DepthReportConfig, measure, strip};
+    use fewview_human::train::prepare::InferenceInputs;
+    let (_, capture) = fewview_human::capture::open(&args.capture.data, &args.capture.sequence)?;
+    let split = Split::for_capture(&*capture, args.input_cameras, None)?;
+    let frames = match &args.frames {
+        Some(t) => parse_frames(t)?,
+        None => split.all_frames(),
+    };
+    if frames.end > capture.frame_count() {
+        bail!("--frames: the capture has {} frames", capture.frame_count());
+    }
+    let camera = args.camera.unwrap_or(split.input_cameras[0]);
+    if !split.input_cameras.contains(&camera) {
+        bail!(
+            "--camera {camera} is not an input camera ({:?})",
+            split.input_cameras
+        );
+    }
+    let train = TrainConfig {
+        preset: preset(args.preset),
+        ..TrainConfig::default()
+    };
+    let net = fewview_human::train::trainer::net_config(&train, &capture.joint_parents()?);
+    let config = DepthReportConfig {
+        frames: frames.clone(),
+        size: [net.input[1], net.input[0]],
+        crop_margin: train.crop_margin,
+        hull_voxel: train.hull_voxel,
+        stereo: train.stereo.clone(),
+    };
+    let inputs = InferenceInputs {
+        source: &*capture,
+        split: &split,
+    };
+    eprintln!(
+        "human depth: hull and stereo depth of {} input cameras over frames {}..={}…",
+        split.input_cameras.len(),
+        frames.start,
+        frames.end - 1
+    );
+    let (report, prepared) = measure(&inputs, &config)?;
+    let out = &args.capture.out;
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    let shown: Vec<usize> = frames.clone().take(4).collect();
+    strip(&prepared, camera, &shown)?.save_png(&out.join("depth_strip.png"))?;
+    let json = out.join("depth_report.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&report)?)
+        .with_context(|| format!("{}: cannot write", json.display()))?;
+    let mm = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{:.1} mm", 1e3 * v));
+    for (name, s) in [("hull", &report.hull), ("stereo", &report.stereo)]
+        .into_iter()
+        .chain(report.truth.as_ref().map(|t| ("truth", t)))
+    {
+        println!(
+            "{name:>6}: flicker {}, beyond the motion {}, error {}",
+            mm(s.flicker_m),
+            mm(s.flicker_beyond_truth_m),
+            mm(s.error_m)
+        );
+    }
+    println!(
+        "stereo matched {:.0} % of the masked pixels; flicker stereo/hull {}; written to {}",
+        100.0 * report.stereo_matched,
+        report
+            .flicker_ratio
+            .map_or("–".to_string(), |r| format!("{r:.2}×")),
+        out.display()
     );
     Ok(())
 }

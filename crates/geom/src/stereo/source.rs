@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use fewview_scene::Image;
+use fewview_scene::{Camera, Image};
 
 use super::pairs::StereoView;
 use super::rectify::{Rectification, RectifiedImage, Side};
@@ -130,6 +130,20 @@ pub fn disparity_range(rect: &Rectification, near: f64, far: f64) -> (i32, usize
     (lo, count.div_ceil(16) * 16)
 }
 
+/// The rectification [`match_pair`] uses for cameras `first` and `second`, and whether it
+/// swapped them (the rectified left camera is `second` when `second` sits to `first`'s left).
+pub fn rectify_pair(first: &Camera, second: &Camera) -> Result<(Rectification, bool)> {
+    let baseline = second.center() - first.center();
+    let first_x = first.world_to_camera.rotation.row(0).transpose();
+    let swapped = baseline.dot(&first_x) < 0.0;
+    let (l, r) = if swapped {
+        (second, first)
+    } else {
+        (first, second)
+    };
+    Ok((Rectification::new(l, r)?, swapped))
+}
+
 /// Rectifies `first` and `second`, brings them to one brightness (`photometry`), matches them
 /// both ways and maps the disparities back to depth in the original cameras. `range` picks the disparity search range (with
 /// [`DisparityRange::FromDepthBounds`] both views need depth bounds; see
@@ -143,16 +157,13 @@ pub fn match_pair(
     photometry: Photometry,
 ) -> Result<PairStereo> {
     let pair_name = || format!("views {} and {}", first.name, second.name);
-    let baseline = second.camera.center() - first.camera.center();
-    let first_x = first.camera.world_to_camera.rotation.row(0).transpose();
-    let swapped = baseline.dot(&first_x) < 0.0;
+    let (rect, swapped) = rectify_pair(first.camera, second.camera)
+        .map_err(|e| GeomError::invalid(pair_name(), e.to_string()))?;
     let (l, r) = if swapped {
         (second, first)
     } else {
         (first, second)
     };
-    let rect = Rectification::new(l.camera, r.camera)
-        .map_err(|e| GeomError::invalid(pair_name(), e.to_string()))?;
     let mut params = params.clone();
     if let DisparityRange::Fixed { min, count } = range {
         (params.min_disparity, params.num_disparities) = (min, count);

@@ -4,36 +4,15 @@
 use burn::tensor::{Device, Tensor, TensorData};
 use fewview_scene::Camera;
 use fewview_splat::op::GaussianTensors;
-use serde::{Deserialize, Serialize};
 
 use super::prepare::{Framing, PreparedView};
+pub use crate::depth::DepthBracket;
 use crate::error::Result;
 use crate::gaussians::{
     GaussianOptions, PixelMaps, Rendered, SourceView, concat, pixel_gaussians, render_gaussians,
 };
 use crate::net::posemap::pose_map_host;
 use crate::net::{HeadOutputs, NetInput, PoseGaussianNet, PoseMapConfig};
-
-/// Where the depth head's `(−1, 1)` lands (a deviation: the paper normalises depth to the
-/// scene's near/far range; ours brackets each pixel around the visual hull's depth, which the
-/// true surface lies behind, so that the head refines the hull instead of finding the person
-/// in a range of metres).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct DepthBracket {
-    /// How far in front of the hull the depth may go (metres).
-    pub front: f32,
-    /// How far behind it.
-    pub behind: f32,
-}
-
-impl Default for DepthBracket {
-    fn default() -> Self {
-        Self {
-            front: 0.03,
-            behind: 0.12,
-        }
-    }
-}
 
 /// What the prediction reads besides the views.
 #[derive(Clone, Debug)]
@@ -64,8 +43,8 @@ fn chw(data: &[f32], channels: usize, w: usize, h: usize) -> Vec<f32> {
     out
 }
 
-/// The network's input for `views`: the image in `[−1, 1]`, the pose map, the hull's depth
-/// normalised to `[−1, 1]` over the framing's near/far (1 where the ray misses the hull).
+/// The network's input for `views`: the image in `[−1, 1]`, the pose map, the input depth
+/// ([`crate::depth`]) normalised to `[−1, 1]` over the framing's near/far (1 where there is none).
 pub fn net_input(
     views: &[&PreparedView],
     s: &ForwardSettings<'_>,
@@ -87,7 +66,7 @@ pub fn net_input(
             pose.extend(std::iter::repeat_n(0.0, channels * w * h));
         }
         let (near, far) = (s.framing.near as f32, s.framing.far as f32);
-        depth.extend(v.hull_depth.data.iter().map(|&d| {
+        depth.extend(v.input_depth.data.iter().map(|&d| {
             if d > 0.0 {
                 (2.0 * (d - near) / (far - near) - 1.0).clamp(-1.0, 1.0)
             } else {
@@ -104,8 +83,8 @@ pub fn net_input(
     })
 }
 
-/// Metric depth of batch item `index`: the hull bracket where the hull is seen, the framing's
-/// near/far elsewhere.
+/// Metric depth of batch item `index`: the bracket around the input depth where there is one,
+/// the framing's near/far elsewhere.
 fn bracket_depth(
     heads: &HeadOutputs,
     index: usize,
@@ -116,7 +95,7 @@ fn bracket_depth(
     let (near, far) = (s.framing.near as f32, s.framing.far as f32);
     let b = s.bracket;
     let (base, span): (Vec<f32>, Vec<f32>) = view
-        .hull_depth
+        .input_depth
         .data
         .iter()
         .map(|&d| {

@@ -1,12 +1,14 @@
 //! Everything the network and the loss read for one frame, computed once: per input camera the
-//! cropped image, mask, pose joints and visual-hull depth (and the dataset's depth, which only
-//! the loss reads).
+//! cropped image, mask, pose joints, visual-hull depth and the depth the network reads
+//! ([`crate::depth`]: stereo, the hull's or the dataset's), and the dataset's depth, which the
+//! loss reads.
 
 use fewview_geom::Mesh;
 use fewview_scene::{Camera, Image};
 use rayon::prelude::*;
 
 use super::crop::{Crop, common_scale};
+use crate::depth::{DepthInput, StereoInput, StereoSettings, pair_depth, stereo_partners};
 use crate::error::{HumanError, Result};
 use crate::gaussians::{Nearness, nearest_sources};
 use crate::hull::{Bounds, Hull, HullConfig, render_depth};
@@ -83,8 +85,13 @@ impl InputViews for InferenceInputs<'_> {
         self.check(camera)?;
         self.source.mask(camera, frame)
     }
-    fn depth(&self, _camera: usize, _frame: usize) -> Result<Option<DepthMap>> {
-        Ok(None)
+    /// The capture's depth of an input camera where it has depth maps (the oracle input depth).
+    fn depth(&self, camera: usize, frame: usize) -> Result<Option<DepthMap>> {
+        self.check(camera)?;
+        if !self.source.has_depth() {
+            return Ok(None);
+        }
+        self.source.depth(camera, frame).map(Some)
     }
     fn joints2d(&self, camera: usize, frame: usize) -> Result<Vec<[f64; 2]>> {
         self.check(camera)?;
@@ -103,6 +110,11 @@ pub struct PreparedView {
     pub mask: Mask,
     /// The visual hull's z-depth (0 where the ray misses it).
     pub hull_depth: DepthMap,
+    /// The depth the network reads and the depth head refines ([`DepthInput`]).
+    pub input_depth: DepthMap,
+    /// The fraction of the view's masked hull pixels whose input depth came from stereo (0
+    /// for the other inputs).
+    pub stereo_matched: f64,
     /// The dataset's depth, when it has one.
     pub depth: Option<DepthMap>,
     /// 2D joints in the crop's pixels.
@@ -229,14 +241,23 @@ pub fn frame_hull(inputs: &dyn InputViews, frame: usize, config: &HullConfig) ->
     Hull::carve(&cameras, &masks, config)?.mesh()
 }
 
-/// The input views of `frame`, cropped by `framing`, with the hull `mesh`'s depth.
+/// Which depth the network reads, and how stereo finds it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DepthSettings {
+    pub input: DepthInput,
+    pub stereo: StereoSettings,
+}
+
+/// The input views of `frame`, cropped by `framing`, with the hull `mesh`'s depth and the
+/// input depth `depth` asks for.
 pub fn prepare_frame(
     inputs: &dyn InputViews,
     frame: usize,
     mesh: &Mesh,
     framing: &Framing,
+    depth: &DepthSettings,
 ) -> Result<PreparedFrame> {
-    let views = inputs
+    let mut views = inputs
         .input_cameras()
         .par_iter()
         .map(|&c| {
@@ -244,16 +265,71 @@ pub fn prepare_frame(
             let crop = framing.crop(full);
             let camera = crop.camera(full);
             let joints = inputs.joints2d(c, frame)?;
+            let hull_depth = render_depth(mesh, &camera)?;
             Ok(PreparedView {
                 camera_index: c,
                 image: crop.image(&inputs.image(c, frame)?),
                 mask: crop.mask(&inputs.mask(c, frame)?),
-                hull_depth: render_depth(mesh, &camera)?,
+                input_depth: hull_depth.clone(),
+                stereo_matched: 0.0,
+                hull_depth,
                 depth: inputs.depth(c, frame)?.map(|d| crop.depth(&d)),
                 joints: joints.iter().map(|&p| crop.point(p)).collect(),
                 camera,
             })
         })
         .collect::<Result<Vec<_>>>()?;
+    match depth.input {
+        DepthInput::Hull => {}
+        DepthInput::Dataset => {
+            for v in &mut views {
+                v.input_depth = v.depth.clone().ok_or_else(|| {
+                    HumanError::argument(
+                        "depth input",
+                        "the capture has no depth maps, so the dataset's depth cannot be the input (choose stereo or hull)",
+                    )
+                })?;
+            }
+        }
+        DepthInput::Stereo => add_stereo_depth(&mut views, &depth.stereo)?,
+    }
     Ok(PreparedFrame { frame, views })
+}
+
+/// Replaces each view's input depth by stereo with its partner ([`stereo_partners`]), each
+/// pair matched once.
+fn add_stereo_depth(views: &mut [PreparedView], settings: &StereoSettings) -> Result<()> {
+    let cameras: Vec<&Camera> = views.iter().map(|v| &v.camera).collect();
+    let partners = stereo_partners(&cameras)?;
+    let mut pairs: Vec<(usize, usize)> = partners
+        .iter()
+        .enumerate()
+        .map(|(i, &j)| (i.min(j), i.max(j)))
+        .collect();
+    pairs.sort_unstable();
+    pairs.dedup();
+    let names: Vec<String> = views
+        .iter()
+        .map(|v| format!("camera {}", v.camera_index))
+        .collect();
+    let input = |i: usize| StereoInput {
+        name: &names[i],
+        camera: &views[i].camera,
+        image: &views[i].image,
+        mask: &views[i].mask,
+        hull: &views[i].hull_depth,
+    };
+    let depths = pairs
+        .par_iter()
+        .map(|&(i, j)| pair_depth(&input(i), &input(j), settings))
+        .collect::<Result<Vec<_>>>()?;
+    for (i, &j) in partners.iter().enumerate() {
+        let k = pairs
+            .binary_search(&(i.min(j), i.max(j)))
+            .expect("every pair matched");
+        let side = usize::from(i > j);
+        views[i].input_depth = depths[k].depth[side].clone();
+        views[i].stereo_matched = depths[k].matched[side];
+    }
+    Ok(())
 }

@@ -15,7 +15,10 @@ use serde::{Deserialize, Serialize};
 
 use super::forward::{DepthBracket, ForwardSettings, predict, prediction_gaussians};
 use super::loss::{LossParts, LossWeights, training_loss};
-use super::prepare::{Framing, InputViews, PreparedFrame, frame_hull, hull_config, prepare_frame};
+use super::prepare::{
+    DepthSettings, Framing, InputViews, PreparedFrame, frame_hull, hull_config, prepare_frame,
+};
+use crate::depth::{DepthInput, StereoSettings};
 use crate::error::{HumanError, Result};
 use crate::gaussians::{GaussianOptions, render_gaussians};
 use crate::net::{NetConfig, PoseGaussianNet, PoseMapConfig, Variant, checkpoint};
@@ -53,6 +56,13 @@ pub struct TrainConfig {
     /// Source views per target (the PoseGaussian paper: the 2 nearest).
     pub source_views: usize,
     pub loss: LossWeights,
+    /// The depth the network reads (runs stored before the choice existed read the hull's).
+    #[serde(default = "DepthInput::before_choice")]
+    pub depth: DepthInput,
+    /// How stereo depth is searched, when it is the input.
+    #[serde(default)]
+    pub stereo: StereoSettings,
+    /// Where the depth head's output lands around the input depth ([`DepthInput::bracket`]).
     pub bracket: DepthBracket,
     /// `false` trains the per-frame baseline (no pose information).
     pub use_pose: bool,
@@ -72,10 +82,22 @@ impl Default for TrainConfig {
             seed: 0,
             source_views: 2,
             loss: LossWeights::default(),
-            bracket: DepthBracket::default(),
+            depth: DepthInput::default(),
+            stereo: StereoSettings::default(),
+            bracket: DepthInput::default().bracket(),
             use_pose: true,
             hull_voxel: 0.01,
             crop_margin: 0.1,
+        }
+    }
+}
+
+impl TrainConfig {
+    /// The input depth's settings.
+    pub fn depth_settings(&self) -> DepthSettings {
+        DepthSettings {
+            input: self.depth,
+            stereo: self.stereo.clone(),
         }
     }
 }
@@ -128,6 +150,7 @@ impl<'a> Trainer<'a> {
         config: TrainConfig,
         device: Device,
     ) -> Result<Self> {
+        check_depth_input(inputs, frames.start, config.depth)?;
         let hulls = carve_all(inputs, frames.clone(), config.hull_voxel)?;
         let net_config = net_config(&config, parents);
         let size = [net_config.input[1], net_config.input[0]];
@@ -259,7 +282,9 @@ impl<'a> Trainer<'a> {
                 let mesh = frame_hull(self.inputs, frame, &hull_config(self.config.hull_voxel))?;
                 self.hulls.insert(frame, mesh);
             }
-            let prepared = prepare_frame(self.inputs, frame, &self.hulls[&frame], &self.framing)?;
+            let depth = self.config.depth_settings();
+            let mesh = &self.hulls[&frame];
+            let prepared = prepare_frame(self.inputs, frame, mesh, &self.framing, &depth)?;
             self.prepared.insert(frame, prepared);
         }
         Ok(())
@@ -391,6 +416,20 @@ pub fn forward_settings<'s>(
             ..GaussianOptions::default()
         },
     }
+}
+
+/// An error, before anything is trained, when the input depth asks for what the capture lacks.
+fn check_depth_input(inputs: &dyn InputViews, frame: usize, depth: DepthInput) -> Result<()> {
+    let Some(&camera) = inputs.input_cameras().first() else {
+        return Ok(());
+    };
+    if depth == DepthInput::Dataset && inputs.depth(camera, frame)?.is_none() {
+        return Err(HumanError::argument(
+            "depth input",
+            "the capture has no depth maps, so the dataset's depth cannot be the input (choose stereo or hull)",
+        ));
+    }
+    Ok(())
 }
 
 fn carve_all(

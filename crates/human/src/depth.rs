@@ -1,0 +1,456 @@
+//! The depth each input view gives the network, and how much it flickers over frames.
+//!
+//! The PoseGaussian paper's per-frame competitors (GPS-Gaussian and its kin) take depth from a
+//! stereo module run on every frame's source images, so that their depth, and with it their
+//! renders, change from frame to frame even where the person does not move: the flicker the
+//! pose conditioning and the Temporal Pose Stabilizer remove. [`DepthInput::Stereo`] puts that
+//! setting back with classical stereo: each input view is rectified with its nearest input
+//! camera and matched by Semi-Global Matching (`fewview-geom`, the code of the fusion method's
+//! stereo start), searched only over the depths the visual hull allows, and the hull's depth
+//! fills what stereo leaves unmatched. [`DepthInput::Hull`] (the visual hull alone, smooth over
+//! time) and [`DepthInput::Dataset`] (the capture's exact depth, an oracle) are the ablations.
+//!
+//! A deviation: GPS-Gaussian rectifies the two source views of each target together. Our
+//! inference computes each input view's maps once per frame and shares them between targets
+//! (the stabilizer works per input view too), so each input view has one stereo partner, its
+//! nearest input camera by view direction.
+
+use fewview_geom::stereo::pairs::{StereoView, overlap_fraction};
+use fewview_geom::stereo::rectify::Side;
+use fewview_geom::stereo::sgm::SgmParams;
+use fewview_geom::stereo::source::{
+    DisparityRange, MAX_DISPARITIES, Photometry, match_pair, rectify_pair,
+};
+use fewview_scene::{Camera, Image};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{HumanError, Result};
+use crate::maps::{DepthMap, Mask};
+
+/// Where the depth the network reads comes from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DepthInput {
+    /// Two-view stereo per frame, bounded by the visual hull (the paper's setting).
+    #[default]
+    Stereo,
+    /// The visual hull of the input masks.
+    Hull,
+    /// The capture's own depth maps (an oracle; the synthetic capture has them).
+    Dataset,
+}
+
+impl DepthInput {
+    /// What runs stored before the choice existed read: the hull.
+    pub fn before_choice() -> Self {
+        Self::Hull
+    }
+
+    /// The range the depth head refines within, around this depth. The hull bounds the
+    /// surface from the front, so the surface lies behind it; stereo and the dataset's depth
+    /// lie on it, give or take their error.
+    pub fn bracket(self) -> DepthBracket {
+        match self {
+            Self::Hull => DepthBracket::default(),
+            Self::Stereo | Self::Dataset => DepthBracket {
+                front: 0.05,
+                behind: 0.05,
+            },
+        }
+    }
+}
+
+/// Where the depth head's `(−1, 1)` lands (a deviation: the paper normalises depth to the
+/// scene's near/far range; ours brackets each pixel around the input depth, so that the head
+/// refines it instead of finding the person in a range of metres; see
+/// [`crate::depth::DepthInput::bracket`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DepthBracket {
+    /// How far in front of the input depth the depth may go (metres).
+    pub front: f32,
+    /// How far behind it.
+    pub behind: f32,
+}
+
+impl Default for DepthBracket {
+    fn default() -> Self {
+        Self {
+            front: 0.03,
+            behind: 0.12,
+        }
+    }
+}
+
+/// How stereo depth is searched and kept.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StereoSettings {
+    /// Semi-Global Matching's parameters; the disparity range is set per pair.
+    pub sgm: SgmParams,
+    /// How far in front of the hull's depth stereo may put the surface (metres).
+    pub hull_front: f64,
+    /// How far behind it.
+    pub hull_behind: f64,
+    /// Smallest fraction of a view that must land in its partner's image.
+    pub min_overlap: f64,
+}
+
+impl Default for StereoSettings {
+    fn default() -> Self {
+        let bracket = DepthBracket::default();
+        Self {
+            sgm: SgmParams::default(),
+            hull_front: bracket.front as f64,
+            hull_behind: bracket.behind as f64,
+            min_overlap: 0.2,
+        }
+    }
+}
+
+/// One view as stereo reads it: a cropped input view with its mask and its hull's depth.
+#[derive(Clone, Copy, Debug)]
+pub struct StereoInput<'a> {
+    /// Named in errors (the capture's camera name).
+    pub name: &'a str,
+    pub camera: &'a Camera,
+    pub image: &'a Image,
+    pub mask: &'a Mask,
+    pub hull: &'a DepthMap,
+}
+
+/// Stereo depth of the two views of a pair.
+#[derive(Clone, Debug)]
+pub struct PairDepth {
+    /// Per view, the stereo depth where it matched inside the hull's range and the mask, the
+    /// hull's depth elsewhere.
+    pub depth: [DepthMap; 2],
+    /// Per view, the fraction of its masked hull pixels stereo matched.
+    pub matched: [f64; 2],
+}
+
+/// The index in `cameras` of each camera's stereo partner: the other camera whose optical axis
+/// is nearest its own (lowest index on ties). An error with fewer than two cameras.
+pub fn stereo_partners(cameras: &[&Camera]) -> Result<Vec<usize>> {
+    if cameras.len() < 2 {
+        return Err(HumanError::argument(
+            "stereo depth",
+            "needs at least two input cameras",
+        ));
+    }
+    let axis = |c: &Camera| c.world_to_camera.rotation.row(2).transpose();
+    Ok((0..cameras.len())
+        .map(|i| {
+            let a = axis(cameras[i]);
+            (0..cameras.len())
+                .filter(|&j| j != i)
+                .max_by(|&j, &k| {
+                    let (dj, dk) = (a.dot(&axis(cameras[j])), a.dot(&axis(cameras[k])));
+                    dj.total_cmp(&dk).then(k.cmp(&j))
+                })
+                .expect("two cameras at least")
+        })
+        .collect())
+}
+
+/// Depth of `first` and `second` from Semi-Global Matching between them, searched over the
+/// disparities of the hull's bracket `[hull − hull_front, hull + hull_behind]` in both views,
+/// and kept per pixel only inside that bracket and the mask. An error when the two views
+/// share too little of the person to be matched.
+pub fn pair_depth(
+    first: &StereoInput,
+    second: &StereoInput,
+    settings: &StereoSettings,
+) -> Result<PairDepth> {
+    let pair = || format!("stereo depth of {} and {}", first.name, second.name);
+    let typical = median_depth(first.hull, first.mask).ok_or_else(|| {
+        HumanError::argument(pair(), format!("{} sees no visual hull", first.name))
+    })?;
+    let overlap = overlap_fraction(first.camera, second.camera, typical);
+    if overlap < settings.min_overlap {
+        let m = format!(
+            "the two views share {:.0} % of the image (at least {:.0} % needed): stereo needs two views of the person",
+            100.0 * overlap,
+            100.0 * settings.min_overlap
+        );
+        return Err(HumanError::argument(pair(), m));
+    }
+    let (rect, _) = rectify_pair(first.camera, second.camera)?;
+    let (near, far) = [first, second]
+        .iter()
+        .filter_map(|v| rectified_depth_range(v, rect.rectified(Side::Left), settings))
+        .fold((f64::INFINITY, 0.0f64), |(n, f), (a, b)| {
+            (n.min(a), f.max(b))
+        });
+    if !(near < far) {
+        return Err(HumanError::argument(
+            pair(),
+            "the hull is behind the cameras",
+        ));
+    }
+    let lo = rect.depth_to_disparity(far).floor().max(0.0) as i32;
+    let hi = rect.depth_to_disparity(near).ceil() as i32;
+    let count = ((hi - lo + 1).max(16) as usize).div_ceil(16) * 16;
+    let mut params = settings.sgm.clone();
+    (params.min_disparity, params.num_disparities) = (lo, count.min(MAX_DISPARITIES));
+    let range = DisparityRange::Fixed {
+        min: params.min_disparity,
+        count: params.num_disparities,
+    };
+    let stereo = match_pair(
+        &stereo_view(first),
+        &stereo_view(second),
+        &params,
+        range,
+        None,
+        Photometry::AsIs,
+    )?;
+    let (a, ma) = keep_in_bracket(first, &stereo.depths.first.depth, settings);
+    let (b, mb) = keep_in_bracket(second, &stereo.depths.second.depth, settings);
+    Ok(PairDepth {
+        depth: [a, b],
+        matched: [ma, mb],
+    })
+}
+
+fn stereo_view<'a>(v: &StereoInput<'a>) -> StereoView<'a> {
+    StereoView {
+        name: v.name,
+        camera: v.camera,
+        image: v.image,
+        depth_bounds: None,
+        mask: None,
+    }
+}
+
+/// The nearest and farthest z-depth in `rectified` of the hull's bracket over `view`'s masked
+/// pixels (`None` when none has a hull depth).
+fn rectified_depth_range(
+    view: &StereoInput,
+    rectified: &Camera,
+    s: &StereoSettings,
+) -> Option<(f64, f64)> {
+    let w = view.hull.width;
+    let mut range: Option<(f64, f64)> = None;
+    for (p, &d) in view.hull.data.iter().enumerate() {
+        if d <= 0.0 || !view.mask.data[p] {
+            continue;
+        }
+        let (u, v) = ((p % w) as f64 + 0.5, (p / w) as f64 + 0.5);
+        for z in [d as f64 - s.hull_front, d as f64 + s.hull_behind] {
+            let x = view.camera.unproject(u, v, z.max(1e-3));
+            let zr = rectified.world_to_camera.transform_point(&x).z;
+            range = Some(match range {
+                None => (zr, zr),
+                Some((n, f)) => (n.min(zr), f.max(zr)),
+            });
+        }
+    }
+    range
+}
+
+/// `stereo` where it lies in the hull's bracket inside the mask, the hull elsewhere; and the
+/// fraction of the masked hull pixels kept.
+fn keep_in_bracket(view: &StereoInput, stereo: &[f32], s: &StereoSettings) -> (DepthMap, f64) {
+    let (mut kept, mut candidates) = (0usize, 0usize);
+    let data = view
+        .hull
+        .data
+        .iter()
+        .zip(stereo)
+        .zip(&view.mask.data)
+        .map(|((&h, &d), &m)| {
+            if h <= 0.0 || !m {
+                return h;
+            }
+            candidates += 1;
+            let (lo, hi) = (h as f64 - s.hull_front, h as f64 + s.hull_behind);
+            if d > 0.0 && (lo..=hi).contains(&(d as f64)) {
+                kept += 1;
+                d
+            } else {
+                h
+            }
+        })
+        .collect();
+    let map = DepthMap {
+        width: view.hull.width,
+        height: view.hull.height,
+        data,
+    };
+    (map, kept as f64 / candidates.max(1) as f64)
+}
+
+/// The median of `depth` over the masked pixels that have one.
+fn median_depth(depth: &DepthMap, mask: &Mask) -> Option<f64> {
+    let mut values: Vec<f32> = depth
+        .data
+        .iter()
+        .zip(&mask.data)
+        .filter(|(d, m)| **d > 0.0 && **m)
+        .map(|(d, _)| *d)
+        .collect();
+    if values.is_empty() {
+        return None;
+    }
+    let mid = values.len() / 2;
+    values.select_nth_unstable_by(mid, f32::total_cmp);
+    Some(values[mid] as f64)
+}
+
+/// Mean `|d_t − d_{t−1}|` (metres) over consecutive frames of one camera, over the pixels that
+/// both frames' masks cover and both depths know; `None` with fewer than two frames or no such
+/// pixel. `frames` are in time order.
+pub fn flicker(frames: &[(&DepthMap, &Mask)]) -> Option<f64> {
+    let (mut sum, mut count) = (0.0f64, 0usize);
+    for pair in frames.windows(2) {
+        let ((d0, m0), (d1, m1)) = (pair[0], pair[1]);
+        for p in 0..d0.data.len().min(d1.data.len()) {
+            let (a, b) = (d0.data[p], d1.data[p]);
+            if m0.data[p] && m1.data[p] && a > 0.0 && b > 0.0 {
+                sum += (a - b).abs() as f64;
+                count += 1;
+            }
+        }
+    }
+    (count > 0).then(|| sum / count as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use fewview_scene::Intrinsics;
+    use nalgebra::Vector3;
+
+    use super::*;
+
+    const SIZE: u32 = 160;
+
+    /// A camera on a circle of radius 3 around the origin at `degrees`, looking at the origin.
+    fn ring_camera(degrees: f64) -> Camera {
+        let a = degrees.to_radians();
+        Camera::look_at(
+            Intrinsics::centered(200.0, SIZE, SIZE),
+            Vector3::new(3.0 * a.sin(), 0.0, -3.0 * a.cos()),
+            Vector3::zeros(),
+            -Vector3::y(),
+        )
+    }
+
+    /// A textured plane `z = 0.4` (world) seen by `camera`: the image (a pattern with energy
+    /// at every scale, fixed on the plane) and the exact z-depth.
+    fn plane_view(camera: &Camera) -> (Image, DepthMap) {
+        let n = SIZE as usize;
+        let (mut image, mut depth) = (Image::new(n, n, 3), vec![0.0f32; n * n]);
+        for p in 0..n * n {
+            let (o, d) = camera.ray((p % n) as f64 + 0.5, (p / n) as f64 + 0.5);
+            let t = (0.4 - o.z) / d.z;
+            let x = o + d * t;
+            let texture = |s: f64| ((x.x * s).sin() * (x.y * 1.3 * s).cos() + 1.0) / 2.0;
+            let v = (0.5 * texture(17.0) + 0.3 * texture(41.0) + 0.2 * texture(97.0)) as f32;
+            image.data[3 * p..3 * p + 3].copy_from_slice(&[v, 0.8 * v + 0.1, 1.0 - v]);
+            depth[p] = camera.world_to_camera.transform_point(&x).z as f32;
+        }
+        let depth = DepthMap {
+            width: n,
+            height: n,
+            data: depth,
+        };
+        (image, depth)
+    }
+
+    fn shifted(d: &DepthMap, by: f32) -> DepthMap {
+        DepthMap {
+            data: d.data.iter().map(|v| v + by).collect(),
+            ..d.clone()
+        }
+    }
+
+    #[test]
+    fn each_camera_pairs_with_the_nearest_optical_axis() {
+        let cameras: Vec<Camera> = [0.0, 30.0, 90.0, 120.0, 180.0, 200.0]
+            .iter()
+            .map(|&d| ring_camera(d))
+            .collect();
+        let refs: Vec<&Camera> = cameras.iter().collect();
+        assert_eq!(stereo_partners(&refs).unwrap(), vec![1, 0, 3, 2, 5, 4]);
+        let err = stereo_partners(&refs[..1]).unwrap_err().to_string();
+        assert!(err.contains("at least two"), "{err}");
+    }
+
+    #[test]
+    fn stereo_finds_a_textured_plane_and_keeps_only_the_hulls_bracket() {
+        let (a, b) = (ring_camera(-12.0), ring_camera(12.0));
+        let ((ia, ga), (ib, gb)) = (plane_view(&a), plane_view(&b));
+        // The hull lies 2 cm in front of the surface, as a visual hull does.
+        let (ha, hb) = (shifted(&ga, -0.02), shifted(&gb, -0.02));
+        let n = SIZE as usize;
+        let mask = Mask::new(n, n, vec![true; n * n]);
+        let input = |camera, image, hull| StereoInput {
+            name: "view",
+            camera,
+            image,
+            mask: &mask,
+            hull,
+        };
+        let s = StereoSettings::default();
+        let got = pair_depth(&input(&a, &ia, &ha), &input(&b, &ib, &hb), &s).unwrap();
+        for (k, truth) in [&ga, &gb].iter().enumerate() {
+            assert!(got.matched[k] > 0.6, "matched {:?}", got.matched);
+            let mut errors: Vec<f32> = (got.depth[k].data.iter().zip(&truth.data))
+                .map(|(d, g)| (d - g).abs())
+                .collect();
+            errors.sort_by(f32::total_cmp);
+            // One pixel of disparity is about 46 mm of depth here: the median within a fifth
+            // of a pixel; nothing outside the bracket [hull − 3 cm, hull + 12 cm].
+            assert!(
+                errors[errors.len() / 2] < 0.01,
+                "median {}",
+                errors[errors.len() / 2]
+            );
+            assert!(
+                *errors.last().unwrap() < 0.121,
+                "worst {}",
+                errors.last().unwrap()
+            );
+        }
+    }
+
+    #[test]
+    fn stereo_of_views_that_share_nothing_is_an_error() {
+        let (a, b) = (ring_camera(0.0), ring_camera(180.0));
+        let ((ia, ga), (ib, gb)) = (plane_view(&a), plane_view(&b));
+        let n = SIZE as usize;
+        let mask = Mask::new(n, n, vec![true; n * n]);
+        let input = |camera, image, hull| StereoInput {
+            name: "cam",
+            camera,
+            image,
+            mask: &mask,
+            hull,
+        };
+        let s = StereoSettings::default();
+        let err = pair_depth(&input(&a, &ia, &ga), &input(&b, &ib, &gb), &s)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("share") && err.contains("cam"), "{err}");
+    }
+
+    #[test]
+    fn flicker_is_the_mean_change_over_pixels_both_masks_cover() {
+        let map = |v: [f32; 3]| DepthMap {
+            width: 3,
+            height: 1,
+            data: v.to_vec(),
+        };
+        let mask = |m: [bool; 3]| Mask::new(3, 1, m.to_vec());
+        let (d0, d1, d2) = (
+            map([1.0, 2.0, 3.0]),
+            map([1.5, 2.0, 0.0]),
+            map([1.5, 1.0, 5.0]),
+        );
+        let (m0, m1) = (mask([true, true, true]), mask([true, true, false]));
+        // Frame 0→1: |0.5|, |0| (pixel 2 has no depth in frame 1); 1→2: 0 and 1 (pixel 2
+        // outside frame 1's mask). Mean of 0.5, 0, 0, 1.
+        let got = flicker(&[(&d0, &m0), (&d1, &m1), (&d2, &m0)]).unwrap();
+        assert!((got - 0.375).abs() < 1e-9, "{got}");
+        assert_eq!(flicker(&[(&d0, &m0)]), None);
+    }
+}
