@@ -43,6 +43,92 @@ pub struct InferenceBench {
     pub network_vs_matmul: f64,
 }
 
+/// Seconds per training step of the network alone (forward and backward on two source views,
+/// a loss that reads every head), and its rate against the same run's matrix product.
+#[derive(Clone, Debug, Serialize)]
+pub struct TrainingBench {
+    pub preset: String,
+    pub size: [usize; 2],
+    pub steps: usize,
+    /// Forward and backward, seconds per step (the mean over the timed steps).
+    pub seconds_per_step: f64,
+    /// Of which the forward pass.
+    pub forward_seconds: f64,
+    /// Multiply-adds of a step: the forward's three times (the backward costs two forwards).
+    pub macs_per_step: u64,
+    pub network_gmacs_per_s: f64,
+    pub matmul_gmacs_per_s: f64,
+    /// `network_gmacs_per_s / matmul_gmacs_per_s`.
+    pub network_vs_matmul: f64,
+}
+
+/// Times `steps` forward and backward passes of `preset` (after one warm-up step) on two
+/// synthetic source views, on the CPU backend with autodiff.
+pub fn training_bench(preset: Preset, steps: usize) -> Result<TrainingBench> {
+    let device = Device::flex().autodiff();
+    let (net_cfg, framing, config) = bench_setup(preset);
+    let parents = chain();
+    let settings = forward_settings(&config, &framing, &parents);
+    let net = PoseGaussianNet::new(&net_cfg, &device)?;
+    let views = [
+        synthetic_view(0, -0.5, &framing),
+        synthetic_view(1, 0.5, &framing),
+    ];
+    let refs: Vec<&PreparedView> = views.iter().collect();
+    let (mut total, mut forward) = (0.0f64, 0.0f64);
+    for step in 0..=steps {
+        let input = net_input(&refs, &settings, &device)?;
+        let clock = Instant::now();
+        let h = net.forward(input)?;
+        let loss = h.scale.sum() + h.rotation.sum() + h.opacity.sum() + h.depth.sum();
+        let loss = loss + h.uncertainty.sum();
+        let _ = loss.clone().into_data();
+        let t_forward = clock.elapsed().as_secs_f64();
+        let grads = loss.backward();
+        drop(grads);
+        if step > 0 {
+            total += clock.elapsed().as_secs_f64();
+            forward += t_forward;
+        }
+    }
+    let k = 1.0 / steps.max(1) as f64;
+    let size = framing.size;
+    let macs = 3 * forward_macs(&net_cfg, size[1], size[0]) * views.len() as u64;
+    let rate = macs as f64 / (total * k) / 1e9;
+    let matmul = matmul_rate(&Device::flex());
+    Ok(TrainingBench {
+        preset: format!("{preset:?}").to_lowercase(),
+        size,
+        steps,
+        seconds_per_step: total * k,
+        forward_seconds: forward * k,
+        macs_per_step: macs,
+        network_gmacs_per_s: rate,
+        matmul_gmacs_per_s: matmul,
+        network_vs_matmul: rate / matmul,
+    })
+}
+
+/// The network configuration, a framing of a person-sized box at 3 m, and the training
+/// configuration of `preset`.
+fn bench_setup(preset: Preset) -> (crate::net::NetConfig, Framing, TrainConfig) {
+    let config = TrainConfig {
+        preset,
+        variant: Variant::Normalized,
+        ..TrainConfig::default()
+    };
+    let net_cfg = net_config(&config, &chain());
+    let size = [net_cfg.input[1], net_cfg.input[0]];
+    let framing = Framing {
+        bounds: [[-0.4, -0.3, 0.0], [0.4, 0.3, 1.8]],
+        scale: size[1] as f64 / 512.0,
+        size,
+        near: 2.0,
+        far: 4.0,
+    };
+    (net_cfg, framing, config)
+}
+
 /// A 17-joint chain: the synthetic capture's joint count, so that the pose map has its 33
 /// channels.
 fn chain() -> Vec<i64> {
@@ -121,20 +207,8 @@ fn matmul_rate(device: &Device) -> f64 {
 pub fn inference_bench(preset: Preset, frames: usize) -> Result<InferenceBench> {
     let device = Device::flex();
     let parents = chain();
-    let config = TrainConfig {
-        preset,
-        variant: Variant::Normalized,
-        ..TrainConfig::default()
-    };
-    let net_cfg = net_config(&config, &parents);
-    let size = [net_cfg.input[1], net_cfg.input[0]];
-    let framing = Framing {
-        bounds: [[-0.4, -0.3, 0.0], [0.4, 0.3, 1.8]],
-        scale: size[1] as f64 / 512.0,
-        size,
-        near: 2.0,
-        far: 4.0,
-    };
+    let (net_cfg, framing, config) = bench_setup(preset);
+    let size = framing.size;
     let settings = forward_settings(&config, &framing, &parents);
     let net = PoseGaussianNet::new(&net_cfg, &device)?;
     let views = [

@@ -145,6 +145,9 @@ struct Report {
     /// PoseGaussian inference per frame, both presets (synthetic frame, random weights).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     human_inference: Vec<fewview_human::bench::InferenceBench>,
+    /// PoseGaussian training steps (the network's forward and backward), CPU preset.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    human_training: Option<fewview_human::bench::TrainingBench>,
     peak_memory_mib: Option<f64>,
 }
 
@@ -280,6 +283,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             human_inference.push(fewview_human::bench::inference_bench(preset, frames)?);
         }
     }
+    let human_training = match args.wants(Section::Human) {
+        true => {
+            eprintln!("PoseGaussian training steps: Cpu preset ...");
+            let preset = fewview_human::train::Preset::Cpu;
+            Some(fewview_human::bench::training_bench(
+                preset,
+                args.human_frames,
+            )?)
+        }
+        false => None,
+    };
     let report = Report {
         machine,
         raster,
@@ -294,6 +308,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         blend,
         stereo,
         human_inference,
+        human_training,
         peak_memory_mib: peak_memory_mib(),
     };
     print_table(&report);
@@ -409,6 +424,21 @@ fn stereo_bench(
 
 fn print_table(r: &Report) {
     println!("{:<46} {:>14} {:>14}", "figure", "value", "reference");
+    if let Some(t) = &r.human_training {
+        println!(
+            "{:<46} {:>14.3} {:>14}",
+            format!(
+                "PoseGaussian {} training s/step ({}x{})",
+                t.preset, t.size[0], t.size[1]
+            ),
+            t.seconds_per_step,
+            format!("fwd {:.3}", t.forward_seconds)
+        );
+        println!(
+            "{:<46} {:>14.2} {:>14.2}",
+            "  training GMAC/s vs 1024³ matmul", t.network_gmacs_per_s, t.matmul_gmacs_per_s
+        );
+    }
     for h in &r.human_inference {
         println!(
             "{:<46} {:>14.3} {:>14}",

@@ -60,7 +60,10 @@ impl Decoder {
             let parts = join(up.take(), level(i + 1));
             up = Some(stage.forward(Tensor::cat(parts, 1)));
         }
-        relu(self.fuse.forward(Tensor::cat(join(up, level(0)), 1)))
+        relu(super::conv::apply(
+            &self.fuse,
+            Tensor::cat(join(up, level(0)), 1),
+        ))
     }
 }
 

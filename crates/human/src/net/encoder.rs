@@ -43,7 +43,7 @@ impl Encoder {
 
     /// The features the decoder skips to: the stem's, then each stage's (finest first).
     pub fn forward(&self, x: Tensor<4>) -> Vec<Tensor<4>> {
-        let mut features = vec![relu(self.stem.forward(x))];
+        let mut features = vec![relu(super::conv::apply(&self.stem, x))];
         for stage in &self.stages {
             let last = features.last().expect("the stem's feature").clone();
             features.push(stage.forward(last));

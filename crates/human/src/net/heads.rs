@@ -61,13 +61,13 @@ impl Heads {
     }
 
     pub fn forward(&self, features: Tensor<4>) -> HeadOutputs {
-        let sr = self.sr_opacity.forward(features.clone());
+        let sr = super::conv::apply(&self.sr_opacity, features.clone());
         HeadOutputs {
             scale: softplus(sr.clone().narrow(1, 0, 3), self.scale_beta),
             rotation: quaternion_from_gibbs(sr.clone().narrow(1, 3, 3)),
             opacity: sigmoid(sr.narrow(1, 6, 2)),
-            depth: tanh(self.depth.forward(features.clone())),
-            uncertainty: sigmoid(self.uncertainty.forward(features)),
+            depth: tanh(super::conv::apply(&self.depth, features.clone())),
+            uncertainty: sigmoid(super::conv::apply(&self.uncertainty, features)),
         }
     }
 }

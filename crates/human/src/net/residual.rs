@@ -46,7 +46,7 @@ pub struct Projection {
 
 impl Projection {
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let y = self.conv.forward(x);
+        let y = super::conv::apply(&self.conv, x);
         match &self.norm {
             Some(bn) => bn.forward(y),
             None => y,
@@ -96,12 +96,12 @@ impl ResidualUnit {
     }
 
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let mut y = self.conv1.forward(x.clone());
+        let mut y = super::conv::apply(&self.conv1, x.clone());
         if let Some(bn) = &self.norm1 {
             y = relu(bn.forward(y));
         }
         if let Some(conv2) = &self.conv2 {
-            y = conv2.forward(y);
+            y = super::conv::apply(conv2, y);
         }
         if let Some(bn) = &self.norm2 {
             y = bn.forward(y);

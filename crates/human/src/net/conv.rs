@@ -1,0 +1,353 @@
+//! The network's convolutions as a Burn custom operation whose weight gradient is one matrix
+//! product per kernel tap on the CPU.
+//!
+//! Burn's generic backward pass computes a convolution's weight gradient as another
+//! convolution whose input channels are the batch (two source views) and whose kernel is the
+//! whole output image; the CPU backend sends so few input channels to a direct loop, which
+//! took most of a training step. Here, for each tap `(dy, dx)` of the kernel,
+//!
+//! ```text
+//! dW[:, :, dy, dx] = Σ_b  G_b · X_b(dy, dx)ᵀ
+//! ```
+//!
+//! where `G_b` is the output gradient of batch item `b` as an `O × pixels` matrix and
+//! `X_b(dy, dx)` the input shifted by the tap, `C × pixels`. Laid over the zero-padded input
+//! with the output's rows widened to the padded width (zero gradient in the extra columns),
+//! the shifted input is a plain strided view of one buffer, so each tap is one GEMM with no
+//! copy. The forward pass and the input and bias gradients stay Burn's; on other backends
+//! (the GPU) the weight gradient does too.
+
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::flex::FlexTensor;
+use burn::backend::ops::ModuleOps;
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{Autodiff, Backend, Dispatch, ExtensionType, Flex, backend_extension};
+use burn::nn::PaddingConfig2d;
+use burn::nn::conv::Conv2d;
+use burn::tensor::ops::ConvOptions;
+use burn::tensor::{Shape, Tensor, TensorData};
+
+/// The tensors of one convolution.
+#[derive(ExtensionType)]
+pub struct ConvInputs<B: Backend> {
+    /// `[B, C, H, W]`
+    pub x: FloatTensor<B>,
+    /// `[O, C, kh, kw]`
+    pub weight: FloatTensor<B>,
+    /// `[O]`
+    pub bias: FloatTensor<B>,
+}
+
+/// Its output, `[B, O, Ho, Wo]`.
+#[derive(ExtensionType)]
+pub struct ConvOutput<B: Backend> {
+    pub y: FloatTensor<B>,
+}
+
+/// A 2D convolution (no groups, no dilation) with its own weight gradient.
+#[backend_extension(Flex, Cube: cfg(feature = "gpu"), Autodiff)]
+pub trait ConvBackend: Backend {
+    fn taps_conv2d(
+        #[extension_type] inputs: ConvInputs<Self>,
+        options: ConvOptions<2>,
+    ) -> ConvOutput<Self>;
+}
+
+/// The weight gradient of a backend (the half of the op each backend supplies).
+pub trait ConvKernels: Backend {
+    fn conv_weight_grad(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self>;
+}
+
+impl ConvKernels for Flex {
+    fn conv_weight_grad(
+        x: FlexTensor,
+        weight: FlexTensor,
+        grad: FlexTensor,
+        options: ConvOptions<2>,
+    ) -> FlexTensor {
+        use burn::backend::TensorMetadata;
+        let xs: [usize; 4] = x.shape().dims();
+        let ws: [usize; 4] = weight.shape().dims();
+        let gs: [usize; 4] = grad.shape().dims();
+        let x = fewview_optim::flex_f32(&x);
+        let g = fewview_optim::flex_f32(&grad);
+        let dw = weight_grad_host(&x, xs, &g, gs, ws, &options);
+        FlexTensor::from_data(TensorData::new(dw, Shape::new(ws)))
+    }
+}
+
+impl ConvBackend for Flex {
+    fn taps_conv2d(inputs: ConvInputs<Self>, options: ConvOptions<2>) -> ConvOutput<Self> {
+        ConvOutput {
+            y: Self::conv2d(inputs.x, inputs.weight, Some(inputs.bias), options),
+        }
+    }
+}
+
+#[cfg(feature = "gpu")]
+mod cube {
+    //! On Burn's cube backend (feature `gpu`) every part is Burn's own.
+    use burn::backend::Cube;
+    use burn::backend::ops::ModuleOps;
+    use burn::tensor::ops::ConvOptions;
+    use burn_cubecl::tensor::CubeTensor;
+
+    use super::{ConvBackend, ConvInputs, ConvKernels, ConvOutput};
+
+    impl ConvKernels for Cube {
+        fn conv_weight_grad(
+            x: CubeTensor,
+            weight: CubeTensor,
+            grad: CubeTensor,
+            options: ConvOptions<2>,
+        ) -> CubeTensor {
+            Self::conv2d_weight_backward(x, weight, grad, options)
+        }
+    }
+
+    impl ConvBackend for Cube {
+        fn taps_conv2d(inputs: ConvInputs<Self>, options: ConvOptions<2>) -> ConvOutput<Self> {
+            ConvOutput {
+                y: Self::conv2d(inputs.x, inputs.weight, Some(inputs.bias), options),
+            }
+        }
+    }
+}
+
+/// What the backward pass keeps of the forward.
+#[derive(Clone, Debug)]
+struct ConvState<B: Backend> {
+    x: FloatTensor<B>,
+    weight: FloatTensor<B>,
+    bias: FloatTensor<B>,
+    options: ConvOptions<2>,
+}
+
+#[derive(Debug)]
+struct ConvBackwardStep;
+
+impl<B: ConvKernels> Backward<B, 3> for ConvBackwardStep {
+    type State = ConvState<B>;
+
+    fn backward(
+        self,
+        ops: Ops<Self::State, 3>,
+        grads: &mut Gradients,
+        _checkpointer: &mut Checkpointer,
+    ) {
+        let grad = grads.consume::<B>(&ops.node);
+        let s = ops.state;
+        let [x_node, w_node, b_node] = ops.parents;
+        if let Some(node) = b_node {
+            let g = B::conv2d_bias_backward(s.x.clone(), s.bias, grad.clone());
+            grads.register::<B>(node.id, g);
+        }
+        if let Some(node) = w_node {
+            let g = B::conv_weight_grad(
+                s.x.clone(),
+                s.weight.clone(),
+                grad.clone(),
+                s.options.clone(),
+            );
+            grads.register::<B>(node.id, g);
+        }
+        if let Some(node) = x_node {
+            let g = B::conv2d_x_backward(s.x, s.weight, grad, s.options);
+            grads.register::<B>(node.id, g);
+        }
+    }
+}
+
+impl<B: ConvKernels, C: CheckpointStrategy> ConvBackend for Autodiff<B, C> {
+    fn taps_conv2d(inputs: ConvInputs<Self>, options: ConvOptions<2>) -> ConvOutput<Self> {
+        let nodes = [inputs.x.node(), inputs.weight.node(), inputs.bias.node()];
+        let state = ConvState::<B> {
+            x: inputs.x.into_primitive(),
+            weight: inputs.weight.into_primitive(),
+            bias: inputs.bias.into_primitive(),
+            options,
+        };
+        let y = B::conv2d(
+            state.x.clone(),
+            state.weight.clone(),
+            Some(state.bias.clone()),
+            state.options.clone(),
+        );
+        let y = match ConvBackwardStep
+            .prepare::<C>(nodes)
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(prep) => prep.finish(state, y),
+            OpsKind::UnTracked(prep) => prep.finish(y),
+        };
+        ConvOutput { y }
+    }
+}
+
+/// `conv` applied to `x` (`[B, C, H, W]`) through the op; a convolution with groups, dilation,
+/// unequal strides, implicit padding or no bias goes through Burn's module instead.
+pub fn apply(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
+    let Some(bias) = &conv.bias else {
+        return conv.forward(x);
+    };
+    let PaddingConfig2d::Explicit(top, left, bottom, right) = conv.padding else {
+        return conv.forward(x);
+    };
+    if conv.groups != 1 || conv.dilation != [1, 1] || conv.stride[0] != conv.stride[1] {
+        return conv.forward(x);
+    }
+    let pads = [(top, bottom), (left, right)];
+    let options = ConvOptions::new_with_padding(conv.stride, pads, [1, 1], 1);
+    let inputs = ConvInputs::<Dispatch> {
+        x: x.into_dispatch(),
+        weight: conv.weight.val().into_dispatch(),
+        bias: bias.val().into_dispatch(),
+    };
+    Tensor::from_dispatch(<Dispatch as ConvBackend>::taps_conv2d(inputs, options).y)
+}
+
+/// `dW` of a convolution on the host: for each tap, `Σ_b G_b · X_b(tap)ᵀ` as one GEMM over the
+/// padded input (see the module documentation).
+pub fn weight_grad_host(
+    x: &[f32],
+    [b, c, h, w]: [usize; 4],
+    g: &[f32],
+    [_, o, ho, wo]: [usize; 4],
+    [_, _, kh, kw]: [usize; 4],
+    options: &ConvOptions<2>,
+) -> Vec<f32> {
+    let [(top, bottom), (left, right)] = options.padding;
+    let [sy, sx] = options.stride;
+    let (hp, wp) = (h + top + bottom, w + left + right);
+    // The padded input, with a tail so that the widened rows of the last taps stay in bounds.
+    let plane = hp * wp;
+    let tail = sy * wp * ho + sx * wp + kh * wp + kw;
+    let mut padded = vec![0.0f32; b * c * plane + tail];
+    for bc in 0..b * c {
+        for y in 0..h {
+            let src = &x[(bc * h + y) * w..(bc * h + y + 1) * w];
+            let dst = bc * plane + (y + top) * wp + left;
+            padded[dst..dst + w].copy_from_slice(src);
+        }
+    }
+    // The output gradient widened to rows of `wp` (zeros past `wo`).
+    let mut widened = vec![0.0f32; b * o * ho * wp];
+    for bo in 0..b * o {
+        for y in 0..ho {
+            let src = &g[(bo * ho + y) * wo..(bo * ho + y + 1) * wo];
+            let dst = (bo * ho + y) * wp;
+            widened[dst..dst + wo].copy_from_slice(src);
+        }
+    }
+    // Output pixel (i, j) reads padded (sy·i + dy, sx·j + dx); with rows of width wp the pixel
+    // index p = i·wp + j reads offset sy·i·wp + sx·j, which is p·sx only when sy = sx.
+    assert_eq!(sy, sx, "equal strides");
+    let k = ho * wp;
+    let mut taps = vec![0.0f32; kh * kw * o * c];
+    for dy in 0..kh {
+        for dx in 0..kw {
+            let dst = &mut taps[(dy * kw + dx) * o * c..(dy * kw + dx + 1) * o * c];
+            for item in 0..b {
+                let lhs = &widened[item * o * k..];
+                let rhs = &padded[item * c * plane + dy * wp + dx..];
+                // dst[o × c] (+)= lhs[o × k] · rhs[k × c]; rhs's k-stride is the stride, its
+                // c-stride one plane.
+                unsafe {
+                    gemm::gemm(
+                        o,
+                        c,
+                        k,
+                        dst.as_mut_ptr(),
+                        1,
+                        c as isize,
+                        item > 0,
+                        lhs.as_ptr(),
+                        1,
+                        k as isize,
+                        rhs.as_ptr(),
+                        plane as isize,
+                        sx as isize,
+                        1.0,
+                        1.0,
+                        false,
+                        false,
+                        false,
+                        gemm::Parallelism::Rayon(0),
+                    );
+                }
+            }
+        }
+    }
+    // taps[(dy, dx), o, c] → weight layout [o, c, dy, dx].
+    let mut dw = vec![0.0f32; o * c * kh * kw];
+    for t in 0..kh * kw {
+        for oc in 0..o * c {
+            dw[oc * kh * kw + t] = taps[t * o * c + oc];
+        }
+    }
+    dw
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::nn::conv::Conv2dConfig;
+    use burn::tensor::{Device, Distribution};
+
+    use super::*;
+
+    /// The op against Burn's own convolution, values and every gradient, for the kernel sizes
+    /// and strides the network has (3×3 and 1×1, stride 1 and 2, odd sizes) and a 5×5.
+    #[test]
+    fn the_op_matches_burns_convolution_and_its_gradients() {
+        let device = Device::flex().autodiff();
+        for (kernel, stride, input, output) in
+            [(3, 1, 5, 7), (3, 2, 4, 6), (1, 2, 6, 3), (5, 1, 3, 4)]
+        {
+            let p = kernel / 2;
+            let conv = Conv2dConfig::new([input, output], [kernel, kernel])
+                .with_stride([stride, stride])
+                .with_padding(PaddingConfig2d::Explicit(p, p, p, p))
+                .init(&device);
+            let x = Tensor::<4>::random([2, input, 11, 9], Distribution::Default, &device)
+                .require_grad();
+            let reference = conv.forward(x.clone());
+            let ours = apply(&conv, x.clone());
+            assert_eq!(reference.dims(), ours.dims());
+            let values = |t: Tensor<4>| t.into_data().try_to_vec::<f32>().unwrap();
+            let close = |a: Vec<f32>, b: Vec<f32>, what: &str| {
+                let worst = a
+                    .iter()
+                    .zip(&b)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f32::max);
+                assert!(
+                    worst < 1e-4,
+                    "{what}: kernel {kernel}, stride {stride}: {worst}"
+                );
+            };
+            close(values(reference.clone()), values(ours.clone()), "values");
+            // A loss that weighs every output differently.
+            let weights = Tensor::<4>::random(reference.dims(), Distribution::Default, &device);
+            let g_ref = (reference * weights.clone()).sum().backward();
+            let g_ours = (ours * weights).sum().backward();
+            let grad = |g: &burn::tensor::Gradients, t: &Tensor<4>| values(t.grad(g).unwrap());
+            close(grad(&g_ref, &x), grad(&g_ours, &x), "input gradient");
+            let w = conv.weight.val();
+            close(grad(&g_ref, &w), grad(&g_ours, &w), "weight gradient");
+            let b = conv.bias.as_ref().unwrap().val();
+            let bias = |g: &burn::tensor::Gradients| {
+                b.grad(g).unwrap().into_data().try_to_vec::<f32>().unwrap()
+            };
+            close(bias(&g_ref), bias(&g_ours), "bias gradient");
+        }
+    }
+}
