@@ -70,10 +70,7 @@ pub fn training_bench(preset: Preset, steps: usize) -> Result<TrainingBench> {
     let parents = chain();
     let settings = forward_settings(&config, &framing, &parents);
     let net = PoseGaussianNet::new(&net_cfg, &device)?;
-    let views = [
-        synthetic_view(0, -0.5, &framing),
-        synthetic_view(1, 0.5, &framing),
-    ];
+    let views = source_pair(&framing);
     let refs: Vec<&PreparedView> = views.iter().collect();
     let (mut total, mut forward) = (0.0f64, 0.0f64);
     for step in 0..=steps {
@@ -127,6 +124,14 @@ fn bench_setup(preset: Preset) -> (crate::net::NetConfig, Framing, TrainConfig) 
         far: 4.0,
     };
     (net_cfg, framing, config)
+}
+
+/// Two synthetic source views 57° apart (cameras 0 and 1).
+fn source_pair(framing: &Framing) -> [PreparedView; 2] {
+    [
+        synthetic_view(0, -0.5, framing),
+        synthetic_view(1, 0.5, framing),
+    ]
 }
 
 /// A 17-joint chain: the synthetic capture's joint count, so that the pose map has its 33
@@ -211,10 +216,7 @@ pub fn inference_bench(preset: Preset, frames: usize) -> Result<InferenceBench> 
     let size = framing.size;
     let settings = forward_settings(&config, &framing, &parents);
     let net = PoseGaussianNet::new(&net_cfg, &device)?;
-    let views = [
-        synthetic_view(0, -0.5, &framing),
-        synthetic_view(1, 0.5, &framing),
-    ];
+    let views = source_pair(&framing);
     let refs: Vec<&PreparedView> = views.iter().collect();
     let target = synthetic_view(2, 0.0, &framing).camera;
     let mut tps = Stabilizer::new(TpsConfig::default());

@@ -363,6 +363,30 @@ mod tests {
         }
     }
 
+    /// Stereo of the plane between ring cameras at `first` and `second` degrees, with hulls
+    /// `hull_offset` metres off the exact depth; and the exact depths.
+    fn plane_stereo(
+        first: f64,
+        second: f64,
+        hull_offset: f32,
+    ) -> (Result<PairDepth>, [DepthMap; 2]) {
+        let (a, b) = (ring_camera(first), ring_camera(second));
+        let ((ia, ga), (ib, gb)) = (plane_view(&a), plane_view(&b));
+        let (ha, hb) = (shifted(&ga, hull_offset), shifted(&gb, hull_offset));
+        let n = SIZE as usize;
+        let mask = Mask::new(n, n, vec![true; n * n]);
+        let input = |camera, image, hull| StereoInput {
+            name: "cam",
+            camera,
+            image,
+            mask: &mask,
+            hull,
+        };
+        let s = StereoSettings::default();
+        let got = pair_depth(&input(&a, &ia, &ha), &input(&b, &ib, &hb), &s);
+        (got, [ga, gb])
+    }
+
     #[test]
     fn each_camera_pairs_with_the_nearest_optical_axis() {
         let cameras: Vec<Camera> = [0.0, 30.0, 90.0, 120.0, 180.0, 200.0]
@@ -377,21 +401,9 @@ mod tests {
 
     #[test]
     fn stereo_finds_a_textured_plane_and_keeps_only_the_hulls_bracket() {
-        let (a, b) = (ring_camera(-12.0), ring_camera(12.0));
-        let ((ia, ga), (ib, gb)) = (plane_view(&a), plane_view(&b));
         // The hull lies 2 cm in front of the surface, as a visual hull does.
-        let (ha, hb) = (shifted(&ga, -0.02), shifted(&gb, -0.02));
-        let n = SIZE as usize;
-        let mask = Mask::new(n, n, vec![true; n * n]);
-        let input = |camera, image, hull| StereoInput {
-            name: "view",
-            camera,
-            image,
-            mask: &mask,
-            hull,
-        };
-        let s = StereoSettings::default();
-        let got = pair_depth(&input(&a, &ia, &ha), &input(&b, &ib, &hb), &s).unwrap();
+        let (got, [ga, gb]) = plane_stereo(-12.0, 12.0, -0.02);
+        let got = got.unwrap();
         for (k, truth) in [&ga, &gb].iter().enumerate() {
             assert!(got.matched[k] > 0.6, "matched {:?}", got.matched);
             let mut errors: Vec<f32> = (got.depth[k].data.iter().zip(&truth.data))
@@ -415,21 +427,7 @@ mod tests {
 
     #[test]
     fn stereo_of_views_that_share_nothing_is_an_error() {
-        let (a, b) = (ring_camera(0.0), ring_camera(180.0));
-        let ((ia, ga), (ib, gb)) = (plane_view(&a), plane_view(&b));
-        let n = SIZE as usize;
-        let mask = Mask::new(n, n, vec![true; n * n]);
-        let input = |camera, image, hull| StereoInput {
-            name: "cam",
-            camera,
-            image,
-            mask: &mask,
-            hull,
-        };
-        let s = StereoSettings::default();
-        let err = pair_depth(&input(&a, &ia, &ga), &input(&b, &ib, &gb), &s)
-            .unwrap_err()
-            .to_string();
+        let err = plane_stereo(0.0, 180.0, 0.0).0.unwrap_err().to_string();
         assert!(err.contains("share") && err.contains("cam"), "{err}");
     }
 
