@@ -133,22 +133,65 @@ fn human_train_and_render_run_on_the_zju_layout() {
 /// One training step of network configuration `variant` on the fixture's cameras 0–2 and
 /// frames 0–1.
 fn train_one_step(data: &Path, out: &Path, variant: &str) {
-    fewview_ok(&[
-        "human",
-        "train",
-        "--data",
-        s(data),
-        "--out",
-        s(out),
+    train_one_step_with(data, out, &["--variant", variant]);
+}
+
+/// One training step on the fixture's cameras 0–2 and frames 0–1 with `extra` flags.
+fn train_one_step_with(data: &Path, out: &Path, extra: &[&str]) {
+    let mut a = vec!["human", "train", "--data", s(data), "--out", s(out)];
+    a.extend([
         "--input-cameras",
         "3",
         "--train-frames",
         "2",
         "--iterations",
         "1",
-        "--variant",
-        variant,
     ]);
+    a.extend(extra);
+    fewview_ok(&a);
+}
+
+/// `human eval` with a named baseline (the same method on the hull's depth) writes the table
+/// with each run's depth input and steps, the report and the video; a baseline without a name
+/// is refused before anything is written.
+#[test]
+fn human_eval_scores_named_baselines_and_says_how_each_was_trained() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = zju_fixture();
+    let (ours, hull) = (dir.path().join("ours"), dir.path().join("hull"));
+    train_one_step_with(&data, &ours, &[]);
+    train_one_step_with(&data, &hull, &["--depth", "hull"]);
+    let eval = |out: &Path, baseline: &str| {
+        let mut a = vec!["human", "eval", "--run", s(&ours), "--data", s(&data)];
+        a.extend(["--out", s(out), "--no-lpips", "--baseline", baseline]);
+        fewview(&a)
+    };
+    let bad = dir.path().join("bad");
+    assert_clean_error(&eval(&bad, s(&hull)), &["--baseline", "NAME=DIR"]);
+    assert!(!bad.exists(), "an output folder was written");
+
+    let out = dir.path().join("eval");
+    let done = eval(&out, &format!("hull={}", s(&hull)));
+    assert!(
+        done.status.success(),
+        "{}",
+        String::from_utf8_lossy(&done.stderr)
+    );
+    let md = std::fs::read_to_string(out.join("table.md")).unwrap();
+    for row in ["| ours | stereo | yes | 1 |", "| hull | hull | yes | 1 |"] {
+        assert!(md.contains(row), "`{row}` not in:\n{md}");
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(report["runs"].as_array().unwrap().len(), 2);
+    let methods: Vec<&str> = report["novel_view"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["method"].as_str().unwrap())
+        .collect();
+    assert_eq!(methods, ["ours", "ours, no TPS", "hull"]);
+    assert!(out.join("side_by_side.mp4").metadata().unwrap().len() > 1000);
 }
 
 /// `human depth` on the fixture (no depth maps: no truth row) writes its report and strip; a

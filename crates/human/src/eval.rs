@@ -185,9 +185,35 @@ pub struct EvalOptions {
     )>,
 }
 
+/// A scored run: its name in the tables and what it was trained as.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunInfo {
+    pub name: String,
+    /// The depth its network reads.
+    pub depth: crate::depth::DepthInput,
+    /// Whether its pose encoder saw the pose (`false`: the per-frame baseline).
+    pub use_pose: bool,
+    /// Training steps behind its weights.
+    pub iterations: usize,
+}
+
+impl RunInfo {
+    pub fn of(name: &str, model: &crate::infer::Model) -> Self {
+        Self {
+            name: name.to_string(),
+            depth: model.config.depth,
+            use_pose: model.config.use_pose,
+            iterations: model.iterations,
+        }
+    }
+}
+
 /// Both tables, and the mean time per frame of the run under test.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct EvalReport {
+    /// The run under test (`ours`, with and without TPS) and each baseline run.
+    #[serde(default)]
+    pub runs: Vec<RunInfo>,
     pub cameras: Vec<usize>,
     pub frames: std::ops::Range<usize>,
     pub novel_view: Vec<Scores>,
@@ -296,7 +322,10 @@ pub fn evaluate(
             .map(|(n, r)| score(n, &cut(r), &cut(&truths), perceptual))
             .collect()
     };
+    let mut runs = vec![RunInfo::of("ours", model)];
+    runs.extend(baselines.iter().map(|(n, m)| RunInfo::of(n, m)));
     let report = EvalReport {
+        runs,
         cameras: options.cameras.clone(),
         frames: options.frames.clone(),
         novel_view: table_of(options.frames.clone())?,

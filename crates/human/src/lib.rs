@@ -18,6 +18,8 @@
 //!   nearest a target, and the differentiable render into it (fewview-splat's rasterizer).
 //! - [`net`]: the network (three encoders, a U-Net decoder, Gaussian-parameter heads), the pose
 //!   map it reads, its multiply-add count and its checkpoints.
+//! - [`eval`]: novel views and novel poses scored against the baselines; [`eval_outputs`]: the
+//!   table, metrics and side-by-side video `fewview human eval` writes from them.
 //! - [`orbit`]: a free-viewpoint camera path circling the rig.
 //! - [`tps`]: the Temporal Pose Stabilizer, each source view's maps blended with its previous
 //!   frame's, warped by the joints' motion and weighted down where they move fast.
@@ -37,6 +39,7 @@ pub mod depth;
 pub mod depth_report;
 pub mod error;
 pub mod eval;
+pub mod eval_outputs;
 pub mod gaussians;
 pub mod hull;
 pub mod infer;

@@ -1,7 +1,7 @@
 //! `fewview human`: pose-guided feed-forward Gaussians of moving people (the PoseGaussian paper).
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, bail};
@@ -390,6 +390,10 @@ pub struct EvalArgs {
     /// A run trained with `--no-pose`: the per-frame baseline.
     #[arg(long, value_name = "DIR")]
     pub per_frame: Option<PathBuf>,
+    /// Another trained run scored beside ours without TPS, as `NAME=DIR` (repeatable), e.g.
+    /// `hull=runs/ours-hull` for the same method with the visual hull's depth.
+    #[arg(long, value_name = "NAME=DIR")]
+    pub baseline: Vec<String>,
     /// First and last frame (inclusive), e.g. `0..=59`; default every frame.
     #[arg(long, value_name = "A..=B")]
     pub frames: Option<String>,
@@ -483,14 +487,27 @@ fn parse_frames(text: &str) -> anyhow::Result<std::ops::Range<usize>> {
 }
 
 fn eval(args: EvalArgs) -> anyhow::Result<()> {
-    use fewview_human::eval::{EvalOptions, evaluate, side_by_side, table};
+    use fewview_human::eval::{EvalOptions, evaluate};
+    use fewview_human::eval_outputs::{self, TableContext};
     use fewview_human::infer::Model;
     let model = load_model(&args.run, args.source_views)?;
-    let per_frame = args
-        .per_frame
-        .as_deref()
-        .map(|run| load_model(run, args.source_views))
-        .transpose()?;
+    let mut compared: Vec<(String, Model)> = Vec::new();
+    if let Some(run) = &args.per_frame {
+        compared.push(("per-frame".to_string(), load_model(run, args.source_views)?));
+    }
+    for text in &args.baseline {
+        let (name, run) = text
+            .split_once('=')
+            .with_context(|| format!("--baseline {text}: expected NAME=DIR"))?;
+        let name = name.trim();
+        if name.is_empty() || compared.iter().any(|(n, _)| n == name) || name.starts_with("ours") {
+            bail!("--baseline {text}: give each baseline its own name (not `ours`)");
+        }
+        compared.push((
+            name.to_string(),
+            load_model(Path::new(run), args.source_views)?,
+        ));
+    }
     let (_, dataset) = fewview_human::capture::open(&args.capture.data, &args.capture.sequence)?;
     let split = run_split(&args.run, &*dataset)?;
     let frames = match &args.frames {
@@ -521,10 +538,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     } else {
         Some(fewview_metrics::lpips::Lpips::default_st_alex()?)
     };
-    let baselines: Vec<(String, &Model)> = per_frame
-        .iter()
-        .map(|m| ("per-frame".to_string(), m))
-        .collect();
+    let baselines: Vec<(String, &Model)> = compared.iter().map(|(n, m)| (n.clone(), m)).collect();
     let options = EvalOptions {
         frames: frames.clone(),
         cameras,
@@ -558,62 +572,13 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         &mut |_| bar.inc(1),
     )?;
     bar.finish_and_clear();
-    let md = if args.validation {
-        format!(
-            "Validation: input cameras {:?} from their neighbours, frames {}..={}\n\n{}",
-            report.cameras,
-            frames.start,
-            frames.end - 1,
-            table(&report.novel_view)
-        )
-    } else {
-        format!(
-            "Novel views (cameras {:?}, frames {}..={})\n\n{}\nNovel poses (frames {}..={})\n\n{}",
-            report.cameras,
-            frames.start,
-            frames.end - 1,
-            table(&report.novel_view),
-            split.test_frames.start,
-            split.test_frames.end - 1,
-            table(&report.novel_pose)
-        )
+    let context = TableContext {
+        validation: args.validation,
+        test_frames: split.test_frames.clone(),
+        splat_frames: options.splat.as_ref().map(|(r, _)| r.clone()),
     };
-    let md = if report.splat_frames.is_empty() {
-        md
-    } else {
-        let r = options
-            .splat
-            .as_ref()
-            .map(|(r, _)| r.clone())
-            .unwrap_or_default();
-        format!(
-            "{md}\n3DGS per frame and every method on its frames ({}..={})\n\n{}",
-            r.start,
-            r.end.saturating_sub(1),
-            table(&report.splat_frames)
-        )
-    };
+    let md = eval_outputs::write(&args.capture.out, &report, &context, &renders, &truths)?;
     print!("{md}");
-    std::fs::write(args.capture.out.join("table.md"), &md)?;
-    std::fs::write(
-        args.capture.out.join("metrics.json"),
-        serde_json::to_string_pretty(&report)?,
-    )?;
-    let video: Vec<_> = (0..frames.len())
-        .map(|t| {
-            let mut cols = vec![&truths[0][t]];
-            cols.extend(
-                renders
-                    .iter()
-                    .filter(|(n, _)| n != "ours, no TPS" || renders.len() == 1)
-                    .map(|(_, r)| &r[0][t]),
-            );
-            side_by_side(&cols)
-        })
-        .collect();
-    let path = args.capture.out.join("side_by_side.mp4");
-    let opts = fewview_video::VideoOptions::default();
-    fewview_video::write_video(&path, &video, 30.0, &opts)?;
     let t = &report.times;
     eprintln!(
         "per frame: {:.3} s (hull and crops {:.3}, image encoder {:.3}, pose encoder {:.3}, depth encoder {:.3}, decoder and heads {:.3}, TPS {:.3}, rendering {:.3}); written to {}",
