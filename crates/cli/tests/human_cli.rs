@@ -68,6 +68,15 @@ fn human_eval_refuses_a_folder_without_a_run() {
     assert!(!out.exists(), "an output folder was written");
 }
 
+/// Fails with the command's error output unless it succeeded.
+fn assert_ok(done: &std::process::Output) {
+    assert!(
+        done.status.success(),
+        "{}",
+        String::from_utf8_lossy(&done.stderr)
+    );
+}
+
 fn zju_fixture() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../human/tests/fixtures/zju_small")
 }
@@ -100,11 +109,7 @@ fn human_train_and_render_run_on_the_zju_layout() {
 
     let out = dir.path().join("render");
     let done = render(&out, &[]);
-    assert!(
-        done.status.success(),
-        "{}",
-        String::from_utf8_lossy(&done.stderr)
-    );
+    assert_ok(&done);
     for frame in 0..3 {
         let png = out.join(format!("Camera_B10/frame_{frame:04}.png"));
         let image = fewview_scene::Image::load(&png).unwrap();
@@ -172,11 +177,7 @@ fn human_eval_scores_named_baselines_and_says_how_each_was_trained() {
 
     let out = dir.path().join("eval");
     let done = eval(&out, &format!("hull={}", s(&hull)));
-    assert!(
-        done.status.success(),
-        "{}",
-        String::from_utf8_lossy(&done.stderr)
-    );
+    assert_ok(&done);
     let md = std::fs::read_to_string(out.join("table.md")).unwrap();
     for row in ["| ours | stereo | yes | 1 |", "| hull | hull | yes | 1 |"] {
         assert!(md.contains(row), "`{row}` not in:\n{md}");
@@ -216,11 +217,7 @@ fn human_depth_reports_stereo_and_refuses_what_the_capture_cannot_give() {
 
     let out = dir.path().join("depth");
     let done = depth(&out, &[]);
-    assert!(
-        done.status.success(),
-        "{}",
-        String::from_utf8_lossy(&done.stderr)
-    );
+    assert_ok(&done);
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("depth_report.json")).unwrap())
             .unwrap();
