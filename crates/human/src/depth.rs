@@ -19,7 +19,7 @@ use fewview_geom::stereo::pairs::{StereoView, overlap_fraction};
 use fewview_geom::stereo::rectify::Side;
 use fewview_geom::stereo::sgm::SgmParams;
 use fewview_geom::stereo::source::{
-    DisparityRange, MAX_DISPARITIES, Photometry, match_pair, rectify_pair,
+    DisparityRange, Photometry, exact_disparity_range, match_pair, rectify_pair,
 };
 use fewview_scene::{Camera, Image};
 use serde::{Deserialize, Serialize};
@@ -44,6 +44,14 @@ impl DepthInput {
     /// What runs stored before the choice existed read: the hull.
     pub fn before_choice() -> Self {
         Self::Hull
+    }
+
+    /// The error when the dataset's depth is asked for and the capture has none.
+    pub(crate) fn dataset_depth_missing() -> HumanError {
+        HumanError::argument(
+            "depth input",
+            "the capture has no depth maps, so the dataset's depth cannot be the input (choose stereo or hull)",
+        )
     }
 
     /// The range the depth head refines within, around this depth. The hull bounds the
@@ -186,20 +194,12 @@ pub fn pair_depth(
             "the hull is behind the cameras",
         ));
     }
-    let lo = rect.depth_to_disparity(far).floor().max(0.0) as i32;
-    let hi = rect.depth_to_disparity(near).ceil() as i32;
-    let count = ((hi - lo + 1).max(16) as usize).div_ceil(16) * 16;
-    let mut params = settings.sgm.clone();
-    (params.min_disparity, params.num_disparities) = (lo, count.min(MAX_DISPARITIES));
-    let range = DisparityRange::Fixed {
-        min: params.min_disparity,
-        count: params.num_disparities,
-    };
+    let (min, count) = exact_disparity_range(&rect, near, far);
     let stereo = match_pair(
         &stereo_view(first),
         &stereo_view(second),
-        &params,
-        range,
+        &settings.sgm,
+        DisparityRange::Fixed { min, count },
         None,
         Photometry::AsIs,
     )?;
@@ -300,12 +300,18 @@ fn median_depth(depth: &DepthMap, mask: &Mask) -> Option<f64> {
 /// both frames' masks cover and both depths know; `None` with fewer than two frames or no such
 /// pixel. `frames` are in time order.
 pub fn flicker(frames: &[(&DepthMap, &Mask)]) -> Option<f64> {
+    mean_change(frames, |v| v > 0.0)
+}
+
+/// Mean `|v_t − v_{t−1}|` over consecutive frames, over the pixels both masks cover where both
+/// values are `known`.
+pub(crate) fn mean_change(frames: &[(&DepthMap, &Mask)], known: fn(f32) -> bool) -> Option<f64> {
     let (mut sum, mut count) = (0.0f64, 0usize);
     for pair in frames.windows(2) {
         let ((d0, m0), (d1, m1)) = (pair[0], pair[1]);
         for p in 0..d0.data.len().min(d1.data.len()) {
             let (a, b) = (d0.data[p], d1.data[p]);
-            if m0.data[p] && m1.data[p] && a > 0.0 && b > 0.0 {
+            if m0.data[p] && m1.data[p] && known(a) && known(b) {
                 sum += (a - b).abs() as f64;
                 count += 1;
             }

@@ -11,12 +11,13 @@ use fewview_geom::colormap::colorize_range;
 use fewview_scene::{Camera, Image};
 use serde::Serialize;
 
-use crate::depth::{StereoSettings, flicker};
+use crate::depth::{StereoSettings, flicker, mean_change};
 use crate::error::{HumanError, Result};
 use crate::eval::side_by_side;
 use crate::maps::{DepthMap, Mask};
 use crate::train::prepare::{
-    DepthSettings, Framing, InputViews, PreparedFrame, frame_hull, hull_config, prepare_frame,
+    DepthSettings, Framing, InputViews, PreparedFrame, PreparedView, frame_hull, hull_config,
+    prepare_frame,
 };
 
 /// What [`measure`] prepares.
@@ -92,22 +93,18 @@ fn report(
     config: &DepthReportConfig,
     cameras: &[usize],
 ) -> Result<DepthReport> {
-    let has_truth = prepared
-        .iter()
-        .all(|f| f.views.iter().all(|v| v.depth.is_some()));
-    let stats = |pick: &dyn Fn(usize, usize) -> DepthMap| -> DepthStats {
-        pooled(prepared, pick, has_truth)
-    };
-    let hull = stats(&|f, v| prepared[f].views[v].hull_depth.clone());
-    let stereo = stats(&|f, v| prepared[f].views[v].input_depth.clone());
-    let truth = has_truth
-        .then(|| stats(&|f, v| prepared[f].views[v].depth.clone().expect("checked above")));
-    let views = prepared.iter().flat_map(|f| &f.views);
-    let count = views.clone().count().max(1);
-    let stereo_matched = views.map(|v| v.stereo_matched).sum::<f64>() / count as f64;
     if prepared.is_empty() {
         return Err(HumanError::argument("depth report", "no frames"));
     }
+    let has_truth = prepared
+        .iter()
+        .all(|f| f.views.iter().all(|v| v.depth.is_some()));
+    let hull = pooled(prepared, |v| Some(&v.hull_depth), has_truth);
+    let stereo = pooled(prepared, |v| Some(&v.input_depth), has_truth);
+    let truth = has_truth.then(|| pooled(prepared, |v| v.depth.as_ref(), true));
+    let views = prepared.iter().flat_map(|f| &f.views);
+    let count = views.clone().count().max(1);
+    let stereo_matched = views.map(|v| v.stereo_matched).sum::<f64>() / count as f64;
     let flicker_ratio = match (stereo.flicker_m, hull.flicker_m) {
         (Some(s), Some(h)) if h > 0.0 => Some(s / h),
         _ => None,
@@ -123,28 +120,32 @@ fn report(
     })
 }
 
-/// Flicker and error of the depth `pick(frame, view)` pooled over the views (each view's mean
-/// weighted by its pixel count is close enough to a per-pixel pool; views are one size).
+/// Flicker and error of the depth `pick` chooses of each view, pooled over the views (each
+/// view's mean weighted by its pixel count is close enough to a per-pixel pool; views are one
+/// size). `pick` gives a map for every view.
 fn pooled(
     prepared: &[PreparedFrame],
-    pick: &dyn Fn(usize, usize) -> DepthMap,
+    pick: fn(&PreparedView) -> Option<&DepthMap>,
     has_truth: bool,
 ) -> DepthStats {
     let views = prepared.first().map_or(0, |f| f.views.len());
     let (mut flick, mut beyond, mut error) = (Vec::new(), Vec::new(), Vec::new());
     for v in 0..views {
-        let maps: Vec<DepthMap> = (0..prepared.len()).map(|f| pick(f, v)).collect();
+        let maps: Vec<&DepthMap> = prepared
+            .iter()
+            .map(|f| pick(&f.views[v]).expect("a map for every view"))
+            .collect();
         let masks: Vec<&Mask> = prepared.iter().map(|f| &f.views[v].mask).collect();
-        let series: Vec<(&DepthMap, &Mask)> = maps.iter().zip(masks.iter().copied()).collect();
+        let series: Vec<(&DepthMap, &Mask)> =
+            maps.iter().copied().zip(masks.iter().copied()).collect();
         flick.extend(flicker(&series));
         if has_truth {
-            let truths: Vec<&DepthMap> = prepared
+            let truths = prepared
                 .iter()
-                .map(|f| f.views[v].depth.as_ref().expect("checked by the caller"))
-                .collect();
-            let diffs: Vec<DepthMap> = maps.iter().zip(&truths).map(|(d, g)| minus(d, g)).collect();
+                .map(|f| f.views[v].depth.as_ref().expect("checked by the caller"));
+            let diffs: Vec<DepthMap> = maps.iter().zip(truths).map(|(d, g)| minus(d, g)).collect();
             let series: Vec<(&DepthMap, &Mask)> = diffs.iter().zip(masks.iter().copied()).collect();
-            beyond.extend(signed_flicker(&series));
+            beyond.extend(mean_change(&series, f32::is_finite));
             error.extend(mean_abs(&diffs, &masks));
         }
     }
@@ -169,22 +170,6 @@ fn minus(d: &DepthMap, g: &DepthMap) -> DepthMap {
         height: d.height,
         data,
     }
-}
-
-/// [`flicker`] of signed maps (NaN = unknown).
-fn signed_flicker(frames: &[(&DepthMap, &Mask)]) -> Option<f64> {
-    let (mut sum, mut count) = (0.0f64, 0usize);
-    for pair in frames.windows(2) {
-        let ((d0, m0), (d1, m1)) = (pair[0], pair[1]);
-        for p in 0..d0.data.len() {
-            let (a, b) = (d0.data[p], d1.data[p]);
-            if m0.data[p] && m1.data[p] && a.is_finite() && b.is_finite() {
-                sum += (a - b).abs() as f64;
-                count += 1;
-            }
-        }
-    }
-    (count > 0).then(|| sum / count as f64)
 }
 
 /// Mean `|d|` over masked known pixels of every frame.

@@ -293,7 +293,11 @@ pub fn evaluate(
         .collect::<Result<Vec<_>>>()?;
     let splat = match &options.splat {
         Some((range, opts)) => {
-            let inputs = crate::train::InferenceInputs { source, split };
+            let inputs = crate::train::InferenceInputs {
+                source,
+                split,
+                depth_maps: false,
+            };
             let mut per_camera = vec![Vec::new(); k];
             for frame in range.clone() {
                 let images =

@@ -139,7 +139,11 @@ impl<'a> SequenceRenderer<'a> {
     ) -> Self {
         Self {
             model,
-            inputs: InferenceInputs { source, split },
+            inputs: InferenceInputs {
+                source,
+                split,
+                depth_maps: model.config.depth == crate::depth::DepthInput::Dataset,
+            },
             joints: source,
             stabilizer: tps.map(Stabilizer::new),
         }

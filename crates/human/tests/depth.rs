@@ -24,6 +24,7 @@ fn the_dataset_depth_of_a_capture_without_depth_maps_is_an_error() {
     let inputs = InferenceInputs {
         source: &capture,
         split: &split,
+        depth_maps: true,
     };
     let mesh = frame_hull(&inputs, 0, &hull_config(0.02)).unwrap();
     let cameras: Vec<_> = capture.cameras().to_vec();
@@ -49,6 +50,7 @@ fn seq_a_stereo_depth_against_exact_depth() {
     let inputs = InferenceInputs {
         source: &data,
         split: &split,
+        depth_maps: true,
     };
     let config = DepthReportConfig {
         frames: 0..3,

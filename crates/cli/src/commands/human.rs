@@ -650,6 +650,7 @@ fn depth(args: DepthArgs) -> anyhow::Result<()> {
     let inputs = InferenceInputs {
         source: &*capture,
         split: &split,
+        depth_maps: true,
     };
     eprintln!(
         "human depth: hull and stereo depth of {} input cameras over frames {}..={}…",

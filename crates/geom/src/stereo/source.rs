@@ -122,10 +122,16 @@ pub struct PairStereo {
     pub depths: PairDepths,
 }
 
-/// The disparity range of rectified pair `rect` for scene depths `near..far`.
+/// The disparity range of rectified pair `rect` for scene depths `near..far`, with 10 % margins.
 pub fn disparity_range(rect: &Rectification, near: f64, far: f64) -> (i32, usize) {
-    let lo = rect.depth_to_disparity(far * 1.1).floor().max(0.0) as i32;
-    let hi = rect.depth_to_disparity(near * 0.9).ceil() as i64;
+    exact_disparity_range(rect, near * 0.9, far * 1.1)
+}
+
+/// The disparity range of rectified pair `rect` for rectified z-depths exactly `near..far`:
+/// the first disparity and a count of 16 to [`MAX_DISPARITIES`], a multiple of 16.
+pub fn exact_disparity_range(rect: &Rectification, near: f64, far: f64) -> (i32, usize) {
+    let lo = rect.depth_to_disparity(far).floor().max(0.0) as i32;
+    let hi = rect.depth_to_disparity(near).ceil() as i64;
     let count = (hi - lo as i64 + 1).clamp(16, MAX_DISPARITIES as i64) as usize;
     (lo, count.div_ceil(16) * 16)
 }

@@ -57,6 +57,9 @@ impl InputViews for TrainingView<'_> {
 pub struct InferenceInputs<'a> {
     pub source: &'a dyn MultiView,
     pub split: &'a Split,
+    /// Read the capture's depth maps too (the oracle input depth, or a report's truth);
+    /// otherwise [`InputViews::depth`] is `None` and no depth file is read.
+    pub depth_maps: bool,
 }
 
 impl InferenceInputs<'_> {
@@ -85,10 +88,10 @@ impl InputViews for InferenceInputs<'_> {
         self.check(camera)?;
         self.source.mask(camera, frame)
     }
-    /// The capture's depth of an input camera where it has depth maps (the oracle input depth).
+    /// The capture's depth of an input camera, when asked for and the capture has depth maps.
     fn depth(&self, camera: usize, frame: usize) -> Result<Option<DepthMap>> {
         self.check(camera)?;
-        if !self.source.has_depth() {
+        if !self.depth_maps || !self.source.has_depth() {
             return Ok(None);
         }
         self.source.depth(camera, frame).map(Some)
@@ -283,12 +286,10 @@ pub fn prepare_frame(
         DepthInput::Hull => {}
         DepthInput::Dataset => {
             for v in &mut views {
-                v.input_depth = v.depth.clone().ok_or_else(|| {
-                    HumanError::argument(
-                        "depth input",
-                        "the capture has no depth maps, so the dataset's depth cannot be the input (choose stereo or hull)",
-                    )
-                })?;
+                v.input_depth = v
+                    .depth
+                    .clone()
+                    .ok_or_else(DepthInput::dataset_depth_missing)?;
             }
         }
         DepthInput::Stereo => add_stereo_depth(&mut views, &depth.stereo)?,

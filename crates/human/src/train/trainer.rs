@@ -424,10 +424,7 @@ fn check_depth_input(inputs: &dyn InputViews, frame: usize, depth: DepthInput) -
         return Ok(());
     };
     if depth == DepthInput::Dataset && inputs.depth(camera, frame)?.is_none() {
-        return Err(HumanError::argument(
-            "depth input",
-            "the capture has no depth maps, so the dataset's depth cannot be the input (choose stereo or hull)",
-        ));
+        return Err(DepthInput::dataset_depth_missing());
     }
     Ok(())
 }
