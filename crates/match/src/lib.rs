@@ -10,4 +10,4 @@ pub mod weights;
 pub mod xfeat;
 
 pub use error::{MatchError, Result};
-pub use xfeat::{DetectOptions, Features, XFeat};
+pub use xfeat::{DenseFeatures, DetectOptions, Features, XFeat};

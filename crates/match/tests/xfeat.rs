@@ -171,3 +171,32 @@ fn a_missing_or_wrong_weight_file_is_one_line_naming_it() {
         "{err}"
     );
 }
+
+#[test]
+fn semi_dense_star_matches_equal_the_reference() {
+    let net = xfeat();
+    for pair in PAIRS {
+        let text = std::fs::read_to_string(fixtures().join(format!("{pair}.json"))).unwrap();
+        let reference: Value = serde_json::from_str(&text).unwrap();
+        let theirs = floats(&reference["star_matches"]);
+        let load = |tag: &str| Image::load(&fixtures().join(format!("{pair}_{tag}.png"))).unwrap();
+        let ours = net.match_star(&load("a"), &load("b"), 4096).unwrap();
+        let found = theirs
+            .chunks_exact(4)
+            .filter(|t| {
+                ours.iter()
+                    .any(|o| o.iter().zip(t.iter()).all(|(a, b)| (a - b).abs() <= 0.01))
+            })
+            .count();
+        let n = theirs.len() / 4;
+        eprintln!(
+            "{pair}: XFeat* {found} of {n} reference matches within 0.01 px ({} ours)",
+            ours.len()
+        );
+        assert!(
+            found as f64 >= 0.99 * n.max(ours.len()) as f64,
+            "{pair}: XFeat* {found} of {n} reference matches within 0.01 px ({} ours)",
+            ours.len()
+        );
+    }
+}

