@@ -6,7 +6,7 @@
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
-use fewview_match::{DetectOptions, Features, XFeat};
+use fewview_match::{DetectOptions, Features, GlueOptions, LighterGlue, XFeat};
 use fewview_scene::Image;
 use serde_json::Value;
 
@@ -198,5 +198,62 @@ fn semi_dense_star_matches_equal_the_reference() {
             "{pair}: XFeat* {found} of {n} reference matches within 0.01 px ({} ours)",
             ours.len()
         );
+    }
+}
+
+#[test]
+fn lighterglue_matches_equal_the_reference() {
+    let net = xfeat();
+    let glue = LighterGlue::load_default().unwrap_or_else(|e| panic!("{e}"));
+    for pair in PAIRS {
+        let text = std::fs::read_to_string(fixtures().join(format!("{pair}.json"))).unwrap();
+        let reference: Value = serde_json::from_str(&text).unwrap();
+        let mut features = Vec::new();
+        let mut to_ours = Vec::new();
+        for tag in ["a", "b"] {
+            let image = Image::load(&fixtures().join(format!("{pair}_{tag}.png"))).unwrap();
+            let ours = net.detect(&image, DetectOptions::default()).unwrap();
+            to_ours.push(check_detection(
+                &format!("{pair} {tag}"),
+                &ours,
+                &reference[tag],
+            ));
+            features.push(ours);
+        }
+        let ours: HashMap<(usize, usize), f32> = glue
+            .match_features(&features[0], &features[1], GlueOptions::default())
+            .unwrap()
+            .into_iter()
+            .map(|m| ((m.a, m.b), m.score))
+            .collect();
+        let scores = floats(&reference["lighterglue_scores"]);
+        let mut same = 0;
+        let mut worst = 0.0f32;
+        for (m, score) in reference["lighterglue_matches"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .zip(&scores)
+        {
+            let key = (
+                to_ours[0][m[0].as_u64().unwrap() as usize],
+                to_ours[1][m[1].as_u64().unwrap() as usize],
+            );
+            if let Some(s) = ours.get(&key) {
+                same += 1;
+                worst = worst.max((s - score).abs());
+            }
+        }
+        let n = scores.len();
+        eprintln!(
+            "{pair}: LighterGlue {same} of {n} reference matches ({} ours), largest score difference {worst}",
+            ours.len()
+        );
+        assert!(
+            same as f64 >= 0.99 * n.max(ours.len()) as f64,
+            "{pair}: {same} of {n} ({} ours)",
+            ours.len()
+        );
+        assert!(worst < 1e-3, "{pair}: score difference {worst}");
     }
 }
