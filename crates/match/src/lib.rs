@@ -6,6 +6,8 @@
 //! [`XFeat::load`], detect with [`XFeat::detect`] and match with [`XFeat::match_mutual`],
 //! [`XFeat::match_star`] (XFeat*, semi-dense) or [`LighterGlue::match_features`].
 
+mod attention;
+pub mod bench;
 pub mod error;
 pub mod lighterglue;
 pub mod weights;

@@ -13,7 +13,7 @@
 
 use std::path::Path;
 
-use burn::tensor::activation::{gelu, log_sigmoid, log_softmax, sigmoid, softmax};
+use burn::tensor::activation::{gelu, log_sigmoid, log_softmax, sigmoid};
 use burn::tensor::{Device, Int, Tensor, TensorData};
 
 use crate::error::{MatchError, Result};
@@ -150,8 +150,7 @@ impl SelfBlock {
         let q = enc.rotate(self.q.forward(x.clone()));
         let k = enc.rotate(self.k.forward(x.clone()));
         let v = self.v.forward(x.clone());
-        let attn = softmax(q.matmul(k.transpose()) / (WIDTH as f32).sqrt(), 1);
-        let message = self.out.forward(attn.matmul(v));
+        let message = self.out.forward(attend(q, k, v));
         self.ffn.update(x, message)
     }
 }
@@ -175,17 +174,25 @@ impl CrossBlock {
     }
 
     fn forward(&self, x0: Tensor<2>, x1: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
-        let s = (WIDTH as f32).powf(-0.25);
-        let qk0 = self.qk.forward(x0.clone()) * s;
-        let qk1 = self.qk.forward(x1.clone()) * s;
+        let qk0 = self.qk.forward(x0.clone());
+        let qk1 = self.qk.forward(x1.clone());
         let (v0, v1) = (self.v.forward(x0.clone()), self.v.forward(x1.clone()));
-        let sim = qk0.matmul(qk1.transpose());
-        let m0 = softmax(sim.clone(), 1).matmul(v1);
-        let m1 = softmax(sim.transpose(), 1).matmul(v0);
+        // softmax(qk0·qk1ᵀ/√D) along its rows attends image 0 to image 1, along its columns
+        // (the rows of qk1·qk0ᵀ) image 1 to image 0.
+        let m0 = attend(qk0.clone(), qk1.clone(), v1);
+        let m1 = attend(qk1, qk0, v0);
         let y0 = self.ffn.update(x0, self.out.forward(m0));
         let y1 = self.ffn.update(x1, self.out.forward(m1));
         (y0, y1)
     }
+}
+
+/// `softmax(q·kᵀ / √D) · v` for one head, on the host.
+fn attend(q: Tensor<2>, k: Tensor<2>, v: Tensor<2>) -> Tensor<2> {
+    let n = q.dims()[0];
+    let device = v.device();
+    let out = crate::attention::attend(&host(q), &host(k), &host(v), WIDTH, WIDTH);
+    Tensor::from_data(TensorData::new(out, [n, WIDTH]), &device)
 }
 
 /// The match assignment head of one layer.

@@ -208,6 +208,20 @@ impl Image {
         out
     }
 
+    /// The `width × height` window whose top-left pixel is `(x, y)`, clipped to the image.
+    pub fn crop(&self, x: usize, y: usize, width: usize, height: usize) -> Self {
+        let (x, y) = (x.min(self.width), y.min(self.height));
+        let (w, h) = (width.min(self.width - x), height.min(self.height - y));
+        let mut out = Self::new(w, h, self.channels);
+        for row in 0..h {
+            let src = self.index(x, y + row, 0);
+            let dst = out.index(0, row, 0);
+            out.data[dst..dst + w * self.channels]
+                .copy_from_slice(&self.data[src..src + w * self.channels]);
+        }
+        out
+    }
+
     /// Whether every value is finite.
     pub fn is_finite(&self) -> bool {
         self.data.iter().all(|v| v.is_finite())
@@ -260,6 +274,17 @@ mod tests {
         assert_eq!(depth.scaled_to_unit_max().data, vec![0.0, 0.25, 1.0]);
         let empty = Image::from_vec(2, 1, 1, vec![0.0, -1.0]);
         assert_eq!(empty.scaled_to_unit_max().data, vec![0.0, -1.0]);
+    }
+
+    #[test]
+    fn crop_copies_the_window_and_clips_at_the_border() {
+        let img = Image::from_vec(4, 3, 1, (0..12).map(|v| v as f32).collect());
+        assert_eq!(img.crop(1, 1, 2, 2).data, vec![5.0, 6.0, 9.0, 10.0]);
+        let clipped = img.crop(3, 2, 5, 5);
+        assert_eq!(
+            (clipped.width, clipped.height, clipped.data),
+            (1, 1, vec![11.0])
+        );
     }
 
     #[test]

@@ -93,6 +93,8 @@ pub enum Section {
     Stereo,
     /// PoseGaussian inference per frame, both presets.
     Human,
+    /// The learned matchers (XFeat, XFeat*, LighterGlue) on a 400×300 fern pair.
+    Match,
 }
 
 impl Args {
@@ -148,6 +150,9 @@ struct Report {
     /// PoseGaussian training steps (the network's forward and backward), CPU preset.
     #[serde(skip_serializing_if = "Option::is_none")]
     human_training: Option<fewview_human::bench::TrainingBench>,
+    /// The learned matchers on one 400×300 pair (fern images 0 and 4, central crops).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    matching: Option<fewview_match::bench::MatchBench>,
     peak_memory_mib: Option<f64>,
 }
 
@@ -294,6 +299,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         false => None,
     };
+    let matching = match args.wants(Section::Match) {
+        true => match_bench(args.fern.clone(), args.runs)?,
+        false => None,
+    };
     let report = Report {
         machine,
         raster,
@@ -309,6 +318,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         stereo,
         human_inference,
         human_training,
+        matching,
         peak_memory_mib: peak_memory_mib(),
     };
     print_table(&report);
@@ -422,8 +432,74 @@ fn stereo_bench(
     Ok(Some(bench))
 }
 
+/// XFeat, XFeat* and LighterGlue on fern images 0 and 4 (central 400×300 crops of `images_8`,
+/// the pair of the parity fixtures).
+fn match_bench(
+    fern: Option<PathBuf>,
+    runs: usize,
+) -> anyhow::Result<Option<fewview_match::bench::MatchBench>> {
+    let dir = fern
+        .or_else(|| std::env::var_os("FEWVIEW_DATA").map(|d| PathBuf::from(d).join("llff/fern")));
+    let Some(dir) = dir.filter(|d| d.exists()) else {
+        eprintln!("matching: skipped (pass --fern or set FEWVIEW_DATA)");
+        return Ok(None);
+    };
+    let (xfeat, glue) = match (
+        fewview_match::XFeat::load_default(),
+        fewview_match::LighterGlue::load_default(),
+    ) {
+        (Ok(x), Ok(g)) => (x, g),
+        (Err(e), _) | (_, Err(e)) => {
+            eprintln!("matching: skipped ({e})");
+            return Ok(None);
+        }
+    };
+    eprintln!("matching: fern images 0 and 4 at 400x300 ...");
+    let crop = |i: usize| -> anyhow::Result<fewview_scene::Image> {
+        let path = dir.join(format!("images_8/image{i:03}.png"));
+        let img = fewview_scene::Image::load(&path)?;
+        Ok(img.crop(
+            img.width.saturating_sub(400) / 2,
+            img.height.saturating_sub(300) / 2,
+            400,
+            300,
+        ))
+    };
+    let bench = fewview_match::bench::match_bench(&xfeat, &glue, &crop(0)?, &crop(4)?, runs)?;
+    Ok(Some(bench))
+}
+
 fn print_table(r: &Report) {
     println!("{:<46} {:>14} {:>14}", "figure", "value", "reference");
+    if let Some(m) = &r.matching {
+        let pair = format!("{}x{} pair", m.width, m.height);
+        let rows = [
+            ("XFeat detect, one image s", m.detect_seconds, String::new()),
+            (
+                "XFeat + MNN, pair s",
+                m.pair_mnn_seconds,
+                format!("{} matches", m.mnn_matches),
+            ),
+            (
+                "XFeat + LighterGlue, pair s",
+                m.pair_lighterglue_seconds,
+                format!("{} matches", m.lighterglue_matches),
+            ),
+            (
+                "XFeat*, pair s",
+                m.pair_star_seconds,
+                format!("{} matches", m.star_matches),
+            ),
+        ];
+        for (name, seconds, note) in rows {
+            println!(
+                "{:<46} {:>14.3} {:>14}",
+                format!("{name} ({pair})"),
+                seconds,
+                note
+            );
+        }
+    }
     if let Some(t) = &r.human_training {
         println!(
             "{:<46} {:>14.3} {:>14}",
