@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::bundle::BundleOptions;
 use crate::matching::densify::DensifyOptions;
+use crate::matching::learned::MatcherKind;
 use crate::matching::refine::AffineRefineOptions;
 use crate::matching::sift::SiftOptions;
 use crate::patch_adjustment::PatchAdjustmentOptions;
@@ -28,8 +29,13 @@ pub enum InitialPoses {
 pub struct RunConfig {
     pub train: TrainConfig,
     pub initial_poses: InitialPoses,
-    /// `None`: no correspondences (colour-only joint optimisation, BARF-like).
+    /// `None`: no correspondences (colour-only joint optimisation, BARF-like). The SIFT
+    /// settings; their RANSAC filter also applies to the learned matchers.
     pub matcher: Option<SiftOptions>,
+    /// Which matcher finds the correspondences (runs written before the choice existed used
+    /// the classical one).
+    #[serde(default)]
+    pub matcher_kind: MatcherKind,
     /// Iterations between checkpoints (0: none).
     pub checkpoint_every: usize,
     pub mesh_resolution: usize,
@@ -98,6 +104,7 @@ impl Default for RunConfig {
             train: TrainConfig::default(),
             initial_poses: InitialPoses::NoisyGroundTruth { sigma: 0.15 },
             matcher: Some(SiftOptions::default()),
+            matcher_kind: MatcherKind::Classical,
             checkpoint_every: 500,
             mesh_resolution: 256,
             eval_views: 5,

@@ -13,6 +13,7 @@ use crate::config::{InitialPoses, RunConfig};
 use crate::error::{Result, SurfaceError};
 use crate::field::{EncoderKind, FdScheme};
 use crate::matching::densify::DensifyOptions;
+use crate::matching::learned::MatcherKind;
 use crate::matching::refine::{AffineRefineOptions, WarpModel};
 use crate::matching::sift::SiftOptions;
 use crate::patch_adjustment::PatchAdjustmentOptions;
@@ -111,6 +112,8 @@ pub struct Overrides {
     pub refine_poses: bool,
     /// In (0, 180] degrees ([`RunConfig::max_pair_angle_deg`]).
     pub max_pair_angle_deg: f64,
+    /// Which matcher finds the correspondences.
+    pub matcher: MatcherKind,
     /// The sub-pixel refinement's warp; `None` keeps the matcher's output.
     pub match_refine: Option<WarpModel>,
     /// With [`WarpModel::Quadratic`] only ([`AffineRefineOptions::max_bend_px`]).
@@ -155,6 +158,7 @@ impl Default for Overrides {
             pose_start: None,
             refine_poses: true,
             max_pair_angle_deg: 80.0,
+            matcher: MatcherKind::Classical,
             match_refine: Some(WarpModel::Affine),
             match_max_bend_px: None,
             densify: Densify::Auto,
@@ -304,6 +308,7 @@ impl RunConfig {
             ));
         }
         self.max_pair_angle_deg = angle;
+        self.matcher_kind = o.matcher;
         if o.match_max_bend_px.is_some() && o.match_refine != Some(WarpModel::Quadratic) {
             return Err(SurfaceError::invalid(
                 "--match-max-bend",

@@ -12,6 +12,7 @@ pub mod eval_video;
 mod fusion;
 mod geom_common;
 mod human;
+mod matching;
 mod mcubes;
 mod number_args;
 mod output_paths;
@@ -46,6 +47,7 @@ pub enum Command {
     Register(register::Args),
     Chamfer(chamfer::Args),
     PoseError(pose_error::Args),
+    Match(matching::Args),
     // Boxed: the surface command has many flags, and clippy bounds the size difference of variants.
     Surface(Box<surface::Args>),
     /// Temporal-coherence metrics of a rendered frame sequence against ground truth.
@@ -73,6 +75,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Register(a) => register::run(a),
         Command::Chamfer(a) => chamfer::run(a),
         Command::PoseError(a) => pose_error::run(a),
+        Command::Match(a) => matching::run(a),
         Command::Surface(a) => surface::run(*a),
         Command::EvalVideo(args) => eval_video::run(args),
         Command::Study(args) => study::run(args),

@@ -10,6 +10,7 @@ use clap::Args as ClapArgs;
 use fewview_metrics::pose_error::PoseError;
 use fewview_surface::adam::ExpSchedule;
 use fewview_surface::field::{EncoderKind, FdScheme};
+use fewview_surface::matching::learned::MatcherKind;
 use fewview_surface::matching::refine::WarpModel;
 use fewview_surface::pipeline::checkpoint_path;
 use fewview_surface::warmup::{Connectivity, WarmupReport};
@@ -98,6 +99,12 @@ pub struct Args {
     /// Match only views whose optical axes are at most this many degrees apart (180: all).
     #[arg(long, default_value_t = 80.0, value_name = "DEG")]
     pub max_pair_angle: f64,
+    /// Which matcher finds the correspondences: `classical` (SIFT), or the learned XFeat with
+    /// mutual nearest neighbours (`xfeat`), semi-dense and refined (`xfeat-star`), or matched by
+    /// LighterGlue (`lighterglue`); their weights come from `scripts/setup.sh`, and without
+    /// them the run says so and uses the classical matcher.
+    #[arg(long, value_enum, default_value_t = MatcherKind::Classical)]
+    pub matcher: MatcherKind,
     /// Sub-pixel refinement of the matches by Lucas–Kanade (a deviation from the surface paper).
     #[arg(long, value_enum, default_value_t = MatchRefineArg::Affine)]
     pub match_refine: MatchRefineArg,
@@ -403,6 +410,7 @@ impl Args {
             pose_start: self.pose_start,
             refine_poses: !self.no_pose_refinement,
             max_pair_angle_deg: self.max_pair_angle,
+            matcher: self.matcher,
             match_refine: self.match_refine.warp(),
             match_max_bend_px: self.match_max_bend,
             densify: self.densify,
@@ -503,6 +511,8 @@ fn print_event(bar: &Bar, e: Event) {
     match e {
         Event::Matched {
             matches,
+            matcher,
+            fallback,
             precision,
             densified_because,
         } => {
@@ -514,13 +524,17 @@ fn print_event(bar: &Bar, e: Event) {
                     )
                 })
                 .unwrap_or_default();
+            let by = matcher.map(|m| format!(" by {m}")).unwrap_or_default();
             bar.suspend(|| {
+                if let Some(why) = fallback {
+                    eprintln!("{why}");
+                }
                 if let Some(why) = densified_because {
                     eprintln!(
                         "sparse matches cannot tie the views together ({why}): growing dense ones"
                     );
                 }
-                eprintln!("{matches} correspondences{p}")
+                eprintln!("{matches} correspondences{by}{p}")
             });
         }
         Event::Step(s) => {

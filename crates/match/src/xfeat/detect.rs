@@ -136,6 +136,19 @@ impl Features {
     pub fn descriptor(&self, i: usize) -> &[f32] {
         &self.descriptors[i * DIM..(i + 1) * DIM]
     }
+
+    /// Keeps the keypoints (with their scores and descriptors) for which `keep` holds.
+    pub fn retain(&mut self, keep: impl Fn([f32; 2]) -> bool) {
+        let kept: Vec<usize> = (0..self.len())
+            .filter(|&i| keep(self.keypoints[i]))
+            .collect();
+        self.descriptors = kept
+            .iter()
+            .flat_map(|&i| self.descriptor(i).to_vec())
+            .collect();
+        self.keypoints = kept.iter().map(|&i| self.keypoints[i]).collect();
+        self.scores = kept.iter().map(|&i| self.scores[i]).collect();
+    }
 }
 
 /// Scores, orders and describes the maxima; keeps the `top_k` best with a positive score.

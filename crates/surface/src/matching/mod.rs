@@ -9,7 +9,9 @@
 pub mod dense;
 pub mod densify;
 pub mod fundamental;
+pub mod learned;
 pub mod refine;
+pub mod report;
 pub mod sift;
 
 use fewview_scene::{Camera, Image, Se3};
@@ -75,6 +77,29 @@ pub trait Matcher: Send + Sync {
     fn name(&self) -> &str;
 }
 
+/// The matches that a RANSAC fundamental matrix (Sampson distance below `px`) keeps.
+pub(crate) fn ransac_filter(
+    matches: Vec<Match>,
+    px: f64,
+    iterations: usize,
+    seed: u64,
+) -> Vec<Match> {
+    let pa: Vec<[f64; 2]> = matches
+        .iter()
+        .map(|m| [m.a[0] as f64, m.a[1] as f64])
+        .collect();
+    let pb: Vec<[f64; 2]> = matches
+        .iter()
+        .map(|m| [m.b[0] as f64, m.b[1] as f64])
+        .collect();
+    let keep = fundamental::ransac_inliers(&pa, &pb, px, iterations, seed);
+    matches
+        .into_iter()
+        .zip(keep)
+        .filter_map(|(m, k)| k.then_some(m))
+        .collect()
+}
+
 /// Matches every unordered pair of views (`view_a < view_b`, indices into `views`).
 pub fn match_all_pairs(matcher: &dyn Matcher, views: &[MatchInput]) -> Vec<Match> {
     let pairs: Vec<(usize, usize)> = unordered_pairs(views.len()).collect();
@@ -82,7 +107,7 @@ pub fn match_all_pairs(matcher: &dyn Matcher, views: &[MatchInput]) -> Vec<Match
 }
 
 /// Every pair `(i, j)` with `i < j < n`.
-fn unordered_pairs(n: usize) -> impl Iterator<Item = (usize, usize)> {
+pub(crate) fn unordered_pairs(n: usize) -> impl Iterator<Item = (usize, usize)> {
     (0..n).flat_map(move |i| (i + 1..n).map(move |j| (i, j)))
 }
 

@@ -11,8 +11,7 @@ use image::{GrayImage, Luma};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::fundamental::ransac_inliers;
-use super::{Match, MatchInput, Matcher, luminance};
+use super::{Match, MatchInput, Matcher, luminance, ransac_filter};
 
 /// Options of [`SiftMatcher`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -155,17 +154,10 @@ impl Matcher for SiftMatcher {
                 b_covariance: None,
             });
         }
-        if let Some(px) = o.ransac_px {
-            let pa: Vec<[f64; 2]> = out.iter().map(|m| [m.a[0] as f64, m.a[1] as f64]).collect();
-            let pb: Vec<[f64; 2]> = out.iter().map(|m| [m.b[0] as f64, m.b[1] as f64]).collect();
-            let keep = ransac_inliers(&pa, &pb, px, o.ransac_iterations, o.seed);
-            out = out
-                .into_iter()
-                .zip(keep)
-                .filter_map(|(m, k)| k.then_some(m))
-                .collect();
+        match o.ransac_px {
+            Some(px) => ransac_filter(out, px, o.ransac_iterations, o.seed),
+            None => out,
         }
-        out
     }
 
     fn name(&self) -> &str {

@@ -241,6 +241,8 @@ pub fn run(
             0.0
         },
         matches: prep.matches.len(),
+        matcher: prep.matcher.clone(),
+        matcher_fallback: prep.matcher_fallback.clone(),
         match_precision: prep.match_precision.clone(),
         densified_because: prep.densified_because.clone(),
         initial_pose_error: evaluated.initial_err,
@@ -320,6 +322,8 @@ fn start_run(
 fn write_prepared(prep: &Prepared, out: &Path, on_event: &mut dyn FnMut(Event)) -> Result<()> {
     on_event(Event::Matched {
         matches: prep.matches.len(),
+        matcher: prep.matcher.as_deref(),
+        fallback: prep.matcher_fallback.as_deref(),
         precision: prep.match_precision.as_ref(),
         densified_because: prep.densified_because.as_deref(),
     });

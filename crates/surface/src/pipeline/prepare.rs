@@ -8,8 +8,9 @@ use crate::config::{InitialPoses, RunConfig};
 use crate::error::{Result, SurfaceError};
 use crate::matching::dense::{DenseOptions, dense_matches};
 use crate::matching::densify::densify_matches;
+use crate::matching::learned::matcher_for;
 use crate::matching::refine::refine_matches;
-use crate::matching::sift::{SiftMatcher, SiftOptions};
+use crate::matching::sift::SiftOptions;
 use crate::matching::{
     Match, MatchInput, MatchPrecision, covisible_pairs, epipolar_precision, match_pairs,
 };
@@ -43,6 +44,10 @@ pub struct Prepared {
     /// Why dense matches were grown under [`RunConfig::densify_if_needed`] (the warm-up's
     /// verdict on the sparse ones), when they were.
     pub densified_because: Option<String>,
+    /// The matcher that ran ([`crate::matching::Matcher::name`]), when one did.
+    pub matcher: Option<String>,
+    /// Why the configured matcher could not run and the classical one ran instead.
+    pub matcher_fallback: Option<String>,
 }
 
 impl Prepared {
@@ -149,21 +154,28 @@ pub fn prepare_with_matching(
         .train_views()
         .map(|v| v.camera.intrinsics)
         .collect();
-    let (fine_matches, match_precision, densified_because) = match &config.matcher {
-        None => (Vec::new(), None, None),
-        Some(opts) => {
-            let pairs = covisible_pairs(&initial, config.max_pair_angle_deg);
-            let c = correspondences(
-                matching,
-                &pairs,
-                &match_intrinsics,
-                &ground_truth,
-                opts,
-                config,
-            );
-            (c.matches, Some(c.precision), c.densified_because)
-        }
-    };
+    let (fine_matches, match_precision, densified_because, matcher, matcher_fallback) =
+        match &config.matcher {
+            None => (Vec::new(), None, None, None, None),
+            Some(opts) => {
+                let pairs = covisible_pairs(&initial, config.max_pair_angle_deg);
+                let c = correspondences(
+                    matching,
+                    &pairs,
+                    &match_intrinsics,
+                    &ground_truth,
+                    opts,
+                    config,
+                );
+                (
+                    c.matches,
+                    Some(c.precision),
+                    c.densified_because,
+                    Some(c.matcher),
+                    c.fallback,
+                )
+            }
+        };
     let (start, warmup) = match &config.pose_warmup {
         None => (initial.clone(), None),
         Some(opts) => {
@@ -221,6 +233,8 @@ pub fn prepare_with_matching(
         matches,
         match_precision,
         densified_because,
+        matcher,
+        matcher_fallback,
     })
 }
 
@@ -257,6 +271,10 @@ struct Correspondences {
     matches: Vec<Match>,
     precision: MatchPrecision,
     densified_because: Option<String>,
+    /// The matcher that ran.
+    matcher: String,
+    /// Why the configured matcher could not run.
+    fallback: Option<String>,
 }
 
 /// SIFT correspondences between the given pairs of training views of `dataset` (in its
@@ -279,13 +297,8 @@ fn correspondences(
             mask: if use_masks { v.mask.as_ref() } else { None },
         })
         .collect();
-    let matches = match_pairs(
-        &SiftMatcher {
-            options: options.clone(),
-        },
-        &inputs,
-        pairs,
-    );
+    let (matcher, fallback) = matcher_for(config.matcher_kind, options, &inputs);
+    let matches = match_pairs(matcher.as_ref(), &inputs, pairs);
     let images: Vec<&Image> = inputs.iter().map(|i| i.image).collect();
     let mut matches = match refinement {
         Some(o) => refine_matches(&images, &matches, o),
@@ -341,6 +354,8 @@ fn correspondences(
         matches,
         precision,
         densified_because,
+        matcher: matcher.name().to_string(),
+        fallback,
     }
 }
 

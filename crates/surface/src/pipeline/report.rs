@@ -31,6 +31,13 @@ pub struct RunReport {
     pub train_seconds_cpu: f64,
     pub iterations_per_second_wall: f64,
     pub matches: usize,
+    /// The matcher that ran (`classical`, `xfeat`, `xfeat-star`, `lighterglue`); absent in runs
+    /// written before the choice existed (classical) and in runs without matches.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub matcher: Option<String>,
+    /// Why the configured matcher could not run and the classical one ran instead.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub matcher_fallback: Option<String>,
     pub match_precision: Option<MatchPrecision>,
     /// Why dense matches were grown under [`crate::config::RunConfig::densify_if_needed`], when they were.
     pub densified_because: Option<String>,
@@ -135,6 +142,9 @@ pub struct ChamferReport {
 pub enum Event<'a> {
     Matched {
         matches: usize,
+        /// The matcher that ran, and why it is not the configured one when it is not.
+        matcher: Option<&'a str>,
+        fallback: Option<&'a str>,
         precision: Option<&'a MatchPrecision>,
         /// Why dense matches were grown although not asked for ([`crate::pipeline::Prepared::densified_because`]).
         densified_because: Option<&'a str>,
