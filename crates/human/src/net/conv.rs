@@ -22,7 +22,6 @@ use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::flex::FlexTensor;
-use burn::backend::ops::ModuleOps;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Dispatch, ExtensionType, Flex, backend_extension};
 use burn::nn::PaddingConfig2d;
@@ -56,8 +55,22 @@ pub trait ConvBackend: Backend {
     ) -> ConvOutput<Self>;
 }
 
-/// The weight gradient of a backend (the half of the op each backend supplies).
+/// The passes each backend supplies.
 pub trait ConvKernels: Backend {
+    fn conv_forward(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self>;
+
+    fn conv_x_grad(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self>;
+
     fn conv_weight_grad(
         x: FloatTensor<Self>,
         weight: FloatTensor<Self>,
@@ -67,6 +80,45 @@ pub trait ConvKernels: Backend {
 }
 
 impl ConvKernels for Flex {
+    fn conv_forward(
+        x: FlexTensor,
+        weight: FlexTensor,
+        bias: FlexTensor,
+        options: ConvOptions<2>,
+    ) -> FlexTensor {
+        use burn::backend::TensorMetadata;
+        let xs: [usize; 4] = x.shape().dims();
+        let ws: [usize; 4] = weight.shape().dims();
+        let (y, ys) = super::conv_taps::forward_host(
+            &fewview_optim::flex_f32(&x),
+            xs,
+            &fewview_optim::flex_f32(&weight),
+            ws,
+            &fewview_optim::flex_f32(&bias),
+            &options,
+        );
+        FlexTensor::from_data(TensorData::new(y, Shape::new(ys)))
+    }
+
+    fn conv_x_grad(
+        x: FlexTensor,
+        weight: FlexTensor,
+        grad: FlexTensor,
+        options: ConvOptions<2>,
+    ) -> FlexTensor {
+        use burn::backend::TensorMetadata;
+        let xs: [usize; 4] = x.shape().dims();
+        let ws: [usize; 4] = weight.shape().dims();
+        let dx = super::conv_taps::input_grad_host(
+            &fewview_optim::flex_f32(&grad),
+            xs,
+            &fewview_optim::flex_f32(&weight),
+            ws,
+            &options,
+        );
+        FlexTensor::from_data(TensorData::new(dx, Shape::new(xs)))
+    }
+
     fn conv_weight_grad(
         x: FlexTensor,
         weight: FlexTensor,
@@ -87,7 +139,7 @@ impl ConvKernels for Flex {
 impl ConvBackend for Flex {
     fn taps_conv2d(inputs: ConvInputs<Self>, options: ConvOptions<2>) -> ConvOutput<Self> {
         ConvOutput {
-            y: Self::conv2d(inputs.x, inputs.weight, Some(inputs.bias), options),
+            y: Self::conv_forward(inputs.x, inputs.weight, inputs.bias, options),
         }
     }
 }
@@ -103,6 +155,24 @@ mod cube {
     use super::{ConvBackend, ConvInputs, ConvKernels, ConvOutput};
 
     impl ConvKernels for Cube {
+        fn conv_forward(
+            x: CubeTensor,
+            weight: CubeTensor,
+            bias: CubeTensor,
+            options: ConvOptions<2>,
+        ) -> CubeTensor {
+            Self::conv2d(x, weight, Some(bias), options)
+        }
+
+        fn conv_x_grad(
+            x: CubeTensor,
+            weight: CubeTensor,
+            grad: CubeTensor,
+            options: ConvOptions<2>,
+        ) -> CubeTensor {
+            Self::conv2d_x_backward(x, weight, grad, options)
+        }
+
         fn conv_weight_grad(
             x: CubeTensor,
             weight: CubeTensor,
@@ -160,7 +230,7 @@ impl<B: ConvKernels> Backward<B, 3> for ConvBackwardStep {
             grads.register::<B>(node.id, g);
         }
         if let Some(node) = x_node {
-            let g = B::conv2d_x_backward(s.x, s.weight, grad, s.options);
+            let g = B::conv_x_grad(s.x, s.weight, grad, s.options);
             grads.register::<B>(node.id, g);
         }
     }
@@ -175,10 +245,10 @@ impl<B: ConvKernels, C: CheckpointStrategy> ConvBackend for Autodiff<B, C> {
             bias: inputs.bias.into_primitive(),
             options,
         };
-        let y = B::conv2d(
+        let y = B::conv_forward(
             state.x.clone(),
             state.weight.clone(),
-            Some(state.bias.clone()),
+            state.bias.clone(),
             state.options.clone(),
         );
         let y = match ConvBackwardStep

@@ -14,6 +14,7 @@
 pub mod checkpoint;
 pub mod config;
 pub mod conv;
+mod conv_taps;
 pub mod decoder;
 pub mod encoder;
 pub mod flops;

@@ -1,0 +1,320 @@
+//! A convolution's forward pass and input gradient on the host as one matrix product per kernel
+//! tap, without the unfolded (im2col) copy of the input.
+//!
+//! The zero-padded input is split into its `s × s` stride phases (phase `(py, px)` holds the
+//! padded pixels `(s·y + py, s·x + px)`), so that tap `(dy, dx)` of a stride-`s` convolution
+//! reads phase `(dy mod s, dx mod s)` shifted by `(⌊dy/s⌋, ⌊dx/s⌋)` with unit stride. With the
+//! output's rows widened to the phase width, the shifted phase is a plain strided view, and
+//!
+//! ```text
+//! Y_b       += W(dy, dx) · Phase_b(dy, dx)         (O × pixels, for each tap)
+//! dPhase_b  += W(dy, dx)ᵀ · G_b                    (C × pixels, accumulated at the shift)
+//! ```
+//!
+//! are one GEMM each. The widened columns past the output's width are discarded (forward) or
+//! carry zero gradient (backward).
+
+use std::cell::RefCell;
+
+use burn::tensor::ops::ConvOptions;
+
+thread_local! {
+    /// Scratch buffers kept between calls: fresh multi-megabyte buffers cost the kernel's page
+    /// zeroing on every convolution.
+    static SCRATCH: RefCell<[Vec<f32>; 2]> = const { RefCell::new([Vec::new(), Vec::new()]) };
+}
+
+/// Runs `f` with two zeroed scratch buffers of `len0` and `len1` values. The buffers are taken
+/// out of the thread's store while `f` runs, so a nested call (a task rayon runs on this thread
+/// while it waits) gets fresh ones instead of a double borrow.
+fn with_scratch<R>(
+    len0: usize,
+    len1: usize,
+    f: impl FnOnce(&mut Vec<f32>, &mut Vec<f32>) -> R,
+) -> R {
+    let [mut a, mut b] = SCRATCH.with_borrow_mut(std::mem::take);
+    for (v, len) in [(&mut a, len0), (&mut b, len1)] {
+        v.clear();
+        v.resize(len, 0.0);
+    }
+    let r = f(&mut a, &mut b);
+    SCRATCH.with_borrow_mut(|s| *s = [a, b]);
+    r
+}
+
+/// The geometry shared by the forward pass and the input gradient.
+struct Taps {
+    b: usize,
+    c: usize,
+    o: usize,
+    h: usize,
+    w: usize,
+    kh: usize,
+    kw: usize,
+    s: usize,
+    top: usize,
+    left: usize,
+    ho: usize,
+    wo: usize,
+    /// Phase width.
+    wpp: usize,
+    /// Values per phase plane (with a tail for the last taps' widened rows).
+    plane: usize,
+}
+
+impl Taps {
+    fn new([b, c, h, w]: [usize; 4], [o, _, kh, kw]: [usize; 4], options: &ConvOptions<2>) -> Self {
+        let [(top, bottom), (left, right)] = options.padding;
+        let s = options.stride[0];
+        assert_eq!(options.stride[1], s, "equal strides");
+        let (hp, wp) = (h + top + bottom, w + left + right);
+        let (hpp, wpp) = (hp.div_ceil(s), wp.div_ceil(s));
+        Self {
+            b,
+            c,
+            o,
+            h,
+            w,
+            kh,
+            kw,
+            s,
+            top,
+            left,
+            ho: (hp - kh) / s + 1,
+            wo: (wp - kw) / s + 1,
+            wpp,
+            plane: hpp * wpp + wpp + kw,
+        }
+    }
+
+    /// Widened output pixels per channel.
+    fn pixels(&self) -> usize {
+        self.ho * self.wpp
+    }
+
+    /// Start of phase `(py, px)`, channel 0, of batch item `bi`.
+    fn phase_base(&self, bi: usize, py: usize, px: usize) -> usize {
+        ((bi * self.s + py) * self.s + px) * self.c * self.plane
+    }
+
+    /// Where in the phases the padded pixel of input pixel `(y, x)` of channel `ci` lies.
+    fn phase_index(&self, bi: usize, ci: usize, y: usize, x: usize) -> usize {
+        let (yp, xp) = (y + self.top, x + self.left);
+        let base = self.phase_base(bi, yp % self.s, xp % self.s);
+        base + ci * self.plane + (yp / self.s) * self.wpp + xp / self.s
+    }
+
+    /// Phase base and shift of tap `(dy, dx)`.
+    fn tap(&self, bi: usize, dy: usize, dx: usize) -> usize {
+        let s = self.s;
+        self.phase_base(bi, dy % s, dx % s) + (dy / s) * self.wpp + dx / s
+    }
+
+    /// Weight `(o, c)` of tap `(dy, dx)` is at `tap_weight + o·C·kh·kw + c·kh·kw`.
+    fn tap_weight(&self, dy: usize, dx: usize) -> usize {
+        dy * self.kw + dx
+    }
+}
+
+/// The convolution `[B, C, H, W] → [B, O, Ho, Wo]` of `x` with `weight` (`[O, C, kh, kw]`) and
+/// `bias`; returns the output and its shape.
+pub fn forward_host(
+    x: &[f32],
+    xs: [usize; 4],
+    weight: &[f32],
+    ws: [usize; 4],
+    bias: &[f32],
+    options: &ConvOptions<2>,
+) -> (Vec<f32>, [usize; 4]) {
+    let t = Taps::new(xs, ws, options);
+    let n = t.pixels();
+    with_scratch(
+        t.b * t.s * t.s * t.c * t.plane,
+        t.b * t.o * n,
+        |phases, wide| {
+            t.scatter(x, phases);
+            t.forward(weight, phases, wide);
+            t.crop_with_bias(wide, bias)
+        },
+    )
+}
+
+impl Taps {
+    /// Writes the input `[B, C, H, W]` into its zero-padded stride phases.
+    fn scatter(&self, x: &[f32], phases: &mut [f32]) {
+        let s = self.s;
+        for bc in 0..self.b * self.c {
+            let (bi, ci) = (bc / self.c, bc % self.c);
+            for y in 0..self.h {
+                let row = &x[(bc * self.h + y) * self.w..][..self.w];
+                for px in 0..s {
+                    // Input columns x with (x + left) mod s = px, in order.
+                    let first = (px + s - self.left % s) % s;
+                    let dst = self.phase_index(bi, ci, y, first.min(self.w));
+                    for (k, &v) in row.iter().skip(first).step_by(s).enumerate() {
+                        phases[dst + k] = v;
+                    }
+                }
+            }
+        }
+    }
+
+    /// The phases read back into `[B, C, H, W]` (the input gradient).
+    fn gather(&self, phases: &[f32]) -> Vec<f32> {
+        let s = self.s;
+        let mut out = vec![0.0f32; self.b * self.c * self.h * self.w];
+        for bc in 0..self.b * self.c {
+            let (bi, ci) = (bc / self.c, bc % self.c);
+            for y in 0..self.h {
+                let row = &mut out[(bc * self.h + y) * self.w..][..self.w];
+                for px in 0..s {
+                    let first = (px + s - self.left % s) % s;
+                    if first >= self.w {
+                        continue;
+                    }
+                    let src = self.phase_index(bi, ci, y, first);
+                    for (k, v) in row.iter_mut().skip(first).step_by(s).enumerate() {
+                        *v = phases[src + k];
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// The widened output `[B, O, Ho·wpp]` of the phases, one GEMM per tap.
+    fn forward(&self, weight: &[f32], phases: &[f32], wide: &mut [f32]) {
+        let t = self;
+        let n = t.pixels();
+        let k = t.kh * t.kw;
+        for bi in 0..t.b {
+            let dst = &mut wide[bi * t.o * n..(bi + 1) * t.o * n];
+            for dy in 0..t.kh {
+                for dx in 0..t.kw {
+                    let first = dy == 0 && dx == 0;
+                    let at = t.tap(bi, dy, dx);
+                    assert!(
+                        at + (t.c - 1) * t.plane + n <= phases.len(),
+                        "tap inside the phases"
+                    );
+                    let rhs = &phases[at..];
+                    let lhs = &weight[t.tap_weight(dy, dx)..];
+                    // dst[O × n] (+)= W_tap[O × C] · phase[C × n]
+                    unsafe {
+                        gemm::gemm(
+                            t.o,
+                            n,
+                            t.c,
+                            dst.as_mut_ptr(),
+                            1,
+                            n as isize,
+                            !first,
+                            lhs.as_ptr(),
+                            k as isize,
+                            (t.c * k) as isize,
+                            rhs.as_ptr(),
+                            1,
+                            t.plane as isize,
+                            1.0,
+                            1.0,
+                            false,
+                            false,
+                            false,
+                            gemm::Parallelism::Rayon(0),
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// The output `[B, O, Ho, Wo]` and its shape: the widened rows cut to `Wo`, plus the bias.
+    fn crop_with_bias(&self, wide: &[f32], bias: &[f32]) -> (Vec<f32>, [usize; 4]) {
+        let n = self.pixels();
+        let mut y = Vec::with_capacity(self.b * self.o * self.ho * self.wo);
+        for bo in 0..self.b * self.o {
+            let b0 = bias[bo % self.o];
+            for i in 0..self.ho {
+                y.extend(
+                    wide[bo * n + i * self.wpp..][..self.wo]
+                        .iter()
+                        .map(|v| v + b0),
+                );
+            }
+        }
+        (y, [self.b, self.o, self.ho, self.wo])
+    }
+}
+
+/// `dL/dx` (`[B, C, H, W]`) of the convolution given `dL/dy` (`g`, `[B, O, Ho, Wo]`).
+pub fn input_grad_host(
+    g: &[f32],
+    xs: [usize; 4],
+    weight: &[f32],
+    ws: [usize; 4],
+    options: &ConvOptions<2>,
+) -> Vec<f32> {
+    let t = Taps::new(xs, ws, options);
+    let n = t.pixels();
+    with_scratch(
+        t.b * t.s * t.s * t.c * t.plane,
+        t.b * t.o * n,
+        |phases, wide| {
+            // The output gradient widened to rows of the phase width, zero past the output's width.
+            for bo in 0..t.b * t.o {
+                for i in 0..t.ho {
+                    let src = &g[(bo * t.ho + i) * t.wo..][..t.wo];
+                    wide[bo * n + i * t.wpp..][..t.wo].copy_from_slice(src);
+                }
+            }
+            t.backward(weight, wide, phases);
+            t.gather(phases)
+        },
+    )
+}
+
+impl Taps {
+    /// Accumulates `W_tapᵀ · G` into the phases at each tap's shift.
+    fn backward(&self, weight: &[f32], wide: &[f32], phases: &mut [f32]) {
+        let t = self;
+        let n = t.pixels();
+        let k = t.kh * t.kw;
+        for bi in 0..t.b {
+            let rhs = &wide[bi * t.o * n..(bi + 1) * t.o * n];
+            for dy in 0..t.kh {
+                for dx in 0..t.kw {
+                    let at = t.tap(bi, dy, dx);
+                    assert!(
+                        at + (t.c - 1) * t.plane + n <= phases.len(),
+                        "tap inside the phases"
+                    );
+                    let lhs = &weight[t.tap_weight(dy, dx)..];
+                    // dPhase[C × n] at the tap's shift += W_tapᵀ[C × O] · G[O × n]
+                    unsafe {
+                        gemm::gemm(
+                            t.c,
+                            n,
+                            t.o,
+                            phases[at..].as_mut_ptr(),
+                            1,
+                            t.plane as isize,
+                            true,
+                            lhs.as_ptr(),
+                            (t.c * k) as isize,
+                            k as isize,
+                            rhs.as_ptr(),
+                            1,
+                            n as isize,
+                            1.0,
+                            1.0,
+                            false,
+                            false,
+                            false,
+                            gemm::Parallelism::Rayon(0),
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
