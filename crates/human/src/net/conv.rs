@@ -1,5 +1,5 @@
-//! The network's convolutions as a Burn custom operation whose weight gradient is one matrix
-//! product per kernel tap on the CPU.
+//! The network's convolutions as a Burn custom operation computed on the CPU as one matrix
+//! product per kernel tap ([`super::conv_taps`]): forward pass, input and weight gradients.
 //!
 //! Burn's generic backward pass computes a convolution's weight gradient as another
 //! convolution whose input channels are the batch (two source views) and whose kernel is the
@@ -14,8 +14,8 @@
 //! `X_b(dy, dx)` the input shifted by the tap, `C × pixels`. Laid over the zero-padded input
 //! with the output's rows widened to the padded width (zero gradient in the extra columns),
 //! the shifted input is a plain strided view of one buffer, so each tap is one GEMM with no
-//! copy. The forward pass and the input and bias gradients stay Burn's; on other backends
-//! (the GPU) the weight gradient does too.
+//! copy; the forward pass and the input gradient use the same views. The bias gradient stays
+//! Burn's, and on other backends (the GPU) every part does.
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
@@ -128,10 +128,9 @@ impl ConvKernels for Flex {
         use burn::backend::TensorMetadata;
         let xs: [usize; 4] = x.shape().dims();
         let ws: [usize; 4] = weight.shape().dims();
-        let gs: [usize; 4] = grad.shape().dims();
         let x = fewview_optim::flex_f32(&x);
         let g = fewview_optim::flex_f32(&grad);
-        let dw = weight_grad_host(&x, xs, &g, gs, ws, &options);
+        let dw = super::conv_taps::weight_grad_host(&x, xs, &g, ws, &options);
         FlexTensor::from_data(TensorData::new(dw, Shape::new(ws)))
     }
 }
@@ -283,88 +282,6 @@ pub fn apply(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
         bias: bias.val().into_dispatch(),
     };
     Tensor::from_dispatch(<Dispatch as ConvBackend>::taps_conv2d(inputs, options).y)
-}
-
-/// `dW` of a convolution on the host: for each tap, `Σ_b G_b · X_b(tap)ᵀ` as one GEMM over the
-/// padded input (see the module documentation).
-pub fn weight_grad_host(
-    x: &[f32],
-    [b, c, h, w]: [usize; 4],
-    g: &[f32],
-    [_, o, ho, wo]: [usize; 4],
-    [_, _, kh, kw]: [usize; 4],
-    options: &ConvOptions<2>,
-) -> Vec<f32> {
-    let [(top, bottom), (left, right)] = options.padding;
-    let [sy, sx] = options.stride;
-    let (hp, wp) = (h + top + bottom, w + left + right);
-    // The padded input, with a tail so that the widened rows of the last taps stay in bounds.
-    let plane = hp * wp;
-    let tail = sy * wp * ho + sx * wp + kh * wp + kw;
-    let mut padded = vec![0.0f32; b * c * plane + tail];
-    for bc in 0..b * c {
-        for y in 0..h {
-            let src = &x[(bc * h + y) * w..(bc * h + y + 1) * w];
-            let dst = bc * plane + (y + top) * wp + left;
-            padded[dst..dst + w].copy_from_slice(src);
-        }
-    }
-    // The output gradient widened to rows of `wp` (zeros past `wo`).
-    let mut widened = vec![0.0f32; b * o * ho * wp];
-    for bo in 0..b * o {
-        for y in 0..ho {
-            let src = &g[(bo * ho + y) * wo..(bo * ho + y + 1) * wo];
-            let dst = (bo * ho + y) * wp;
-            widened[dst..dst + wo].copy_from_slice(src);
-        }
-    }
-    // Output pixel (i, j) reads padded (sy·i + dy, sx·j + dx); with rows of width wp the pixel
-    // index p = i·wp + j reads offset sy·i·wp + sx·j, which is p·sx only when sy = sx.
-    assert_eq!(sy, sx, "equal strides");
-    let k = ho * wp;
-    let mut taps = vec![0.0f32; kh * kw * o * c];
-    for dy in 0..kh {
-        for dx in 0..kw {
-            let dst = &mut taps[(dy * kw + dx) * o * c..(dy * kw + dx + 1) * o * c];
-            for item in 0..b {
-                let lhs = &widened[item * o * k..];
-                let rhs = &padded[item * c * plane + dy * wp + dx..];
-                // dst[o × c] (+)= lhs[o × k] · rhs[k × c]; rhs's k-stride is the stride, its
-                // c-stride one plane.
-                unsafe {
-                    gemm::gemm(
-                        o,
-                        c,
-                        k,
-                        dst.as_mut_ptr(),
-                        1,
-                        c as isize,
-                        item > 0,
-                        lhs.as_ptr(),
-                        1,
-                        k as isize,
-                        rhs.as_ptr(),
-                        plane as isize,
-                        sx as isize,
-                        1.0,
-                        1.0,
-                        false,
-                        false,
-                        false,
-                        gemm::Parallelism::Rayon(0),
-                    );
-                }
-            }
-        }
-    }
-    // taps[(dy, dx), o, c] → weight layout [o, c, dy, dx].
-    let mut dw = vec![0.0f32; o * c * kh * kw];
-    for t in 0..kh * kw {
-        for oc in 0..o * c {
-            dw[oc * kh * kw + t] = taps[t * o * c + oc];
-        }
-    }
-    dw
 }
 
 #[cfg(test)]

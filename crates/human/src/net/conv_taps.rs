@@ -1,5 +1,5 @@
-//! A convolution's forward pass and input gradient on the host as one matrix product per kernel
-//! tap, without the unfolded (im2col) copy of the input.
+//! A convolution's forward pass, input gradient and weight gradient on the host as one matrix
+//! product per kernel tap, without the unfolded (im2col) copy of the input.
 //!
 //! The zero-padded input is split into its `s × s` stride phases (phase `(py, px)` holds the
 //! padded pixels `(s·y + py, s·x + px)`), so that tap `(dy, dx)` of a stride-`s` convolution
@@ -9,6 +9,7 @@
 //! ```text
 //! Y_b       += W(dy, dx) · Phase_b(dy, dx)         (O × pixels, for each tap)
 //! dPhase_b  += W(dy, dx)ᵀ · G_b                    (C × pixels, accumulated at the shift)
+//! dW(dy, dx) = Σ_b G_b · Phase_b(dy, dx)ᵀ           (O × C)
 //! ```
 //!
 //! are one GEMM each. The widened columns past the output's width are discarded (forward) or
@@ -316,5 +317,92 @@ impl Taps {
                 }
             }
         }
+    }
+}
+
+/// `dL/dW` (`[O, C, kh, kw]`) of the convolution of `x` given `dL/dy` (`g`): for each tap,
+/// `Σ_b G_b · Phase_b(tap)ᵀ`, one GEMM per batch item and tap.
+pub fn weight_grad_host(
+    x: &[f32],
+    xs: [usize; 4],
+    g: &[f32],
+    ws: [usize; 4],
+    options: &ConvOptions<2>,
+) -> Vec<f32> {
+    let t = Taps::new(xs, ws, options);
+    let n = t.pixels();
+    with_scratch(
+        t.b * t.s * t.s * t.c * t.plane,
+        t.b * t.o * n,
+        |phases, wide| {
+            t.scatter(x, phases);
+            t.widen(g, wide);
+            t.weight_grad(phases, wide)
+        },
+    )
+}
+
+impl Taps {
+    /// The output gradient `[B, O, Ho, Wo]` widened to rows of the phase width (zero past `Wo`).
+    fn widen(&self, g: &[f32], wide: &mut [f32]) {
+        let n = self.pixels();
+        for bo in 0..self.b * self.o {
+            for i in 0..self.ho {
+                let src = &g[(bo * self.ho + i) * self.wo..][..self.wo];
+                wide[bo * n + i * self.wpp..][..self.wo].copy_from_slice(src);
+            }
+        }
+    }
+
+    fn weight_grad(&self, phases: &[f32], wide: &[f32]) -> Vec<f32> {
+        let t = self;
+        let n = t.pixels();
+        // Per tap an O × C block, then rearranged to [O, C, kh, kw].
+        let mut taps = vec![0.0f32; t.kh * t.kw * t.o * t.c];
+        for dy in 0..t.kh {
+            for dx in 0..t.kw {
+                let dst = &mut taps[(dy * t.kw + dx) * t.o * t.c..][..t.o * t.c];
+                for bi in 0..t.b {
+                    let at = t.tap(bi, dy, dx);
+                    assert!(
+                        at + (t.c - 1) * t.plane + n <= phases.len(),
+                        "tap inside the phases"
+                    );
+                    let lhs = &wide[bi * t.o * n..];
+                    // dst[O × C] (+)= G[O × n] · phase[C × n]ᵀ
+                    unsafe {
+                        gemm::gemm(
+                            t.o,
+                            t.c,
+                            n,
+                            dst.as_mut_ptr(),
+                            1,
+                            t.c as isize,
+                            bi > 0,
+                            lhs.as_ptr(),
+                            1,
+                            n as isize,
+                            phases[at..].as_ptr(),
+                            t.plane as isize,
+                            1,
+                            1.0,
+                            1.0,
+                            false,
+                            false,
+                            false,
+                            gemm::Parallelism::Rayon(0),
+                        );
+                    }
+                }
+            }
+        }
+        let k = t.kh * t.kw;
+        let mut dw = vec![0.0f32; t.o * t.c * k];
+        for tap in 0..k {
+            for oc in 0..t.o * t.c {
+                dw[oc * k + tap] = taps[tap * t.o * t.c + oc];
+            }
+        }
+        dw
     }
 }
