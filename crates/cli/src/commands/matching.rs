@@ -34,7 +34,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         check_folder(parent, "--json")?;
     }
     let dataset = args.dataset.load()?;
-    let report = match_report(&dataset, args.matcher, !args.no_masks);
+    let report = match_report(&dataset, args.matcher, !args.no_masks)?;
     if let Some(why) = &report.fallback {
         eprintln!("{why}");
     }

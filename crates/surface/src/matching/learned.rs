@@ -142,6 +142,22 @@ impl Matcher for LearnedMatcher {
     }
 }
 
+/// Refuses weight files that exist but cannot serve `kind` (truncated, another network's, wrong
+/// shapes), naming the file. Missing files are not an error here: the run then falls back to
+/// the classical matcher and says so ([`matcher_for`]).
+pub fn check_weights(kind: MatcherKind) -> Result<(), MatchError> {
+    let mut files = vec![fewview_match::weights::xfeat_weights()];
+    match kind {
+        MatcherKind::Classical => return Ok(()),
+        MatcherKind::Lighterglue => files.push(fewview_match::weights::lighterglue_weights()),
+        MatcherKind::Xfeat | MatcherKind::XfeatStar => {}
+    }
+    if files.iter().any(|f| !f.is_file()) {
+        return Ok(());
+    }
+    LearnedMatcher::load(kind, SiftOptions::default()).map(drop)
+}
+
 /// The matcher `kind` names, or the classical one with the reason in one line when its weights
 /// cannot be loaded or the images are too small for it.
 pub fn matcher_for(

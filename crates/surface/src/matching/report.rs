@@ -7,7 +7,7 @@ use std::time::Instant;
 use fewview_scene::{Camera, Dataset};
 use serde::Serialize;
 
-use super::learned::{MatcherKind, matcher_for};
+use super::learned::{MatcherKind, check_weights, matcher_for};
 use super::refine::{AffineRefineOptions, refine_matches};
 use super::sift::SiftOptions;
 use super::{Match, MatchInput, MatchPrecision, epipolar_precision, match_pairs, unordered_pairs};
@@ -41,8 +41,14 @@ pub struct MatchReport {
 }
 
 /// Matches every pair of `dataset`'s training views with `kind` and scores them against the
-/// dataset's cameras. Masks restrict the matches when `use_masks`.
-pub fn match_report(dataset: &Dataset, kind: MatcherKind, use_masks: bool) -> MatchReport {
+/// dataset's cameras. Masks restrict the matches when `use_masks`. Weight files that exist but
+/// cannot be loaded are an error ([`check_weights`]).
+pub fn match_report(
+    dataset: &Dataset,
+    kind: MatcherKind,
+    use_masks: bool,
+) -> Result<MatchReport, fewview_match::MatchError> {
+    check_weights(kind)?;
     let views: Vec<_> = dataset.train_views().collect();
     let inputs: Vec<MatchInput> = views
         .iter()
@@ -73,12 +79,12 @@ pub fn match_report(dataset: &Dataset, kind: MatcherKind, use_masks: bool) -> Ma
             refined: epipolar_precision(&of_pair(&refined, p), &cameras),
         })
         .collect();
-    MatchReport {
+    Ok(MatchReport {
         dataset: dataset.name.clone(),
         matcher: matcher.name().to_string(),
         fallback,
         pairs,
         matching_seconds,
         matches: refined,
-    }
+    })
 }

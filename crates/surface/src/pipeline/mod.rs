@@ -182,6 +182,8 @@ pub fn run(
     on_event: &mut dyn FnMut(Event),
 ) -> Result<RunReport> {
     let started = std::time::Instant::now();
+    crate::matching::learned::check_weights(config.matcher_kind)
+        .map_err(|e| SurfaceError::invalid("--matcher", e.to_string()))?;
     let resumed = start_run(&inputs, config, on_event)?;
     let ResumedRun { identity, saved } = if resume {
         resumed.resume(out, config)?
