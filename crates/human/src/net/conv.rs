@@ -1,5 +1,5 @@
 //! The network's convolutions as a Burn custom operation computed on the CPU as one matrix
-//! product per kernel tap ([`super::conv_taps`]): forward pass, input and weight gradients.
+//! product per kernel tap (`net::conv_taps`): forward pass, input and weight gradients.
 //!
 //! Burn's generic backward pass computes a convolution's weight gradient as another
 //! convolution whose input channels are the batch (two source views) and whose kernel is the
