@@ -137,6 +137,12 @@ fn bad_variants_views_and_studies_are_refused_with_nothing_written() {
         &["--object-only"],
     );
     assert!(!out.exists());
+    // A surface run made here needs a dataset.
+    assert_clean_error(
+        &short_run("gf", &out, &["--init", "surface"]),
+        &["--init surface", "--data"],
+    );
+    assert!(!out.exists());
 
     // A study over runs of different data.
     let (a, b) = (dir.path().join("a"), dir.path().join("b"));

@@ -18,6 +18,7 @@ use super::dataset_args::{ViewList, object_only, parse_views};
 use super::output_paths::check_folder;
 use super::photo_args::{DemoSceneArgs, JitterArgs};
 use super::progress;
+use super::surface_first;
 use super::train::print_summary;
 use super::train_args::TrainArgs;
 
@@ -158,8 +159,33 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         default_iterations(&ds)
     };
+    let mut args = args;
+    let surface_here = surface_first::wanted(&args.train.init);
+    if surface_here {
+        if demo.is_some() {
+            bail!("--init surface runs the surface method on a dataset; pass --data");
+        }
+        args.train.init = surface_first::init_for(&out);
+    }
     let cfg = args.train.run_config(ds.background, default)?;
-    if let Some(line) = adopt_init_poses(&mut ds, &cfg, args.train.surface_poses.into())? {
+    let mut poses = args.train.surface_poses.into();
+    if surface_here {
+        let first = surface_first::SurfaceFirst {
+            data: args
+                .data
+                .as_deref()
+                .expect("clap requires --data without --demo"),
+            downscale: args.downscale,
+            train_views: args.train_views.as_ref().map(|v| v.0.as_slice()),
+            test_views: args.test_views.as_ref().map(|v| v.0.as_slice()),
+            n_train: args.n_train,
+            object_only: args.object_only,
+            seed: args.train.seed,
+        };
+        surface_first::run(&first, &out)?;
+        poses = surface_first::poses(poses);
+    }
+    if let Some(line) = adopt_init_poses(&mut ds, &cfg, poses)? {
         eprintln!("{line}");
     }
     if args.rescore {

@@ -24,6 +24,7 @@ mod render;
 mod stereo;
 pub mod study;
 mod surface;
+mod surface_first;
 mod train;
 mod train_args;
 mod view;

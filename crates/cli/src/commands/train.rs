@@ -13,6 +13,7 @@ use fewview_splat::pipeline::{
 use super::dataset_args::DatasetArgs;
 use super::output_paths::check_folder;
 use super::progress;
+use super::surface_first;
 use super::train_args::TrainArgs;
 
 /// Train 3D Gaussians on a dataset's training views and score its held-out views.
@@ -42,12 +43,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Err(e) = split::check_disjoint(&ds.train, &ds.test, args.dataset.folder()?) {
         bail!("{e}; pass disjoint --train-views and --test-views");
     }
-    let cfg = args
-        .train
-        .run_config(ds.background, default_iterations(&ds))?;
-    if let Some(line) = adopt_init_poses(&mut ds, &cfg, args.train.surface_poses.into())? {
-        eprintln!("{line}");
-    }
     let out = args.out.clone().unwrap_or_else(|| {
         let name = args
             .dataset
@@ -59,6 +54,32 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         PathBuf::from("runs").join(name)
     });
     check_folder(&out, "--out")?;
+    let mut args = args;
+    let surface_here = surface_first::wanted(&args.train.init);
+    if surface_here {
+        args.train.init = surface_first::init_for(&out);
+    }
+    let cfg = args
+        .train
+        .run_config(ds.background, default_iterations(&ds))?;
+    let mut poses = args.train.surface_poses.into();
+    if surface_here {
+        let d = &args.dataset;
+        let first = surface_first::SurfaceFirst {
+            data: d.folder()?,
+            downscale: d.downscale,
+            train_views: d.train_views.as_ref().map(|v| v.0.as_slice()),
+            test_views: d.test_views.as_ref().map(|v| v.0.as_slice()),
+            n_train: d.n_train,
+            object_only: d.object_only,
+            seed: args.train.seed,
+        };
+        surface_first::run(&first, &out)?;
+        poses = surface_first::poses(poses);
+    }
+    if let Some(line) = adopt_init_poses(&mut ds, &cfg, poses)? {
+        eprintln!("{line}");
+    }
     eprintln!(
         "training on {} ({} train / {} held-out views, {}x{}) → {}",
         ds.name,

@@ -36,12 +36,15 @@ pub struct TrainArgs {
     /// (the same from your own depth maps, `DIR/<view>.npy` float z-depth or 16-bit `.png` in
     /// millimetres), `points`, `frustum`, `box`, `box:HALF_SIZE`, `ply:FILE`, or `surface:DIR`
     /// (Gaussians on the mesh of the `surface` run in DIR, flat along its normals, for views
-    /// too far apart for stereo; the run must be of the same dataset and training views).
+    /// too far apart for stereo; the run must be of the same dataset and training views), or
+    /// `surface` (the surface method runs first, from the input's poses, into `OUT/surface`;
+    /// a finished one is reused, an interrupted one resumed).
     #[arg(long, default_value = "auto", value_name = "HOW")]
     pub init: String,
     /// With `--init surface:DIR`: train with the surface run's refined poses (`refined`), the
     /// dataset's (`dataset`), or the refined ones when the surface run started from poses other
-    /// than the dataset's (`auto`).
+    /// than the dataset's (`auto`; with a bare `--init surface`, which refines the input's own
+    /// poses: the refined ones).
     #[arg(long, value_enum, default_value_t = SurfacePosesArg::Auto)]
     pub surface_poses: SurfacePosesArg,
     /// With `--init surface:DIR`: weight of the L1 distance between the rendered depth and the
@@ -246,9 +249,13 @@ fn parse_init(s: &str) -> anyhow::Result<(InitStrategy, DepthFrom)> {
         }
         _ if s.starts_with("ply:") => InitStrategy::Ply(PathBuf::from(&s[4..])),
         _ if s.starts_with("surface:") => InitStrategy::Surface(PathBuf::from(&s[8..])),
+        "surface" => bail!(
+            "--init surface: runs the surface method on a dataset first (`train` or `fusion` with \
+             --data); give surface:DIR to start from a finished surface run"
+        ),
         "stereo" => InitStrategy::Stereo,
         _ => bail!(
-            "--init {s}: expected auto, stereo, depth:DIR, points, frustum, box, box:HALF_SIZE, ply:FILE or surface:DIR"
+            "--init {s}: expected auto, stereo, depth:DIR, points, frustum, box, box:HALF_SIZE, ply:FILE, surface or surface:DIR"
         ),
     };
     Ok((strategy, DepthFrom::Sgm))
