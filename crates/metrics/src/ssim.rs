@@ -700,7 +700,7 @@ macro_rules! dispatch {
     ($kernel:ident($($arg:expr),* $(,)?)) => {{
         #[cfg(target_arch = "x86_64")]
         {
-            if std::is_x86_feature_detected!("avx2") {
+            if fewview_scene::cpu::avx2() {
                 // SAFETY: the CPU supports AVX2 (checked just above).
                 unsafe { avx2::$kernel($($arg),*) }
             } else {

@@ -17,6 +17,7 @@ pub mod atomic;
 pub mod axes;
 pub mod camera;
 pub mod colmap;
+pub mod cpu;
 pub mod cputime;
 pub mod dataset;
 pub mod demo_capture;
@@ -46,3 +47,4 @@ pub use load::{
     DatasetFormat, LoadOptions, LoadReport, UndistortMode, detect_format, load_dataset,
     load_dataset_with_report,
 };
+pub use view_files::stem as file_stem;

@@ -67,8 +67,8 @@ pub(crate) fn first_error_in_order<T: Send>(
     results.into_iter().collect()
 }
 
-/// The file stem, for [`crate::View::name`].
-pub(crate) fn stem(path: &Path) -> String {
+/// The file stem (lossy UTF-8; empty when there is none), for [`crate::View::name`].
+pub fn stem(path: &Path) -> String {
     path.file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default()

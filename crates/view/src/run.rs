@@ -410,11 +410,7 @@ fn display_name(path: &Path) -> String {
         .to_string()
 }
 
-fn stem(path: &Path) -> String {
-    path.file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default()
-}
+use fewview_scene::file_stem as stem;
 
 /// The JSON in `path`, or `None` when there is no such file.
 fn read_json(path: &Path) -> Result<Option<serde_json::Value>> {

@@ -182,11 +182,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(parent) = args.json.parent() {
         check_folder(parent, "--json")?;
     }
-    #[cfg(target_arch = "x86_64")]
-    let avx2_fma =
-        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma");
-    #[cfg(not(target_arch = "x86_64"))]
-    let avx2_fma = false;
+    let avx2_fma = fewview_scene::cpu::avx2_fma();
     let machine = Machine {
         threads: rayon::current_num_threads(),
         avx2_fma,

@@ -210,7 +210,7 @@ impl MgLevel {
     /// `(i + j) % 2 == color`, unpadded coordinates), rows in parallel.
     fn smooth<const C: usize>(&self, x: &mut [[f32; C]], b: &[[f32; C]], color: usize) {
         let pw = self.pw;
-        let ptr = SharedMut(x.as_mut_ptr());
+        let ptr = fewview_scene::cpu::SharedMut(x.as_mut_ptr());
         (0..self.h).into_par_iter().for_each(|j| {
             let ptr = &ptr;
             let row = (j + 1) * pw;
@@ -308,11 +308,6 @@ impl MgLevel {
         });
     }
 }
-
-/// A raw pointer that may cross threads (see the SAFETY note in [`MgLevel::smooth`]).
-struct SharedMut<T>(*mut T);
-unsafe impl<T> Sync for SharedMut<T> {}
-unsafe impl<T> Send for SharedMut<T> {}
 
 /// The multigrid hierarchy (level 0 is the fine operator) with its work buffers.
 struct Hierarchy<const C: usize> {

@@ -83,7 +83,7 @@ fn tile_geometry(cam: &RenderCamera, t: usize, tiles_x: usize) -> TileGeometry {
 /// Whether the CPU runs the AVX2 + FMA build of the tile kernels.
 #[cfg(target_arch = "x86_64")]
 fn has_avx2_fma() -> bool {
-    std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+    fewview_scene::cpu::avx2_fma()
 }
 
 /// Runs the tile kernel compiled for AVX2 + FMA when the CPU has them (the generic body is

@@ -110,7 +110,7 @@ pub fn bin<F: Real>(splats: &[Splat<F>], tiles_x: usize, tiles_y: usize) -> Tile
     // Pass 2: fill. Chunk k writes entries only at its own cursors (disjoint ranges).
     let mut entries = vec![0u32; acc];
     let mut pair_slots = vec![0u32; acc];
-    let entries_ptr = SyncPtr(entries.as_mut_ptr());
+    let entries_ptr = fewview_scene::cpu::SharedMut(entries.as_mut_ptr());
     let mut slot_parts = Vec::with_capacity(cursors.len());
     let mut rest = pair_slots.as_mut_slice();
     for k in 0..cursors.len() {
@@ -152,20 +152,6 @@ pub fn bin<F: Real>(splats: &[Splat<F>], tiles_x: usize, tiles_y: usize) -> Tile
         pair_offsets,
         pair_slots,
         depth_order: order,
-    }
-}
-
-/// A raw pointer that may cross threads; users guarantee disjoint writes.
-#[derive(Clone, Copy)]
-struct SyncPtr(*mut u32);
-// SAFETY: only used for writes to disjoint indices (see `bin`).
-unsafe impl Send for SyncPtr {}
-// SAFETY: as above.
-unsafe impl Sync for SyncPtr {}
-
-impl SyncPtr {
-    fn get(self) -> *mut u32 {
-        self.0
     }
 }
 

@@ -113,7 +113,7 @@ fn forward_block<T: Float>(spec: &MlpSpec, params: &[T], x: &[T], o: &mut [T]) {
 /// multiply-adds are introduced, only wider vectors).
 #[cfg(target_arch = "x86_64")]
 pub(crate) fn has_avx2() -> bool {
-    std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+    fewview_scene::cpu::avx2_fma()
 }
 
 fn forward_block_best<T: Float>(spec: &MlpSpec, params: &[T], x: &[T], o: &mut [T]) {

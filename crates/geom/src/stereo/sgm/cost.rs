@@ -105,7 +105,7 @@ fn row_costs(
             let pixel = pixel_costs(l, r, y, la, p);
             box_sum_columns(&pixel, row, la, p.half_block);
         }
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if fewview_scene::cpu::avx2() {
             // SAFETY: the CPU supports AVX2 (checked just above).
             return unsafe { avx2(left, right, y, layout, p, row) };
         }

@@ -137,7 +137,7 @@ fn dispatch_row(c: &[i16], s: &mut [i16], layout: &Layout, p: &Resolved) {
         fn avx2(c: &[i16], s: &mut [i16], layout: &Layout, p: &Resolved) {
             horizontal_row(c, s, layout, p)
         }
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if fewview_scene::cpu::avx2() {
             // SAFETY: the CPU supports AVX2 (checked just above).
             return unsafe { avx2(c, s, layout, p) };
         }
@@ -188,7 +188,7 @@ fn vertical(
         fn avx2(c: &[i16], h: usize, l: &Layout, p: &Resolved, dir: Direction, s: &mut [i16]) {
             vertical_paths(c, h, l, p, dir, s)
         }
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if fewview_scene::cpu::avx2() {
             // SAFETY: the CPU supports AVX2 (checked just above).
             return unsafe { avx2(c, height, layout, p, dir, s) };
         }
