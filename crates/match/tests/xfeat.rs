@@ -98,24 +98,31 @@ fn check_detection(name: &str, ours: &Features, reference: &Value) -> Vec<usize>
     to_ours
 }
 
+/// The reference of `pair`, our detections of its two images (checked against it), and for
+/// each image the map from the reference's keypoint indices to ours.
+fn detect_pair(net: &XFeat, pair: &str) -> (Value, Vec<Features>, Vec<Vec<usize>>) {
+    let text = std::fs::read_to_string(fixtures().join(format!("{pair}.json"))).unwrap();
+    let reference: Value = serde_json::from_str(&text).unwrap();
+    let mut features = Vec::new();
+    let mut to_ours = Vec::new();
+    for tag in ["a", "b"] {
+        let image = Image::load(&fixtures().join(format!("{pair}_{tag}.png"))).unwrap();
+        let ours = net.detect(&image, DetectOptions::default()).unwrap();
+        to_ours.push(check_detection(
+            &format!("{pair} {tag}"),
+            &ours,
+            &reference[tag],
+        ));
+        features.push(ours);
+    }
+    (reference, features, to_ours)
+}
+
 #[test]
 fn sparse_keypoints_descriptors_and_matches_equal_the_reference() {
     let net = xfeat();
     for pair in PAIRS {
-        let text = std::fs::read_to_string(fixtures().join(format!("{pair}.json"))).unwrap();
-        let reference: Value = serde_json::from_str(&text).unwrap();
-        let mut features = Vec::new();
-        let mut to_ours = Vec::new();
-        for tag in ["a", "b"] {
-            let image = Image::load(&fixtures().join(format!("{pair}_{tag}.png"))).unwrap();
-            let ours = net.detect(&image, DetectOptions::default()).unwrap();
-            to_ours.push(check_detection(
-                &format!("{pair} {tag}"),
-                &ours,
-                &reference[tag],
-            ));
-            features.push(ours);
-        }
+        let (reference, features, to_ours) = detect_pair(&net, pair);
         let ours: HashSet<(usize, usize)> = net
             .match_mutual(&features[0], &features[1], None)
             .into_iter()
@@ -206,20 +213,7 @@ fn lighterglue_matches_equal_the_reference() {
     let net = xfeat();
     let glue = LighterGlue::load_default().unwrap_or_else(|e| panic!("{e}"));
     for pair in PAIRS {
-        let text = std::fs::read_to_string(fixtures().join(format!("{pair}.json"))).unwrap();
-        let reference: Value = serde_json::from_str(&text).unwrap();
-        let mut features = Vec::new();
-        let mut to_ours = Vec::new();
-        for tag in ["a", "b"] {
-            let image = Image::load(&fixtures().join(format!("{pair}_{tag}.png"))).unwrap();
-            let ours = net.detect(&image, DetectOptions::default()).unwrap();
-            to_ours.push(check_detection(
-                &format!("{pair} {tag}"),
-                &ours,
-                &reference[tag],
-            ));
-            features.push(ours);
-        }
+        let (reference, features, to_ours) = detect_pair(&net, pair);
         let ours: HashMap<(usize, usize), f32> = glue
             .match_features(&features[0], &features[1], GlueOptions::default())
             .unwrap()

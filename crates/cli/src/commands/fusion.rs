@@ -160,31 +160,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         default_iterations(&ds)
     };
     let mut args = args;
-    let surface_here = surface_first::wanted(&args.train.init);
-    if surface_here {
-        if demo.is_some() {
-            bail!("--init surface runs the surface method on a dataset; pass --data");
-        }
-        args.train.init = surface_first::init_for(&out);
+    if demo.is_some() && surface_first::wanted(&args.train.init) {
+        bail!("--init surface runs the surface method on a dataset; pass --data");
     }
+    let bare_surface = surface_first::take(&mut args.train.init, &out);
     let cfg = args.train.run_config(ds.background, default)?;
-    let mut poses = args.train.surface_poses.into();
-    if surface_here {
-        let first = surface_first::SurfaceFirst {
+    let first = || {
+        Ok(surface_first::SurfaceFirst {
             data: args
                 .data
-                .as_deref()
+                .clone()
                 .expect("clap requires --data without --demo"),
             downscale: args.downscale,
-            train_views: args.train_views.as_ref().map(|v| v.0.as_slice()),
-            test_views: args.test_views.as_ref().map(|v| v.0.as_slice()),
+            train_views: args.train_views.clone().map(|v| v.0),
+            test_views: args.test_views.clone().map(|v| v.0),
             n_train: args.n_train,
             object_only: args.object_only,
             seed: args.train.seed,
-        };
-        surface_first::run(&first, &out)?;
-        poses = surface_first::poses(poses);
-    }
+        })
+    };
+    let poses = surface_first::run_if(bare_surface, first, &out, args.train.surface_poses.into())?;
     if let Some(line) = adopt_init_poses(&mut ds, &cfg, poses)? {
         eprintln!("{line}");
     }

@@ -3,16 +3,16 @@
 //! mesh. The surface run starts from the input's own poses (`--initial-poses loaded`) and
 //! refines them; a finished one is reused and an interrupted one resumed.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use clap::Parser;
 
 /// The dataset flags the surface run repeats.
-pub struct SurfaceFirst<'a> {
-    pub data: &'a Path,
+pub struct SurfaceFirst {
+    pub data: PathBuf,
     pub downscale: u32,
-    pub train_views: Option<&'a [usize]>,
-    pub test_views: Option<&'a [usize]>,
+    pub train_views: Option<Vec<usize>>,
+    pub test_views: Option<Vec<usize>>,
     pub n_train: Option<usize>,
     pub object_only: bool,
     pub seed: u64,
@@ -46,10 +46,10 @@ pub fn run(first: &SurfaceFirst, out: &Path) -> anyhow::Result<()> {
     argv.extend(["--downscale".into(), first.downscale.to_string()]);
     argv.extend(["--seed".into(), first.seed.to_string()]);
     argv.extend(["--out".into(), dir.display().to_string()]);
-    if let Some(v) = first.train_views {
+    if let Some(v) = &first.train_views {
         argv.extend(["--train-views".into(), list(v)]);
     }
-    if let Some(v) = first.test_views {
+    if let Some(v) = &first.test_views {
         argv.extend(["--test-views".into(), list(v)]);
     }
     if let Some(n) = first.n_train {
@@ -74,6 +74,30 @@ pub fn run(first: &SurfaceFirst, out: &Path) -> anyhow::Result<()> {
 struct SurfaceCommand {
     #[command(flatten)]
     args: super::surface::Args,
+}
+
+/// Replaces a bare `--init surface` in `init` by the `surface:DIR` of the run in `out`, so that
+/// the other flags are checked before the surface method's minutes; whether it was bare.
+pub fn take(init: &mut String, out: &Path) -> bool {
+    let bare = wanted(init);
+    if bare {
+        *init = init_for(out);
+    }
+    bare
+}
+
+/// After [`take`]: runs the surface method when `bare`, and returns the pose choice to adopt.
+pub fn run_if(
+    bare: bool,
+    first: impl FnOnce() -> anyhow::Result<SurfaceFirst>,
+    out: &Path,
+    choice: fewview_splat::surface_start::SurfacePoses,
+) -> anyhow::Result<fewview_splat::surface_start::SurfacePoses> {
+    if !bare {
+        return Ok(choice);
+    }
+    run(&first()?, out)?;
+    Ok(poses(choice))
 }
 
 /// `--surface-poses auto` for a surface run made here: it refined the input's own poses, so its

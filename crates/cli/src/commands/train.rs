@@ -55,28 +55,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     });
     check_folder(&out, "--out")?;
     let mut args = args;
-    let surface_here = surface_first::wanted(&args.train.init);
-    if surface_here {
-        args.train.init = surface_first::init_for(&out);
-    }
+    let bare_surface = surface_first::take(&mut args.train.init, &out);
     let cfg = args
         .train
         .run_config(ds.background, default_iterations(&ds))?;
-    let mut poses = args.train.surface_poses.into();
-    if surface_here {
-        let d = &args.dataset;
-        let first = surface_first::SurfaceFirst {
-            data: d.folder()?,
+    let d = &args.dataset;
+    let first = || {
+        Ok(surface_first::SurfaceFirst {
+            data: d.folder()?.to_path_buf(),
             downscale: d.downscale,
-            train_views: d.train_views.as_ref().map(|v| v.0.as_slice()),
-            test_views: d.test_views.as_ref().map(|v| v.0.as_slice()),
+            train_views: d.train_views.clone().map(|v| v.0),
+            test_views: d.test_views.clone().map(|v| v.0),
             n_train: d.n_train,
             object_only: d.object_only,
             seed: args.train.seed,
-        };
-        surface_first::run(&first, &out)?;
-        poses = surface_first::poses(poses);
-    }
+        })
+    };
+    let poses = surface_first::run_if(bare_surface, first, &out, args.train.surface_poses.into())?;
     if let Some(line) = adopt_init_poses(&mut ds, &cfg, poses)? {
         eprintln!("{line}");
     }

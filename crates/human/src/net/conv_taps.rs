@@ -93,6 +93,12 @@ impl Taps {
         self.ho * self.wpp
     }
 
+    /// Runs `f` with zeroed scratch for the phases and the widened output (or its gradient).
+    fn with_buffers<R>(&self, f: impl FnOnce(&mut Vec<f32>, &mut Vec<f32>) -> R) -> R {
+        let phases = self.b * self.s * self.s * self.c * self.plane;
+        with_scratch(phases, self.b * self.o * self.pixels(), f)
+    }
+
     /// Start of phase `(py, px)`, channel 0, of batch item `bi`.
     fn phase_base(&self, bi: usize, py: usize, px: usize) -> usize {
         ((bi * self.s + py) * self.s + px) * self.c * self.plane
@@ -128,16 +134,11 @@ pub fn forward_host(
     options: &ConvOptions<2>,
 ) -> (Vec<f32>, [usize; 4]) {
     let t = Taps::new(xs, ws, options);
-    let n = t.pixels();
-    with_scratch(
-        t.b * t.s * t.s * t.c * t.plane,
-        t.b * t.o * n,
-        |phases, wide| {
-            t.scatter(x, phases);
-            t.forward(weight, phases, wide);
-            t.crop_with_bias(wide, bias)
-        },
-    )
+    t.with_buffers(|phases, wide| {
+        t.scatter(x, phases);
+        t.forward(weight, phases, wide);
+        t.crop_with_bias(wide, bias)
+    })
 }
 
 impl Taps {
@@ -256,22 +257,11 @@ pub fn input_grad_host(
     options: &ConvOptions<2>,
 ) -> Vec<f32> {
     let t = Taps::new(xs, ws, options);
-    let n = t.pixels();
-    with_scratch(
-        t.b * t.s * t.s * t.c * t.plane,
-        t.b * t.o * n,
-        |phases, wide| {
-            // The output gradient widened to rows of the phase width, zero past the output's width.
-            for bo in 0..t.b * t.o {
-                for i in 0..t.ho {
-                    let src = &g[(bo * t.ho + i) * t.wo..][..t.wo];
-                    wide[bo * n + i * t.wpp..][..t.wo].copy_from_slice(src);
-                }
-            }
-            t.backward(weight, wide, phases);
-            t.gather(phases)
-        },
-    )
+    t.with_buffers(|phases, wide| {
+        t.widen(g, wide);
+        t.backward(weight, wide, phases);
+        t.gather(phases)
+    })
 }
 
 impl Taps {
@@ -330,16 +320,11 @@ pub fn weight_grad_host(
     options: &ConvOptions<2>,
 ) -> Vec<f32> {
     let t = Taps::new(xs, ws, options);
-    let n = t.pixels();
-    with_scratch(
-        t.b * t.s * t.s * t.c * t.plane,
-        t.b * t.o * n,
-        |phases, wide| {
-            t.scatter(x, phases);
-            t.widen(g, wide);
-            t.weight_grad(phases, wide)
-        },
-    )
+    t.with_buffers(|phases, wide| {
+        t.scatter(x, phases);
+        t.widen(g, wide);
+        t.weight_grad(phases, wide)
+    })
 }
 
 impl Taps {
