@@ -43,7 +43,52 @@ fn with_scratch<R>(
     r
 }
 
-/// The geometry shared by the forward pass and the input gradient.
+/// A strided matrix: element `(row, col)` at `ptr + row·rs + col·cs`.
+struct Strided<P> {
+    ptr: P,
+    rs: usize,
+    cs: usize,
+}
+
+/// `dst[m × n] = (accumulate ? dst : 0) + lhs[m × k] · rhs[k × n]`, parallel over rayon.
+///
+/// # Safety
+/// Every element the strides reach (`m × n` of `dst`, `m × k` of `lhs`, `k × n` of `rhs`) must
+/// lie inside its buffer, and `dst` must not overlap the others.
+unsafe fn gemm(
+    [m, n, k]: [usize; 3],
+    dst: Strided<*mut f32>,
+    accumulate: bool,
+    lhs: Strided<*const f32>,
+    rhs: Strided<*const f32>,
+) {
+    // SAFETY: the caller's contract.
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            dst.ptr,
+            dst.cs as isize,
+            dst.rs as isize,
+            accumulate,
+            lhs.ptr,
+            lhs.cs as isize,
+            lhs.rs as isize,
+            rhs.ptr,
+            rhs.cs as isize,
+            rhs.rs as isize,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            gemm::Parallelism::Rayon(0),
+        )
+    }
+}
+
+/// The geometry shared by the forward pass and both gradients.
 struct Taps {
     b: usize,
     c: usize,
@@ -111,10 +156,22 @@ impl Taps {
         base + ci * self.plane + (yp / self.s) * self.wpp + xp / self.s
     }
 
-    /// Phase base and shift of tap `(dy, dx)`.
-    fn tap(&self, bi: usize, dy: usize, dx: usize) -> usize {
+    /// The first input column `x` with `(x + left) mod s = px`; the phase's columns are every
+    /// `s`-th from it.
+    fn first_column(&self, px: usize) -> usize {
+        (px + self.s - self.left % self.s) % self.s
+    }
+
+    /// Phase base and shift of tap `(dy, dx)`, checked to leave the tap's `C × pixels` view
+    /// inside `phases_len` values (the GEMMs read or write it unchecked).
+    fn tap(&self, bi: usize, dy: usize, dx: usize, phases_len: usize) -> usize {
         let s = self.s;
-        self.phase_base(bi, dy % s, dx % s) + (dy / s) * self.wpp + dx / s
+        let at = self.phase_base(bi, dy % s, dx % s) + (dy / s) * self.wpp + dx / s;
+        assert!(
+            at + (self.c - 1) * self.plane + self.pixels() <= phases_len,
+            "tap inside the phases"
+        );
+        at
     }
 
     /// Weight `(o, c)` of tap `(dy, dx)` is at `tap_weight + o·C·kh·kw + c·kh·kw`.
@@ -150,8 +207,7 @@ impl Taps {
             for y in 0..self.h {
                 let row = &x[(bc * self.h + y) * self.w..][..self.w];
                 for px in 0..s {
-                    // Input columns x with (x + left) mod s = px, in order.
-                    let first = (px + s - self.left % s) % s;
+                    let first = self.first_column(px);
                     let dst = self.phase_index(bi, ci, y, first.min(self.w));
                     for (k, &v) in row.iter().skip(first).step_by(s).enumerate() {
                         phases[dst + k] = v;
@@ -170,7 +226,7 @@ impl Taps {
             for y in 0..self.h {
                 let row = &mut out[(bc * self.h + y) * self.w..][..self.w];
                 for px in 0..s {
-                    let first = (px + s - self.left % s) % s;
+                    let first = self.first_column(px);
                     if first >= self.w {
                         continue;
                     }
@@ -193,36 +249,29 @@ impl Taps {
             let dst = &mut wide[bi * t.o * n..(bi + 1) * t.o * n];
             for dy in 0..t.kh {
                 for dx in 0..t.kw {
-                    let first = dy == 0 && dx == 0;
-                    let at = t.tap(bi, dy, dx);
-                    assert!(
-                        at + (t.c - 1) * t.plane + n <= phases.len(),
-                        "tap inside the phases"
-                    );
-                    let rhs = &phases[at..];
+                    let at = t.tap(bi, dy, dx, phases.len());
                     let lhs = &weight[t.tap_weight(dy, dx)..];
                     // dst[O × n] (+)= W_tap[O × C] · phase[C × n]
+                    // SAFETY: `tap` checked the phase view; the weight view spans O·C·k values.
                     unsafe {
-                        gemm::gemm(
-                            t.o,
-                            n,
-                            t.c,
-                            dst.as_mut_ptr(),
-                            1,
-                            n as isize,
-                            !first,
-                            lhs.as_ptr(),
-                            k as isize,
-                            (t.c * k) as isize,
-                            rhs.as_ptr(),
-                            1,
-                            t.plane as isize,
-                            1.0,
-                            1.0,
-                            false,
-                            false,
-                            false,
-                            gemm::Parallelism::Rayon(0),
+                        gemm(
+                            [t.o, n, t.c],
+                            Strided {
+                                ptr: dst.as_mut_ptr(),
+                                rs: n,
+                                cs: 1,
+                            },
+                            dy + dx > 0,
+                            Strided {
+                                ptr: lhs.as_ptr(),
+                                rs: t.c * k,
+                                cs: k,
+                            },
+                            Strided {
+                                ptr: phases[at..].as_ptr(),
+                                rs: t.plane,
+                                cs: 1,
+                            },
                         );
                     }
                 }
@@ -274,34 +323,29 @@ impl Taps {
             let rhs = &wide[bi * t.o * n..(bi + 1) * t.o * n];
             for dy in 0..t.kh {
                 for dx in 0..t.kw {
-                    let at = t.tap(bi, dy, dx);
-                    assert!(
-                        at + (t.c - 1) * t.plane + n <= phases.len(),
-                        "tap inside the phases"
-                    );
+                    let at = t.tap(bi, dy, dx, phases.len());
                     let lhs = &weight[t.tap_weight(dy, dx)..];
                     // dPhase[C × n] at the tap's shift += W_tapᵀ[C × O] · G[O × n]
+                    // SAFETY: `tap` checked the phase view; `rhs` holds O × n values.
                     unsafe {
-                        gemm::gemm(
-                            t.c,
-                            n,
-                            t.o,
-                            phases[at..].as_mut_ptr(),
-                            1,
-                            t.plane as isize,
+                        gemm(
+                            [t.c, n, t.o],
+                            Strided {
+                                ptr: phases[at..].as_mut_ptr(),
+                                rs: t.plane,
+                                cs: 1,
+                            },
                             true,
-                            lhs.as_ptr(),
-                            (t.c * k) as isize,
-                            k as isize,
-                            rhs.as_ptr(),
-                            1,
-                            n as isize,
-                            1.0,
-                            1.0,
-                            false,
-                            false,
-                            false,
-                            gemm::Parallelism::Rayon(0),
+                            Strided {
+                                ptr: lhs.as_ptr(),
+                                rs: k,
+                                cs: t.c * k,
+                            },
+                            Strided {
+                                ptr: rhs.as_ptr(),
+                                rs: n,
+                                cs: 1,
+                            },
                         );
                     }
                 }
@@ -348,34 +392,29 @@ impl Taps {
             for dx in 0..t.kw {
                 let dst = &mut taps[(dy * t.kw + dx) * t.o * t.c..][..t.o * t.c];
                 for bi in 0..t.b {
-                    let at = t.tap(bi, dy, dx);
-                    assert!(
-                        at + (t.c - 1) * t.plane + n <= phases.len(),
-                        "tap inside the phases"
-                    );
+                    let at = t.tap(bi, dy, dx, phases.len());
                     let lhs = &wide[bi * t.o * n..];
                     // dst[O × C] (+)= G[O × n] · phase[C × n]ᵀ
+                    // SAFETY: `tap` checked the phase view; `lhs` holds O × n values.
                     unsafe {
-                        gemm::gemm(
-                            t.o,
-                            t.c,
-                            n,
-                            dst.as_mut_ptr(),
-                            1,
-                            t.c as isize,
+                        gemm(
+                            [t.o, t.c, n],
+                            Strided {
+                                ptr: dst.as_mut_ptr(),
+                                rs: t.c,
+                                cs: 1,
+                            },
                             bi > 0,
-                            lhs.as_ptr(),
-                            1,
-                            n as isize,
-                            phases[at..].as_ptr(),
-                            t.plane as isize,
-                            1,
-                            1.0,
-                            1.0,
-                            false,
-                            false,
-                            false,
-                            gemm::Parallelism::Rayon(0),
+                            Strided {
+                                ptr: lhs.as_ptr(),
+                                rs: n,
+                                cs: 1,
+                            },
+                            Strided {
+                                ptr: phases[at..].as_ptr(),
+                                rs: 1,
+                                cs: t.plane,
+                            },
                         );
                     }
                 }
