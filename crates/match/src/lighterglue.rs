@@ -17,6 +17,7 @@ use burn::tensor::activation::{gelu, log_sigmoid, log_softmax, sigmoid};
 use burn::tensor::{Device, Int, Tensor, TensorData};
 
 use crate::error::{MatchError, Result};
+use crate::host;
 use crate::weights::StateDict;
 use crate::xfeat::{DIM, Features};
 
@@ -421,10 +422,6 @@ fn mutual_best(scores: &[f32], n: usize, threshold: f32) -> Vec<(usize, usize, f
             (col_best[j] == i && p > threshold).then_some((i, j, p))
         })
         .collect()
-}
-
-fn host<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data().try_to_vec::<f32>().expect("f32 tensor")
 }
 
 #[cfg(test)]

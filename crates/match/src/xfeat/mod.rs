@@ -21,6 +21,7 @@ use network::Network;
 use sample::Map;
 
 use crate::error::{MatchError, Result};
+use crate::host;
 use crate::weights::StateDict;
 
 /// Detection settings (the reference's defaults).
@@ -214,9 +215,4 @@ fn argmax(row: &[f32]) -> (usize, f32) {
         .fold((0, f32::NEG_INFINITY), |best, (j, &s)| {
             if s > best.1 { (j, s) } else { best }
         })
-}
-
-/// A tensor's values on the host (row-major).
-fn host<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data().try_to_vec::<f32>().expect("f32 tensor")
 }
