@@ -142,58 +142,67 @@ impl Matcher for LearnedMatcher {
     }
 }
 
-/// Refuses weight files that exist but cannot serve `kind` (truncated, another network's, wrong
-/// shapes), naming the file. Missing files are not an error here: the run then falls back to
-/// the classical matcher and says so ([`matcher_for`]).
-pub fn check_weights(kind: MatcherKind) -> Result<(), MatchError> {
-    let mut files = vec![fewview_match::weights::xfeat_weights()];
+/// The weight files `kind` needs.
+fn weight_files(kind: MatcherKind) -> Vec<std::path::PathBuf> {
     match kind {
-        MatcherKind::Classical => return Ok(()),
-        MatcherKind::Lighterglue => files.push(fewview_match::weights::lighterglue_weights()),
-        MatcherKind::Xfeat | MatcherKind::XfeatStar => {}
+        MatcherKind::Classical => Vec::new(),
+        MatcherKind::Xfeat | MatcherKind::XfeatStar => {
+            vec![fewview_match::weights::xfeat_weights()]
+        }
+        MatcherKind::Lighterglue => vec![
+            fewview_match::weights::xfeat_weights(),
+            fewview_match::weights::lighterglue_weights(),
+        ],
     }
-    if files.iter().any(|f| !f.is_file()) {
-        return Ok(());
-    }
-    LearnedMatcher::load(kind, SiftOptions::default()).map(drop)
+}
+
+/// Refuses weight files that exist but cannot serve `kind` (truncated, another network's, wrong
+/// shapes), naming the file, before a run writes anything. Missing files are not an error: the
+/// run then falls back to the classical matcher and says so ([`matcher_for`]).
+pub fn check_weights(kind: MatcherKind) -> Result<(), MatchError> {
+    matcher_for(kind, &SiftOptions::default(), &[]).map(drop)
 }
 
 /// The matcher `kind` names, or the classical one with the reason in one line when its weights
-/// cannot be loaded or the images are too small for it.
+/// are missing or the images are too small for it. Weight files that exist but cannot be loaded
+/// are an error naming the file.
 pub fn matcher_for(
     kind: MatcherKind,
     options: &SiftOptions,
     inputs: &[MatchInput],
-) -> (Box<dyn Matcher>, Option<String>) {
+) -> Result<(Box<dyn Matcher>, Option<String>), MatchError> {
     let classical = || {
         Box::new(SiftMatcher {
             options: options.clone(),
         }) as Box<dyn Matcher>
     };
+    let fallback = |why: String| {
+        let line = format!(
+            "matcher {}: {why}; using the classical matcher",
+            kind.name()
+        );
+        Ok((classical(), Some(line)))
+    };
     if kind == MatcherKind::Classical {
-        return (classical(), None);
+        return Ok((classical(), None));
     }
-    let small = inputs
+    if let Some(i) = inputs
         .iter()
-        .find(|i| i.image.width < 32 || i.image.height < 32);
-    let loaded = match small {
-        Some(i) => Err(format!(
+        .find(|i| i.image.width < 32 || i.image.height < 32)
+    {
+        return fallback(format!(
             "a {}×{} image is smaller than XFeat's 32-pixel stride",
             i.image.width, i.image.height
-        )),
-        None if inputs.iter().any(|i| !i.image.is_finite()) => {
-            Err("an image has NaN or infinite pixels".to_string())
-        }
-        None => LearnedMatcher::load(kind, options.clone()).map_err(|e| e.to_string()),
-    };
-    match loaded {
-        Ok(m) => (Box::new(m), None),
-        Err(why) => (
-            classical(),
-            Some(format!(
-                "matcher {}: {why}; using the classical matcher",
-                kind.name()
-            )),
-        ),
+        ));
     }
+    if inputs.iter().any(|i| !i.image.is_finite()) {
+        return fallback("an image has NaN or infinite pixels".to_string());
+    }
+    if let Err(missing) = weight_files(kind)
+        .iter()
+        .try_for_each(|f| fewview_match::weights::require(f))
+    {
+        return fallback(missing.to_string());
+    }
+    Ok((Box::new(LearnedMatcher::load(kind, options.clone())?), None))
 }

@@ -7,7 +7,7 @@ use std::time::Instant;
 use fewview_scene::{Camera, Dataset};
 use serde::Serialize;
 
-use super::learned::{MatcherKind, check_weights, matcher_for};
+use super::learned::{MatcherKind, matcher_for};
 use super::refine::{AffineRefineOptions, refine_matches};
 use super::sift::SiftOptions;
 use super::{Match, MatchInput, MatchPrecision, epipolar_precision, match_pairs, unordered_pairs};
@@ -42,13 +42,12 @@ pub struct MatchReport {
 
 /// Matches every pair of `dataset`'s training views with `kind` and scores them against the
 /// dataset's cameras. Masks restrict the matches when `use_masks`. Weight files that exist but
-/// cannot be loaded are an error ([`check_weights`]).
+/// cannot be loaded are an error ([`matcher_for`]).
 pub fn match_report(
     dataset: &Dataset,
     kind: MatcherKind,
     use_masks: bool,
 ) -> Result<MatchReport, fewview_match::MatchError> {
-    check_weights(kind)?;
     let views: Vec<_> = dataset.train_views().collect();
     let inputs: Vec<MatchInput> = views
         .iter()
@@ -58,7 +57,7 @@ pub fn match_report(
         })
         .collect();
     let cameras: Vec<Camera> = views.iter().map(|v| v.camera.clone()).collect();
-    let (matcher, fallback) = matcher_for(kind, &SiftOptions::default(), &inputs);
+    let (matcher, fallback) = matcher_for(kind, &SiftOptions::default(), &inputs)?;
     let pairs: Vec<(usize, usize)> = unordered_pairs(inputs.len()).collect();
     let started = Instant::now();
     let raw = match_pairs(matcher.as_ref(), &inputs, &pairs);

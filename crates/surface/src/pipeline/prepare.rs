@@ -166,7 +166,7 @@ pub fn prepare_with_matching(
                     &ground_truth,
                     opts,
                     config,
-                );
+                )?;
                 (
                     c.matches,
                     Some(c.precision),
@@ -280,7 +280,8 @@ struct Correspondences {
 /// SIFT correspondences between the given pairs of training views of `dataset` (in its
 /// pixels), refined and densified as `config` asks (or, under
 /// [`RunConfig::densify_if_needed`], as the warm-up needs), and their precision against the
-/// ground-truth poses.
+/// ground-truth poses. Weight files of a learned matcher that exist but cannot be loaded are an
+/// error.
 fn correspondences(
     dataset: &Dataset,
     pairs: &[(usize, usize)],
@@ -288,7 +289,7 @@ fn correspondences(
     ground_truth: &[Se3],
     options: &SiftOptions,
     config: &RunConfig,
-) -> Correspondences {
+) -> Result<Correspondences> {
     let (use_masks, refinement) = (config.train.use_masks, config.match_refinement.as_ref());
     let inputs: Vec<MatchInput> = dataset
         .train_views()
@@ -297,7 +298,8 @@ fn correspondences(
             mask: if use_masks { v.mask.as_ref() } else { None },
         })
         .collect();
-    let (matcher, fallback) = matcher_for(config.matcher_kind, options, &inputs);
+    let (matcher, fallback) = matcher_for(config.matcher_kind, options, &inputs)
+        .map_err(|e| SurfaceError::invalid("--matcher", e.to_string()))?;
     let matches = match_pairs(matcher.as_ref(), &inputs, pairs);
     let images: Vec<&Image> = inputs.iter().map(|i| i.image).collect();
     let mut matches = match refinement {
@@ -350,13 +352,13 @@ fn correspondences(
         .map(|(k, p)| Camera::new(*k, *p))
         .collect();
     let precision = epipolar_precision(&matches, &cams);
-    Correspondences {
+    Ok(Correspondences {
         matches,
         precision,
         densified_because,
         matcher: matcher.name().to_string(),
         fallback,
-    }
+    })
 }
 
 /// The dense matcher's correspondences ([`crate::matching::dense`]) of every pair in `pairs`.
