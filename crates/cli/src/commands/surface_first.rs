@@ -24,12 +24,12 @@ pub fn wanted(init: &str) -> bool {
 }
 
 /// The `--init` value that starts from the surface run made for the run in `out`.
-pub fn init_for(out: &Path) -> String {
+fn init_for(out: &Path) -> String {
     format!("surface:{}", out.join("surface").display())
 }
 
 /// Runs (or reuses, or resumes) the surface method into `out/surface`.
-pub fn run(first: &SurfaceFirst, out: &Path) -> anyhow::Result<()> {
+fn run(first: &SurfaceFirst, out: &Path) -> anyhow::Result<()> {
     let dir = out.join("surface");
     if dir.join("mesh.ply").is_file() && dir.join("metrics.json").is_file() {
         eprintln!(
@@ -102,7 +102,7 @@ pub fn run_if(
 
 /// `--surface-poses auto` for a surface run made here: it refined the input's own poses, so its
 /// refined ones are the better guess.
-pub fn poses(
+fn poses(
     choice: fewview_splat::surface_start::SurfacePoses,
 ) -> fewview_splat::surface_start::SurfacePoses {
     use fewview_splat::surface_start::SurfacePoses;
