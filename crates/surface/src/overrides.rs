@@ -271,22 +271,24 @@ impl RunConfig {
     }
 
     /// The warm-up, its covariance polish, and the bundle and patch adjustments after it: each
-    /// as the schedule says unless `o` switches it.
+    /// as the schedule says unless `o` switches it. Poses held fixed (`refine_poses` off) hold
+    /// before training too: the three stages are off unless `o` switches one on.
     fn resolve_pose_stages(&mut self, o: &Overrides) {
-        let scheduled = self.pose_warmup;
+        let scheduled = self.pose_warmup.filter(|_| o.refine_poses);
         let warm_up = o.pose_warmup.unwrap_or(scheduled.is_some());
         let covariance_polish = o
             .warmup_covariance
             .unwrap_or(scheduled.is_some_and(|w| w.covariance_polish));
         let patch_adjustment = o
             .patch_adjustment
-            .unwrap_or(self.patch_adjustment.is_some());
+            .unwrap_or(self.patch_adjustment.is_some() && o.refine_poses);
         self.patch_adjustment = patch_adjustment.then(PatchAdjustmentOptions::default);
         match o.bundle_adjustment {
             Some(false) => self.bundle_adjustment = None,
             Some(true) => {
                 self.bundle_adjustment = self.bundle_adjustment.or(Some(BundleOptions::default()))
             }
+            None if !o.refine_poses => self.bundle_adjustment = None,
             None => {}
         }
         self.pose_warmup = warm_up.then(|| WarmupOptions {
@@ -331,5 +333,37 @@ impl RunConfig {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Held poses hold before training too: a run on exact poses once had the CPU schedule's
+    /// warm-up replace them from wrong matches, with `--no-pose-refinement` given.
+    #[test]
+    fn held_poses_switch_the_pose_stages_off_unless_asked() {
+        let held = Overrides {
+            refine_poses: false,
+            ..Overrides::default()
+        };
+        let c = RunConfig::resolve(Schedule::Cpu, &held).unwrap();
+        assert!(!c.train.refine_poses);
+        assert!(c.pose_warmup.is_none());
+        assert!(c.bundle_adjustment.is_none() && c.patch_adjustment.is_none());
+        // Switched on explicitly, a stage still runs.
+        let asked = Overrides {
+            pose_warmup: Some(true),
+            bundle_adjustment: Some(true),
+            ..held
+        };
+        let c = RunConfig::resolve(Schedule::Cpu, &asked).unwrap();
+        assert!(c.pose_warmup.is_some() && c.bundle_adjustment.is_some());
+        assert!(c.patch_adjustment.is_none());
+        // Refined poses keep the schedule's stages.
+        let c = RunConfig::resolve(Schedule::Cpu, &Overrides::default()).unwrap();
+        assert!(c.pose_warmup.is_some() && c.bundle_adjustment.is_some());
+        assert!(c.patch_adjustment.is_some());
     }
 }

@@ -90,7 +90,8 @@ pub struct Args {
     /// Pose learning rate at the start and end of its decay (default from `--schedule`).
     #[arg(long, value_name = "START,END", value_parser = pose_rates)]
     pub pose_lr: Option<ExpSchedule>,
-    /// Keep the poses fixed.
+    /// Keep the poses fixed, before training too: the warm-up and the bundle and patch
+    /// adjustments are off unless switched on by their own flags.
     #[arg(long)]
     pub no_pose_refinement: bool,
     /// Downscale factor of the images the matcher sees; must divide `--downscale`.
