@@ -122,7 +122,7 @@ impl std::str::FromStr for Variant {
 pub struct FusionConfig {
     pub variant: Variant,
     /// λ of the virtual-view loss of (d), (e) and (f). The paper does not print it; 0.3 is
-    /// the best of a sweep over 0.1–3 on the demo scene (README, "Gradient-domain fusion").
+    /// the best of a sweep over 0.1–3 on the demo scene (`docs/guide/fusion.md`).
     pub weight: f32,
     /// Weight of the total variation of (c) (the supplement: 1).
     pub tv_weight: f32,

@@ -296,7 +296,7 @@ pub fn look_at_point(cameras: &[&Camera]) -> Vector3<f64> {
 /// longer runs overfit), otherwise 3000 or 50 per training view, whichever is more (360° scenes
 /// from a random box form their geometry only after the first opacity reset has pruned the
 /// floaters; dense captures need each view seen about 50 times). The runs behind these lengths
-/// are in the README's "Schedule for short sparse-view runs".
+/// are in `docs/guide/splatting.md`, "Schedule for short sparse-view runs".
 pub fn default_iterations(ds: &Dataset) -> usize {
     if ds.train_views().all(|v| v.depth_bounds.is_some()) {
         1000

@@ -29,7 +29,12 @@ pub mod hashgrid;
 pub mod inputs;
 #[doc(hidden)]
 pub mod losses;
-pub mod matching;
+/// Correspondences between the training views: the matchers of `fewview-match` under the
+/// paths the surface method has always used.
+pub mod matching {
+    pub use fewview_match::correspondence::*;
+    pub use fewview_match::{dense, densify, fundamental, learned, refine, report, sift};
+}
 #[doc(hidden)]
 pub mod mlp;
 pub mod overrides;

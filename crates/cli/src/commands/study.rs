@@ -20,7 +20,8 @@ pub struct Args {
 enum StudyCommand {
     /// Serve the study page (two videos side by side, the configured questions).
     Serve {
-        /// The study configuration (TOML; see `fewview study serve --help` and the README).
+        /// The study configuration (TOML: title, seed, methods, scenes, questions, one video
+        /// per scene and method; crates/study/README.md).
         #[arg(long)]
         config: PathBuf,
         /// Address to listen on; loopback by default. Use 0.0.0.0:PORT to accept other machines.

@@ -20,7 +20,7 @@ pub enum TrainBackground {
 #[derive(Debug, Clone, Args)]
 pub struct TrainArgs {
     /// Training iterations (default for `train`: 1000 on forward-facing scenes with depth bounds, e.g. LLFF, otherwise 3000 or 50 per training view, whichever is more; `demo`: 2000). The densification
-    /// schedule is rescaled to the run length (see `TrainConfig::sparse_view` and the README).
+    /// schedule is rescaled to the run length (see `TrainConfig::sparse_view` and docs/guide/splatting.md).
     #[arg(long)]
     pub iterations: Option<usize>,
     /// Seed of every random choice (initialisation, view order, splits of Gaussians).

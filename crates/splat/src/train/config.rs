@@ -133,7 +133,7 @@ impl TrainConfig {
     ///
     /// With 3–8 views, each view is seen hundreds of times in a thousand iterations, and longer
     /// runs overfit: on fern 3-view the held-out PSNR peaks near iteration 500 and drifts down
-    /// slowly after (README, "Schedule for short sparse-view runs"). So the Inria schedule is
+    /// slowly after (`docs/guide/splatting.md`, "Schedule for short sparse-view runs"). So the Inria schedule is
     /// compressed: densification (clone/split every 100 iterations, as Inria) runs from 20% to
     /// 60% of the run instead of from iteration 500 to 15k of 30k; the opacity reset (Inria:
     /// every 3000) happens every `max(iterations / 3, 1000)` iterations while densifying, so not

@@ -6,7 +6,7 @@
 //! XFeat places the keypoint of pixel `i` at `i` (pixel centres at integers); matches here put
 //! pixel centres at half-integers, so both ends move by half a pixel.
 
-use fewview_match::{DetectOptions, Features, GlueOptions, LighterGlue, MatchError, XFeat};
+use crate::{DetectOptions, Features, GlueOptions, LighterGlue, MatchError, XFeat};
 use serde::{Deserialize, Serialize};
 
 use super::sift::{SiftMatcher, SiftOptions};
@@ -147,11 +147,11 @@ fn weight_files(kind: MatcherKind) -> Vec<std::path::PathBuf> {
     match kind {
         MatcherKind::Classical => Vec::new(),
         MatcherKind::Xfeat | MatcherKind::XfeatStar => {
-            vec![fewview_match::weights::xfeat_weights()]
+            vec![crate::weights::xfeat_weights()]
         }
         MatcherKind::Lighterglue => vec![
-            fewview_match::weights::xfeat_weights(),
-            fewview_match::weights::lighterglue_weights(),
+            crate::weights::xfeat_weights(),
+            crate::weights::lighterglue_weights(),
         ],
     }
 }
@@ -200,7 +200,7 @@ pub fn matcher_for(
     }
     if let Err(missing) = weight_files(kind)
         .iter()
-        .try_for_each(|f| fewview_match::weights::require(f))
+        .try_for_each(|f| crate::weights::require(f))
     {
         return fallback(missing.to_string());
     }

@@ -146,7 +146,7 @@ mod tests {
     use rand::RngExt;
 
     use super::*;
-    use crate::matching::{epipolar_distance, fundamental_from_cameras};
+    use crate::{epipolar_distance, fundamental_from_cameras};
 
     #[test]
     fn recovers_the_true_geometry_and_rejects_outliers() {

@@ -57,7 +57,7 @@ pub struct DensifyOptions {
     /// share no surface out; a composed match instead rests on two grown pairs and is then
     /// checked by its own windows, so it needs no such guard. It gives views two steps apart
     /// on a ring their matches, and DTU's wide outer pair when σ = 0.15 noise has pushed it
-    /// past the angle (seed 1: 89.7°). Off by default; [`crate::schedule::Schedule::Cpu`]
+    /// past the angle (seed 1: 89.7°). Off by default; the surface method's CPU schedule
     /// turns it on for the dense matches it grows when the warm-up needs them.
     #[serde(default)]
     pub compose_unmatched_pairs: bool,
@@ -363,7 +363,7 @@ impl PairContext<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::matching::refine::tests::affine_pair;
+    use crate::refine::tests::affine_pair;
     use nalgebra::Matrix2;
 
     fn exact_match(

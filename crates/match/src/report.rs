@@ -47,7 +47,7 @@ pub fn match_report(
     dataset: &Dataset,
     kind: MatcherKind,
     use_masks: bool,
-) -> Result<MatchReport, fewview_match::MatchError> {
+) -> Result<MatchReport, crate::MatchError> {
     let views: Vec<_> = dataset.train_views().collect();
     let inputs: Vec<MatchInput> = views
         .iter()

@@ -1,18 +1,10 @@
-//! Correspondences between training views. The surface paper uses PDC-Net (a learned dense matcher
+//! Correspondences between views. The surface paper uses PDC-Net (a learned dense matcher
 //! whose weights cannot be fetched here); [`Matcher`] is the seam where a learned matcher plugs
-//! in, and [`sift::SiftMatcher`] is the classical one used by default: SIFT features, Lowe's
+//! in, and [`crate::sift::SiftMatcher`] is the classical one used by default: SIFT features, Lowe's
 //! ratio test, a mutual nearest-neighbour check and an optional RANSAC fundamental-matrix
 //! filter (no poses are used: the poses are what is being estimated).
 //!
 //! [`epipolar_precision`] scores matches against ground-truth cameras.
-
-pub mod dense;
-pub mod densify;
-pub mod fundamental;
-pub mod learned;
-pub mod refine;
-pub mod report;
-pub mod sift;
 
 use fewview_scene::{Camera, Image, Se3};
 use nalgebra::{Matrix3, Vector3};
@@ -30,7 +22,7 @@ pub struct Match {
     /// In `[0, 1]`, higher is more reliable.
     pub confidence: f32,
     /// Covariance of `b` in px² (xx, xy, yy), when `b` was fitted by Lucas–Kanade at a grid
-    /// point of `a` ([`densify`]): a grid point is not chosen for its texture, and on an edge
+    /// point of `a` ([`crate::densify`]): a grid point is not chosen for its texture, and on an edge
     /// the window fixes `b` across the edge only. The warm-up can weigh the epipolar residuals
     /// by it (`WarmupOptions::covariance_polish`). `None` for feature matches, whose keypoints
     /// are blobs located in both directions.
@@ -46,7 +38,7 @@ pub struct MatchInput<'a> {
 
 /// Whether the mask (value ≥ `threshold` at the pixel under `p`) admits `p`; no mask admits
 /// everything.
-fn mask_admits(mask: Option<&Image>, p: nalgebra::Vector2<f64>, threshold: f32) -> bool {
+pub(crate) fn mask_admits(mask: Option<&Image>, p: nalgebra::Vector2<f64>, threshold: f32) -> bool {
     let Some(m) = mask else {
         return true;
     };
@@ -60,7 +52,7 @@ fn mask_admits(mask: Option<&Image>, p: nalgebra::Vector2<f64>, threshold: f32) 
 
 /// Grey value of a pixel as the matchers see it: Rec. 601 luminance of RGB(A), or the single
 /// channel.
-fn luminance(pixel: &[f32]) -> f32 {
+pub(crate) fn luminance(pixel: &[f32]) -> f32 {
     if pixel.len() >= 3 {
         0.299 * pixel[0] + 0.587 * pixel[1] + 0.114 * pixel[2]
     } else {
@@ -92,7 +84,7 @@ pub(crate) fn ransac_filter(
         .iter()
         .map(|m| [m.b[0] as f64, m.b[1] as f64])
         .collect();
-    let keep = fundamental::ransac_inliers(&pa, &pb, px, iterations, seed);
+    let keep = crate::fundamental::ransac_inliers(&pa, &pb, px, iterations, seed);
     matches
         .into_iter()
         .zip(keep)

@@ -99,10 +99,11 @@ impl AffineRefineOptions {
 }
 
 /// A grey plane with its gradients, sampled bilinearly with pixel centres at half-integers.
-pub(crate) struct Plane {
-    pub(crate) width: usize,
-    pub(crate) height: usize,
-    pub(crate) value: Vec<f32>,
+pub struct Plane {
+    pub width: usize,
+    pub height: usize,
+    /// The blurred grey values, row-major.
+    pub value: Vec<f32>,
     grad_x: Vec<f32>,
     grad_y: Vec<f32>,
 }
@@ -110,7 +111,7 @@ pub(crate) struct Plane {
 impl Plane {
     /// Luminance (Rec. 601 weights, as the SIFT matcher's grey image) blurred by `sigma`, with
     /// central-difference gradients (one-sided at the borders).
-    pub(crate) fn new(image: &Image, sigma: f32) -> Self {
+    pub fn new(image: &Image, sigma: f32) -> Self {
         let (w, h) = (image.width, image.height);
         let grey: Vec<f32> = (0..w * h)
             .map(|i| luminance(image.pixel(i % w, i / w)))
@@ -152,7 +153,7 @@ impl Plane {
     }
 
     /// Whether `(x, y)` lies where all four bilinear taps are inside the image.
-    pub(crate) fn inside(&self, x: f64, y: f64) -> bool {
+    pub fn inside(&self, x: f64, y: f64) -> bool {
         x >= 0.5 && y >= 0.5 && x <= self.width as f64 - 0.5 && y <= self.height as f64 - 0.5
     }
 
@@ -172,7 +173,8 @@ impl Plane {
         ]
     }
 
-    pub(crate) fn sample(&self, plane: &[f32], x: f64, y: f64) -> f64 {
+    /// The bilinear sample of `plane` (this plane's values or one of its gradients) at `(x, y)`.
+    pub fn sample(&self, plane: &[f32], x: f64, y: f64) -> f64 {
         self.taps(x, y)
             .iter()
             .map(|&(i, t)| plane[i] as f64 * t)
@@ -181,13 +183,14 @@ impl Plane {
 }
 
 /// Offsets of the window and their Gaussian weights.
-pub(crate) struct Window {
-    pub(crate) offsets: Vec<Vector2<f64>>,
-    pub(crate) weights: Vec<f64>,
+pub struct Window {
+    pub offsets: Vec<Vector2<f64>>,
+    pub weights: Vec<f64>,
 }
 
 impl Window {
-    pub(crate) fn new(half: usize) -> Self {
+    /// The `(2 half + 1)²` window, weighted by a Gaussian of σ = half / 2 (at least 0.5).
+    pub fn new(half: usize) -> Self {
         let h = half as isize;
         let sigma = (half as f64 / 2.0).max(0.5);
         let mut offsets = Vec::new();
