@@ -2,7 +2,7 @@
 # Where plain splats' transitions fail: the demo scene under the conditions of real captures
 # (per-photo exposure and white balance, vignetting, strong highlights, a mirror floor, wide
 # baselines, fewer SH bands, more views), plain against gf, seed 0, then one Markdown table
-# (README, "Where plain transitions fail").
+# (docs/guide/fusion.md, "Photos that disagree, and where plain transitions fail").
 #
 #   scripts/fusion_sweep.sh OUT [CONDITION ...]
 #

@@ -4,7 +4,7 @@
 # its references brought to one exposure and tested against each other (gf-me-occ), seeds 0
 # and 1, on the demo scene with a phone's exposure (0.5 EV, 5 % white balance) and its highlight
 # at full strength (0.4, 40), and on LLFF fern 3-view with the same jitter; then one Markdown
-# table per scene (README, "Gradient-domain fusion").
+# table per scene (docs/guide/fusion.md).
 #
 #   scripts/fusion_table.sh OUT [demo|fern|all] [SEED ...]
 #
