@@ -15,7 +15,7 @@
 /// Adam and the learning-rate schedule live in `fewview-optim`, shared with the Gaussian trainer.
 pub use fewview_optim as adam;
 pub mod bench;
-pub mod bundle;
+pub use fewview_sfm::bundle;
 pub mod checkpoint;
 pub mod config;
 pub use fewview_scene::cputime;
@@ -23,7 +23,7 @@ pub mod error;
 pub mod extract;
 pub mod field;
 #[doc(hidden)]
-pub mod global_start;
+pub use fewview_sfm::global_start;
 #[doc(hidden)]
 pub mod hashgrid;
 pub mod inputs;
@@ -47,7 +47,7 @@ pub mod rays;
 #[doc(hidden)]
 pub mod render;
 pub mod schedule;
-mod schur;
+use fewview_sfm::schur;
 pub mod sdf_scene;
 pub mod table1;
 pub mod train;

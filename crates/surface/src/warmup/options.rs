@@ -32,7 +32,7 @@ pub struct WarmupOptions {
     #[serde(default)]
     pub covariance_polish: bool,
     /// Also start one annealing run from the poses the matches imply on their own
-    /// ([`crate::global_start`]: five-point relative poses, rotation averaging, baseline
+    /// ([`mod@crate::global_start`]: five-point relative poses, rotation averaging, baseline
     /// directions). On by default; off, the runs start from the initial poses only.
     #[serde(default = "yes")]
     pub global_start: bool,

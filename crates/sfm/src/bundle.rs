@@ -1,8 +1,8 @@
-//! Bundle adjustment of the warmed-up poses on the matches' tracks, as structure from motion
-//! ends its start (a deviation from the surface paper, which refines the poses through the field
-//! alone; `--bundle-adjustment off` switches it off).
+//! Bundle adjustment of camera poses on the matches' tracks, as structure from motion ends its
+//! start. The surface method runs it after its warm-up (a deviation from the surface paper,
+//! which refines the poses through the field alone; `--bundle-adjustment off` switches it off).
 //!
-//! **Why.** The epipolar warm-up ([`crate::warmup`]) fits each pair's matches on their own:
+//! **Why.** The surface method's epipolar warm-up fits each pair's matches on their own:
 //! a pair's Sampson cost cannot say that the point a match of views 0–1 sees is the point a
 //! match of views 0–2 sees at the same pixel of view 0. On a narrow field of view with a shallow
 //! object that freedom is a long, flat valley (rotation traded against baseline direction), and
@@ -18,7 +18,7 @@
 //! held, and the common scale, which no image sees, is restored at the end. Levenberg–Marquardt
 //! with Marquardt's damping on analytic Jacobians, points eliminated by the Schur complement
 //! (the `schur` module), Cauchy weights (iteratively reweighted) at `cauchy_sigmas` robust
-//! standard deviations of the starting residuals. Unlike [`crate::patch_adjustment`], the
+//! standard deviations of the starting residuals. Unlike the surface method's patch adjustment, the
 //! scale is not recomputed as the fit tightens: on DTU's triplets a shrinking scale kept
 //! moving the optimum (docs/experiments.md, 2026-11-26).
 
@@ -29,8 +29,8 @@ use nalgebra::{DMatrix, Matrix2x3, Matrix3, Vector2, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::matching::Match;
 use crate::schur::{BlockSystem, CameraSystem, LmStep, damped_step, keep_scale, robust_sigma};
+use fewview_match::Match;
 
 /// Options of [`bundle_adjust`].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -464,7 +464,12 @@ pub fn bundle_adjust(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pose::{rotation_angle_deg, se3_exp};
+    use crate::se3::se3_exp;
+    use fewview_geom::similarity::rotation_angle_deg as angle_deg;
+
+    fn rotation_angle_deg(a: &Matrix3<f64>, b: &Matrix3<f64>) -> f64 {
+        angle_deg(&(a * b.transpose()))
+    }
     use nalgebra::{Rotation3, Unit};
 
     /// Three cameras 2.5 units from a cloud of points near the origin, looking at it, 20° apart

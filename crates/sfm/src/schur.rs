@@ -2,16 +2,16 @@
 //! cameras (6 each, camera 0 held) and many small blocks of 3 (a 3D point, or a patch's depth
 //! and tilts), each block seen by a few cameras: the Schur complement eliminates the blocks, so
 //! a Levenberg–Marquardt step solves only the `6(n − 1)` camera system, then back-substitutes
-//! every block. Shared by [`crate::bundle`] and [`crate::patch_adjustment`].
+//! every block. Shared by [`crate::bundle`] and the surface method's patch adjustment.
 
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
 use fewview_scene::Se3;
 
-use crate::pose::se3_exp;
+use crate::se3::se3_exp;
 
 /// One block's share of the weighted normal equations `Jᵀ J δ = −Jᵀ r`.
-pub(crate) struct BlockSystem {
+pub struct BlockSystem {
     /// `J_bᵀ J_b` and `J_bᵀ r` of the block's own 3 unknowns.
     pub v: Matrix3<f64>,
     pub g: Vector3<f64>,
@@ -26,13 +26,13 @@ pub(crate) struct BlockSystem {
 
 /// A damped Gauss–Newton step: the free cameras' twists (6 each) and each block's step
 /// (`None` for a block whose damped 3 × 3 system is singular; it stays where it is).
-pub(crate) struct SchurStep {
+pub struct SchurStep {
     pub cameras: DVector<f64>,
     pub blocks: Vec<Option<Vector3<f64>>>,
 }
 
 /// The camera part `U`, `g_c` of the normal equations, summed over the blocks.
-pub(crate) struct CameraSystem {
+pub struct CameraSystem {
     u: DMatrix<f64>,
     gc: DVector<f64>,
 }
@@ -107,7 +107,7 @@ impl CameraSystem {
 
 /// What one Levenberg–Marquardt iteration did: the weighted cost before and after (under the
 /// iteration's weights) and, when a step lowered it, the new poses and block states.
-pub(crate) struct LmStep<T> {
+pub struct LmStep<T> {
     pub cost_before: f64,
     pub cost_after: f64,
     pub accepted: Option<(Vec<Se3>, Vec<T>)>,
@@ -117,7 +117,7 @@ pub(crate) struct LmStep<T> {
 /// damping then falls three-fold, to `min_lambda` at the least) or the damping exceeds 10⁶ (it
 /// rises ten-fold after each failed step). `moved` applies a block's step to its state; `cost`
 /// is the weighted cost of new poses and states.
-pub(crate) fn damped_step<T: Copy>(
+pub fn damped_step<T: Copy>(
     cameras: &CameraSystem,
     systems: &[BlockSystem],
     (poses, states): (&[Se3], &[T]),
@@ -156,7 +156,7 @@ pub(crate) fn damped_step<T: Copy>(
 }
 
 /// Poses after the left update by `xi` (6 per free camera, rotation first; camera 0 held).
-pub(crate) fn updated(poses: &[Se3], xi: &DVector<f64>) -> Vec<Se3> {
+pub fn updated(poses: &[Se3], xi: &DVector<f64>) -> Vec<Se3> {
     poses
         .iter()
         .enumerate()
@@ -172,7 +172,7 @@ pub(crate) fn updated(poses: &[Se3], xi: &DVector<f64>) -> Vec<Se3> {
 
 /// `adjusted` with the camera centres scaled about view 0's so that their summed distance from
 /// it is that of `start`: images cannot see a common scale, and the step along it is undone.
-pub(crate) fn keep_scale(start: &[Se3], adjusted: &[Se3]) -> Vec<Se3> {
+pub fn keep_scale(start: &[Se3], adjusted: &[Se3]) -> Vec<Se3> {
     let spread = |poses: &[Se3]| {
         let origin = poses[0].inverse().translation;
         poses[1..]
@@ -197,7 +197,7 @@ pub(crate) fn keep_scale(start: &[Se3], adjusted: &[Se3]) -> Vec<Se3> {
 
 /// The robust scale of residuals: 1.4826 × their median magnitude (the standard deviation of
 /// a normal distribution with that median absolute value).
-pub(crate) fn robust_sigma(residuals: impl Iterator<Item = f64>) -> f64 {
+pub fn robust_sigma(residuals: impl Iterator<Item = f64>) -> f64 {
     let mut magnitudes: Vec<f64> = residuals.map(f64::abs).collect();
     if magnitudes.is_empty() {
         return 0.0;

@@ -17,7 +17,7 @@ use fewview_scene::{Intrinsics, Se3};
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::matching::Match;
+use fewview_match::Match;
 
 /// One pair's relative pose as the five-point step found it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -174,7 +174,7 @@ pub fn global_start(
         .map(|(r, c)| Se3::new(*r, -(r * c)))
         .collect();
     Ok(GlobalStart {
-        poses: crate::pose::into_frame_of(&poses, initial),
+        poses: crate::se3::into_frame_of(&poses, initial),
         pairs,
     })
 }
