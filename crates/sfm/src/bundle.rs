@@ -461,6 +461,40 @@ pub fn bundle_adjust(
     (keep_scale(poses, &current), report)
 }
 
+/// A track's triangulated point and the reprojection error of each of its observations.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TriangulatedTrack {
+    pub track: Track,
+    pub point: Vector3<f64>,
+    /// Pixels, one per observation, in the track's order.
+    pub errors_px: Vec<f64>,
+}
+
+/// The tracks of `matches` triangulated from `poses` (linear triangulation), with their
+/// reprojection errors; tracks that do not triangulate in front of their cameras are left out.
+pub fn triangulated_tracks(
+    intrinsics: &[Intrinsics],
+    poses: &[Se3],
+    matches: &[Match],
+) -> Vec<TriangulatedTrack> {
+    let Some(cameras) = Cameras::new(intrinsics) else {
+        return Vec::new();
+    };
+    tracks_from_matches(matches)
+        .into_iter()
+        .filter_map(|track| {
+            let point = triangulate(&cameras, poses, &track)?;
+            let r = reprojection_errors(&cameras, poses, &track, &point)?;
+            let errors_px = r.chunks(2).map(|d| d[0].hypot(d[1])).collect();
+            Some(TriangulatedTrack {
+                track,
+                point,
+                errors_px,
+            })
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

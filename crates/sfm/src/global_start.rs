@@ -99,48 +99,14 @@ pub fn global_start(
     seed: u64,
 ) -> Result<GlobalStart, String> {
     let n = initial.len();
-    let options = RelativePoseOptions {
-        threshold_px: inlier_threshold_px(intrinsics),
-        seed,
-        ..RelativePoseOptions::default()
-    };
     let mut pairs = Vec::new();
-    for PairMatches {
-        a,
-        b,
-        in_a: pa,
-        in_b: pb,
-    } in pairs_of(matches, n, min_per_pair)
-    {
-        let (ka, kb) = (intrinsics[a].matrix(), intrinsics[b].matrix());
-        let Some(pose) = relative_pose(&pa, &pb, &ka, &kb, &options) else {
-            return Err(format!(
-                "no relative pose for views {a} and {b} ({} matches)",
-                pa.len()
-            ));
-        };
-        let r = pose.rotation;
-        pairs.push(PairPose {
-            view_a: a,
-            view_b: b,
-            matches: pa.len(),
-            inliers: pose.inliers.iter().filter(|i| **i).count(),
-            median_px: pose.median_px,
-            rotation: std::array::from_fn(|i| std::array::from_fn(|j| r[(i, j)])),
-            translation: pose.translation.into(),
-        });
+    for pair in pairs_of(matches, n, min_per_pair) {
+        let (a, b, count) = (pair.a, pair.b, pair.in_a.len());
+        let pose = pair_pose(&pair, intrinsics, seed)
+            .ok_or_else(|| format!("no relative pose for views {a} and {b} ({count} matches)"))?;
+        pairs.push(pose);
     }
-    let edges: Vec<RelativeRotation> = pairs
-        .iter()
-        .map(|p| RelativeRotation {
-            i: p.view_a,
-            j: p.view_b,
-            rotation: Matrix3::from_fn(|i, j| p.rotation[i][j]),
-            weight: p.inliers as f64,
-        })
-        .collect();
-    let rotations = average_rotations(n, &edges)
-        .ok_or_else(|| "the pairs with enough matches do not connect all views".to_string())?;
+    let rotations = averaged_rotations(n, &pairs)?;
     // The world rotation the averaging leaves free: the one nearest the initial rotations.
     let g = project_to_rotation(
         &rotations
@@ -152,6 +118,116 @@ pub fn global_start(
     let rotations: Vec<Matrix3<f64>> = rotations.iter().map(|r| r * g).collect();
     let initial_centres: Vec<Vector3<f64>> =
         initial.iter().map(|p| p.inverse().translation).collect();
+    let prior = |i: usize, j: usize| (initial_centres[j] - initial_centres[i]).norm();
+    let poses = poses_from_baselines(n, &pairs, &rotations, prior)?;
+    Ok(GlobalStart {
+        poses: crate::se3::into_frame_of(&poses, initial),
+        pairs,
+    })
+}
+
+/// The poses the matches imply with no poses to start from, as structure from motion starts:
+/// view 0 at the origin with the identity rotation, and every baseline whose length the
+/// directions leave free (a pair outside any triangle of pairs) one unit long. Pairs whose
+/// matches give no relative pose, or whose rotation disagrees with the averaged ones by more
+/// than [`MAX_PAIR_DISAGREEMENT_DEG`] (dropped worst first while the rest connect the views),
+/// are left out; `Err` says why there is no start when the
+/// remaining pairs do not connect the `n` views.
+pub fn relative_start(
+    n: usize,
+    intrinsics: &[Intrinsics],
+    matches: &[Match],
+    min_per_pair: usize,
+    seed: u64,
+) -> Result<GlobalStart, String> {
+    let mut pairs: Vec<PairPose> = pairs_of(matches, n, min_per_pair)
+        .iter()
+        .filter_map(|pair| pair_pose(pair, intrinsics, seed))
+        .collect();
+    let mut rotations = averaged_rotations(n, &pairs)?;
+    // A pair whose relative rotation disagrees with the others (a wrong model from few or
+    // look-alike matches) is dropped while the rest still connect the views.
+    while let Some(worst) = worst_disagreeing_pair(&pairs, &rotations) {
+        let mut fewer = pairs.clone();
+        fewer.remove(worst);
+        let Ok(again) = averaged_rotations(n, &fewer) else {
+            break;
+        };
+        (pairs, rotations) = (fewer, again);
+    }
+    let g = rotations[0].transpose();
+    let rotations: Vec<Matrix3<f64>> = rotations.iter().map(|r| r * g).collect();
+    let poses = poses_from_baselines(n, &pairs, &rotations, |_, _| 1.0)?;
+    Ok(GlobalStart { poses, pairs })
+}
+
+/// A pair's relative rotation may disagree with the averaged rotations by at most this many
+/// degrees before [`relative_start`] drops it.
+pub const MAX_PAIR_DISAGREEMENT_DEG: f64 = 2.0;
+
+/// The pair whose relative rotation disagrees most with `rotations`, when that is beyond
+/// [`MAX_PAIR_DISAGREEMENT_DEG`].
+fn worst_disagreeing_pair(pairs: &[PairPose], rotations: &[Matrix3<f64>]) -> Option<usize> {
+    pairs
+        .iter()
+        .map(|p| {
+            let r = Matrix3::from_fn(|i, j| p.rotation[i][j]);
+            let implied = rotations[p.view_b] * rotations[p.view_a].transpose();
+            fewview_geom::similarity::rotation_angle_deg(&(r * implied.transpose()))
+        })
+        .enumerate()
+        .filter(|(_, deg)| *deg > MAX_PAIR_DISAGREEMENT_DEG)
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(i, _)| i)
+}
+
+/// One pair's relative pose from its matches (five-point RANSAC, then the robust refinement),
+/// `None` when the matches give no model.
+fn pair_pose(pair: &PairMatches, intrinsics: &[Intrinsics], seed: u64) -> Option<PairPose> {
+    let (a, b) = (pair.a, pair.b);
+    let options = RelativePoseOptions {
+        threshold_px: inlier_threshold_px(intrinsics),
+        seed,
+        ..RelativePoseOptions::default()
+    };
+    let (ka, kb) = (intrinsics[a].matrix(), intrinsics[b].matrix());
+    let pose = relative_pose(&pair.in_a, &pair.in_b, &ka, &kb, &options)?;
+    let r = pose.rotation;
+    Some(PairPose {
+        view_a: a,
+        view_b: b,
+        matches: pair.in_a.len(),
+        inliers: pose.inliers.iter().filter(|i| **i).count(),
+        median_px: pose.median_px,
+        rotation: std::array::from_fn(|i| std::array::from_fn(|j| r[(i, j)])),
+        translation: pose.translation.into(),
+    })
+}
+
+/// World-to-camera rotations of `n` views averaged over the pairs' relative rotations (weighted
+/// by their inliers), up to a common rotation.
+fn averaged_rotations(n: usize, pairs: &[PairPose]) -> Result<Vec<Matrix3<f64>>, String> {
+    let edges: Vec<RelativeRotation> = pairs
+        .iter()
+        .map(|p| RelativeRotation {
+            i: p.view_a,
+            j: p.view_b,
+            rotation: Matrix3::from_fn(|i, j| p.rotation[i][j]),
+            weight: p.inliers as f64,
+        })
+        .collect();
+    average_rotations(n, &edges)
+        .ok_or_else(|| "the pairs with enough matches do not connect all views".to_string())
+}
+
+/// Poses from the `rotations` and the camera centres the pairs' baseline directions give,
+/// each baseline `(i, j)` with the prior length `prior(i, j)` where the directions leave it free.
+fn poses_from_baselines(
+    n: usize,
+    pairs: &[PairPose],
+    rotations: &[Matrix3<f64>],
+    prior: impl Fn(usize, usize) -> f64,
+) -> Result<Vec<Se3>, String> {
     let baselines: Vec<Baseline> = pairs
         .iter()
         .map(|p| {
@@ -161,22 +237,18 @@ pub fn global_start(
                 j: p.view_b,
                 // x_b = R x_a + t with t = −R_b (c_b − c_a).
                 direction: -(rotations[p.view_b].transpose() * t),
-                prior_length: (initial_centres[p.view_b] - initial_centres[p.view_a]).norm(),
+                prior_length: prior(p.view_a, p.view_b),
                 weight: p.inliers as f64,
             }
         })
         .collect();
     let centres = centres_from_baselines(n, &baselines)
         .ok_or_else(|| "the pairs with enough matches do not connect all views".to_string())?;
-    let poses: Vec<Se3> = rotations
+    Ok(rotations
         .iter()
         .zip(&centres)
         .map(|(r, c)| Se3::new(*r, -(r * c)))
-        .collect();
-    Ok(GlobalStart {
-        poses: crate::se3::into_frame_of(&poses, initial),
-        pairs,
-    })
+        .collect())
 }
 
 #[cfg(test)]

@@ -18,6 +18,7 @@ mod number_args;
 mod output_paths;
 mod photo_args;
 mod pose_error;
+mod poses;
 mod progress;
 mod register;
 mod render;
@@ -49,6 +50,7 @@ pub enum Command {
     Chamfer(chamfer::Args),
     PoseError(pose_error::Args),
     Match(matching::Args),
+    Poses(poses::Args),
     // Boxed: the surface command has many flags, and clippy bounds the size difference of variants.
     Surface(Box<surface::Args>),
     /// Temporal-coherence metrics of a rendered frame sequence against ground truth.
@@ -77,6 +79,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Chamfer(a) => chamfer::run(a),
         Command::PoseError(a) => pose_error::run(a),
         Command::Match(a) => matching::run(a),
+        Command::Poses(a) => poses::run(a),
         Command::Surface(a) => surface::run(*a),
         Command::EvalVideo(args) => eval_video::run(args),
         Command::Study(args) => study::run(args),

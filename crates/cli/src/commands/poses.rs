@@ -1,0 +1,84 @@
+//! `fewview poses`: camera poses from a folder of photos, written as a COLMAP model.
+
+use std::path::PathBuf;
+
+use clap::Args as ClapArgs;
+use fewview_sfm::photos::{DEFAULT_FOV_DEG, FocalSource};
+use fewview_sfm::{PoseOptions, estimate_poses, load_folder, place_images, write_model};
+
+use super::output_paths::check_folder;
+
+/// Estimate camera poses from a few photos, without COLMAP: SIFT matches between every pair
+/// (dense matches where SIFT finds few), relative poses by the five-point algorithm, rotation
+/// averaging, camera centres from the baselines, and a bundle adjustment of poses and points.
+///
+/// Writes `OUT/sparse/0/{cameras,images,points3D}.txt` (a COLMAP text model), `OUT/transforms.json`
+/// (nerfstudio), `OUT/cameras.json` (for `fewview pose-error`), `OUT/poses_report.json`, and the
+/// registered photos in `OUT/images/`, so that `fewview train --data OUT` trains on them. The model is fixed up to a similarity: the first
+/// registered photo is at the origin, and the median depth of the points is 1. Intrinsics are
+/// held at their starting values: the EXIF 35 mm focal length, else `--fov` across the width.
+#[derive(Debug, ClapArgs)]
+pub struct Args {
+    /// Folder of photos (`.jpg`, `.jpeg`, `.png`).
+    #[arg(long, value_name = "DIR")]
+    pub images: PathBuf,
+    /// Output folder.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Horizontal field of view (degrees) of photos without an EXIF focal length.
+    #[arg(long, value_name = "DEG", default_value_t = DEFAULT_FOV_DEG)]
+    pub fov: f64,
+    /// Photos are matched with their longer side scaled down to at most this many pixels.
+    #[arg(long, value_name = "PX", default_value_t = 1024)]
+    pub max_side: usize,
+    /// Fewest matches for two photos to count as overlapping.
+    #[arg(long, value_name = "N", default_value_t = PoseOptions::default().min_matches)]
+    pub min_matches: usize,
+    /// Seed of RANSAC.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if !(args.fov > 1.0 && args.fov < 179.0) {
+        anyhow::bail!("--fov {}: expected degrees between 1 and 179", args.fov);
+    }
+    if args.max_side < 64 {
+        anyhow::bail!("--max-side {}: expected at least 64 pixels", args.max_side);
+    }
+    check_folder(&args.out, "--out")?;
+    let photos = load_folder(&args.images, args.max_side, args.fov)?;
+    let assumed = photos
+        .iter()
+        .filter(|p| p.focal_from == FocalSource::AssumedFov)
+        .count();
+    if assumed > 0 {
+        println!(
+            "{assumed} of {} photos have no EXIF focal length: assuming a {}° field of view",
+            photos.len(),
+            args.fov
+        );
+    }
+    let options = PoseOptions {
+        min_matches: args.min_matches,
+        seed: args.seed,
+        ..PoseOptions::default()
+    };
+    let model = estimate_poses(&photos, &options)?;
+    for u in &model.unregistered {
+        println!("not registered: {}: {}", u.name, u.reason);
+    }
+    let r = &model.report;
+    println!(
+        "registered {} of {} photos; {} points, median reprojection error {:.3} px",
+        r.registered, r.photos, r.points, r.median_error_px
+    );
+    write_model(&model, &args.out)?;
+    place_images(&model, &args.images, &args.out)?;
+    println!(
+        "wrote {} (COLMAP text), transforms.json, cameras.json, poses_report.json and images/ in {}",
+        args.out.join("sparse/0").display(),
+        args.out.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,204 @@
+//! A [`PoseModel`] written as the tools of the field read it: a COLMAP text model
+//! (`sparse/0/cameras.txt`, `images.txt`, `points3D.txt`), nerfstudio's `transforms.json`,
+//! `cameras.json` (the camera list `fewview pose-error` reads) and `poses_report.json`, with the
+//! registered photos placed in `images/` beside them so that the folder loads as a dataset.
+//! Every file is written atomically.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use fewview_scene::Intrinsics;
+use fewview_scene::atomic::write_bytes;
+use fewview_scene::axes::opengl_to_opencv;
+use serde_json::json;
+
+use crate::error::{Result, SfmError};
+use crate::poses::PoseModel;
+
+/// The model's files under `out` (which is created); returns their paths.
+pub fn write_model(model: &PoseModel, out: &Path) -> Result<Vec<PathBuf>> {
+    let sparse = out.join("sparse").join("0");
+    std::fs::create_dir_all(&sparse).map_err(|e| SfmError::io(&sparse, e))?;
+    let (camera_of, cameras) = distinct_cameras(model);
+    let files = [
+        (sparse.join("cameras.txt"), cameras_txt(&cameras)),
+        (sparse.join("images.txt"), images_txt(model, &camera_of)),
+        (sparse.join("points3D.txt"), points_txt(model)),
+        (out.join("transforms.json"), transforms_json(model)),
+        (out.join("poses_report.json"), report_json(model)),
+    ];
+    for (path, text) in &files {
+        write_bytes(path, text.as_bytes()).map_err(|e| SfmError::input(path, e.to_string()))?;
+    }
+    let cameras_json = out.join("cameras.json");
+    let cameras: Vec<_> = model.photos.iter().map(|p| p.camera.clone()).collect();
+    fewview_geom::io::cameras::write_cameras(&cameras_json, &cameras)
+        .map_err(|e| SfmError::input(&cameras_json, e.to_string()))?;
+    let mut written: Vec<PathBuf> = files.into_iter().map(|(p, _)| p).collect();
+    written.push(cameras_json);
+    Ok(written)
+}
+
+/// Places the registered photos of `model`, read from `images_dir`, in `out/images/` (a hard
+/// link where the file system allows, else a copy), as the written model names them.
+pub fn place_images(model: &PoseModel, images_dir: &Path, out: &Path) -> Result<()> {
+    let images = out.join("images");
+    std::fs::create_dir_all(&images).map_err(|e| SfmError::io(&images, e))?;
+    for photo in &model.photos {
+        let (from, to) = (images_dir.join(&photo.name), images.join(&photo.name));
+        if to.exists() {
+            continue;
+        }
+        if std::fs::hard_link(&from, &to).is_err() {
+            std::fs::copy(&from, &to).map_err(|e| SfmError::io(&from, e))?;
+        }
+    }
+    Ok(())
+}
+
+/// One COLMAP camera per distinct set of intrinsics (photos of one camera share it); the
+/// camera id (1-based) of each photo.
+fn distinct_cameras(model: &PoseModel) -> (Vec<usize>, Vec<Intrinsics>) {
+    let mut cameras: Vec<Intrinsics> = Vec::new();
+    let ids = model
+        .photos
+        .iter()
+        .map(|p| {
+            let k = p.camera.intrinsics;
+            match cameras.iter().position(|c| *c == k) {
+                Some(i) => i + 1,
+                None => {
+                    cameras.push(k);
+                    cameras.len()
+                }
+            }
+        })
+        .collect();
+    (ids, cameras)
+}
+
+fn cameras_txt(cameras: &[Intrinsics]) -> String {
+    let mut s = String::from("# CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]\n");
+    for (i, k) in cameras.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "{} PINHOLE {} {} {:.17} {:.17} {:.17} {:.17}",
+            i + 1,
+            k.width,
+            k.height,
+            k.fx,
+            k.fy,
+            k.cx,
+            k.cy
+        );
+    }
+    s
+}
+
+/// `images.txt`: each photo's world-to-camera pose, then its observed points.
+fn images_txt(model: &PoseModel, camera_of: &[usize]) -> String {
+    let mut observed: Vec<Vec<(f64, f64, usize)>> = vec![Vec::new(); model.photos.len()];
+    for (id, point) in model.points.iter().enumerate() {
+        for &(photo, [x, y]) in &point.observations {
+            observed[photo].push((x, y, id + 1));
+        }
+    }
+    let mut s = String::from(
+        "# IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME\n# POINTS2D[] as (X, Y, POINT3D_ID)\n",
+    );
+    for (i, photo) in model.photos.iter().enumerate() {
+        let pose = &photo.camera.world_to_camera;
+        let q = nalgebra::UnitQuaternion::from_matrix(&pose.rotation);
+        let t = pose.translation;
+        let _ = writeln!(
+            s,
+            "{} {:.17} {:.17} {:.17} {:.17} {:.17} {:.17} {:.17} {} {}",
+            i + 1,
+            q.w,
+            q.i,
+            q.j,
+            q.k,
+            t.x,
+            t.y,
+            t.z,
+            camera_of[i],
+            photo.name
+        );
+        let line: Vec<String> = observed[i]
+            .iter()
+            .map(|(x, y, id)| format!("{x:.3} {y:.3} {id}"))
+            .collect();
+        let _ = writeln!(s, "{}", line.join(" "));
+    }
+    s
+}
+
+/// `points3D.txt`: each point with its colour, error and track (image id, index of the
+/// observation in that image's line of `images.txt`).
+fn points_txt(model: &PoseModel) -> String {
+    let mut next_index = vec![0usize; model.photos.len()];
+    let mut s = String::from("# POINT3D_ID X Y Z R G B ERROR TRACK[] as (IMAGE_ID, POINT2D_IDX)\n");
+    for (id, p) in model.points.iter().enumerate() {
+        let track: Vec<String> = p
+            .observations
+            .iter()
+            .map(|&(photo, _)| {
+                let index = next_index[photo];
+                next_index[photo] += 1;
+                format!("{} {index}", photo + 1)
+            })
+            .collect();
+        let _ = writeln!(
+            s,
+            "{} {:.17} {:.17} {:.17} {} {} {} {:.6} {}",
+            id + 1,
+            p.xyz[0],
+            p.xyz[1],
+            p.xyz[2],
+            p.rgb[0],
+            p.rgb[1],
+            p.rgb[2],
+            p.error_px,
+            track.join(" ")
+        );
+    }
+    s
+}
+
+/// nerfstudio's `transforms.json`: per-frame pinhole intrinsics and OpenGL camera-to-world
+/// matrices, with the images expected under `images/`.
+fn transforms_json(model: &PoseModel) -> String {
+    let frames: Vec<_> = model
+        .photos
+        .iter()
+        .map(|p| {
+            let k = p.camera.intrinsics;
+            let gl = opengl_to_opencv(&p.camera.camera_to_world()).to_matrix4();
+            let rows: Vec<Vec<f64>> = (0..4)
+                .map(|r| (0..4).map(|c| gl[(r, c)]).collect())
+                .collect();
+            json!({
+                "file_path": format!("images/{}", p.name),
+                "fl_x": k.fx, "fl_y": k.fy, "cx": k.cx, "cy": k.cy, "w": k.width, "h": k.height,
+                "transform_matrix": rows,
+            })
+        })
+        .collect();
+    let doc = json!({ "camera_model": "OPENCV", "frames": frames });
+    serde_json::to_string_pretty(&doc).unwrap_or_default()
+}
+
+fn report_json(model: &PoseModel) -> String {
+    let photos: Vec<_> = model
+        .photos
+        .iter()
+        .map(|p| json!({ "name": p.name, "focal_from": p.focal_from, "focal_px": p.camera.intrinsics.fx }))
+        .collect();
+    let doc = json!({
+        "registered": photos,
+        "unregistered": model.unregistered,
+        "report": model.report,
+        "gauge": "first registered photo at the origin with the identity rotation; median track depth 1",
+    });
+    serde_json::to_string_pretty(&doc).unwrap_or_default()
+}

@@ -1,0 +1,383 @@
+//! Camera poses from a few photos, as structure from motion finds them: SIFT matches between
+//! every pair of photos (with dense matches added where SIFT finds few, as the surface method
+//! grows them, and every match refined by affine Lucas–Kanade), the relative start (five-point pair poses, rotation averaging,
+//! centres from the baseline directions), and the bundle adjustment of poses and tracks.
+//!
+//! **Gauge.** A model from photos alone is fixed up to a similarity. The first registered photo
+//! is the world: its camera sits at the origin with the identity rotation, and the scale puts
+//! the median depth of the tracks' points, over all their observations, at 1.
+//!
+//! **Intrinsics** are held at their starting values (EXIF or an assumed field of view,
+//! [`crate::photos`]); refining the focal length and a radial coefficient is not done yet.
+
+use fewview_match::dense::{DenseOptions, dense_matches};
+use fewview_match::refine::{AffineRefineOptions, refine_matches};
+use fewview_match::sift::{SiftMatcher, SiftOptions};
+use fewview_match::{Match, MatchInput, match_all_pairs};
+use fewview_scene::{Camera, Image, Intrinsics, Se3};
+use serde::Serialize;
+
+use crate::bundle::{BundleOptions, BundleReport, bundle_adjust, triangulated_tracks};
+use crate::error::{Result, SfmError};
+use crate::global_start::{PairPose, relative_start};
+use crate::photos::{FocalSource, Photo};
+
+/// Options of [`estimate_poses`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoseOptions {
+    /// Fewest matches for a pair of photos to count as overlapping.
+    pub min_matches: usize,
+    /// Pairs with fewer SIFT matches than this also get the dense matcher's (`0`: never).
+    pub dense_below: usize,
+    /// Tracks whose reprojection error exceeds this (pixels of the working images) after the
+    /// adjustment are left out of the model's points.
+    pub max_error_px: f64,
+    pub sift: SiftOptions,
+    pub bundle: BundleOptions,
+    /// Seed of RANSAC.
+    pub seed: u64,
+}
+
+impl Default for PoseOptions {
+    fn default() -> Self {
+        Self {
+            min_matches: 20,
+            dense_below: 200,
+            max_error_px: 4.0,
+            sift: SiftOptions::default(),
+            bundle: BundleOptions::default(),
+            seed: 0,
+        }
+    }
+}
+
+/// A photo with its estimated camera.
+#[derive(Clone, Debug)]
+pub struct RegisteredPhoto {
+    pub name: String,
+    /// At the resolution of the photo's file.
+    pub camera: Camera,
+    pub focal_from: FocalSource,
+}
+
+/// A photo left out of the model, and why.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Unregistered {
+    pub name: String,
+    pub reason: String,
+}
+
+/// A triangulated track: its point, colour and where the photos see it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelPoint {
+    pub xyz: [f64; 3],
+    pub rgb: [u8; 3],
+    /// (index into [`PoseModel::photos`], pixel of the photo's file; centres at half-integers).
+    pub observations: Vec<(usize, [f64; 2])>,
+    /// Mean reprojection error (pixels of the working images).
+    pub error_px: f64,
+}
+
+/// What [`estimate_poses`] measured on the way.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct PoseReport {
+    pub photos: usize,
+    pub registered: usize,
+    /// Pairs of photos with at least `min_matches` matches, and those that gave a relative pose.
+    pub overlapping_pairs: usize,
+    pub pairs: Vec<PairPose>,
+    pub matches: usize,
+    pub bundle: BundleReport,
+    pub points: usize,
+    /// Median reprojection error of the model's points (pixels of the working images).
+    pub median_error_px: f64,
+}
+
+/// The estimated model.
+#[derive(Clone, Debug)]
+pub struct PoseModel {
+    pub photos: Vec<RegisteredPhoto>,
+    pub unregistered: Vec<Unregistered>,
+    pub points: Vec<ModelPoint>,
+    pub report: PoseReport,
+}
+
+/// Cameras for `photos` (module docs). Photos that share too little with the largest group of
+/// overlapping photos are listed in [`PoseModel::unregistered`] with the reason; fewer than two
+/// registered photos is an error.
+pub fn estimate_poses(photos: &[Photo], options: &PoseOptions) -> Result<PoseModel> {
+    if photos.len() < 2 {
+        return Err(SfmError::NoModel(format!(
+            "{} photo(s): poses need at least two photos that overlap",
+            photos.len()
+        )));
+    }
+    let inputs: Vec<MatchInput> = photos
+        .iter()
+        .map(|p| MatchInput {
+            image: &p.image,
+            mask: None,
+        })
+        .collect();
+    let matcher = SiftMatcher {
+        options: SiftOptions {
+            seed: options.seed,
+            ..options.sift.clone()
+        },
+    };
+    let matches = correspondences(&inputs, &matcher, options);
+    let (group, unregistered) = largest_group(photos, &matches, options.min_matches);
+    if group.len() < 2 {
+        return Err(SfmError::NoModel(format!(
+            "no two of the {} photos share {} matches or more",
+            photos.len(),
+            options.min_matches
+        )));
+    }
+    let (intrinsics, matches) = restricted(photos, &matches, &group);
+    let start = relative_start(
+        group.len(),
+        &intrinsics,
+        &matches,
+        options.min_matches,
+        options.seed,
+    )
+    .map_err(SfmError::NoModel)?;
+    let (poses, bundle) = bundle_adjust(&intrinsics, &start.poses, &matches, &options.bundle);
+    let (poses, points) = scaled_model(photos, &group, &intrinsics, &poses, &matches, options);
+    let mut errors: Vec<f64> = points.iter().map(|p| p.error_px).collect();
+    errors.sort_by(f64::total_cmp);
+    let report = PoseReport {
+        photos: photos.len(),
+        registered: group.len(),
+        overlapping_pairs: overlapping_pairs(&matches, group.len(), options.min_matches),
+        pairs: start.pairs,
+        matches: matches.len(),
+        bundle,
+        points: points.len(),
+        median_error_px: errors.get(errors.len() / 2).copied().unwrap_or(f64::NAN),
+    };
+    let photos = group
+        .iter()
+        .zip(&poses)
+        .map(|(&i, pose)| RegisteredPhoto {
+            name: photos[i].name.clone(),
+            camera: Camera::new(full_intrinsics(&photos[i]), *pose),
+            focal_from: photos[i].focal_from,
+        })
+        .collect();
+    Ok(PoseModel {
+        photos,
+        unregistered,
+        points,
+        report,
+    })
+}
+
+/// SIFT matches of every pair, dense ones added to pairs with few, all refined by affine
+/// Lucas–Kanade (the refinement drops the matches whose windows do not agree).
+fn correspondences(
+    inputs: &[MatchInput],
+    matcher: &SiftMatcher,
+    options: &PoseOptions,
+) -> Vec<Match> {
+    let mut matches = match_all_pairs(matcher, inputs);
+    let counts = match_counts(&matches, inputs.len());
+    let dense = DenseOptions {
+        seed: options.seed,
+        ..DenseOptions::default()
+    };
+    let sparse_pairs: Vec<(usize, usize)> = (0..inputs.len())
+        .flat_map(|a| (a + 1..inputs.len()).map(move |b| (a, b)))
+        .filter(|&(a, b)| counts[a][b] < options.dense_below)
+        .collect();
+    for (a, b) in sparse_pairs {
+        matches.extend(dense_matches(&inputs[a], &inputs[b], a, b, &dense));
+    }
+    let images: Vec<&Image> = inputs.iter().map(|i| i.image).collect();
+    refine_matches(&images, &matches, &AffineRefineOptions::default())
+}
+
+/// Number of matches between photos `i` and `j` of `n`, as a symmetric table.
+fn match_counts(matches: &[Match], n: usize) -> Vec<Vec<usize>> {
+    let mut counts = vec![vec![0; n]; n];
+    for m in matches {
+        counts[m.view_a][m.view_b] += 1;
+        counts[m.view_b][m.view_a] += 1;
+    }
+    counts
+}
+
+fn overlapping_pairs(matches: &[Match], n: usize, min_matches: usize) -> usize {
+    let counts = match_counts(matches, n);
+    (0..n)
+        .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+        .filter(|&(i, j)| counts[i][j] >= min_matches)
+        .count()
+}
+
+/// The largest set of photos connected by pairs with at least `min_matches` matches (ties: the
+/// one with the first photo), and the others with their reason.
+fn largest_group(
+    photos: &[Photo],
+    matches: &[Match],
+    min_matches: usize,
+) -> (Vec<usize>, Vec<Unregistered>) {
+    let n = photos.len();
+    let counts = match_counts(matches, n);
+    let mut component = vec![usize::MAX; n];
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for seed in 0..n {
+        if component[seed] != usize::MAX {
+            continue;
+        }
+        let id = groups.len();
+        let mut group = vec![seed];
+        component[seed] = id;
+        let mut next = 0;
+        while next < group.len() {
+            let i = group[next];
+            next += 1;
+            for j in 0..n {
+                if component[j] == usize::MAX && counts[i][j] >= min_matches {
+                    component[j] = id;
+                    group.push(j);
+                }
+            }
+        }
+        group.sort_unstable();
+        groups.push(group);
+    }
+    let best = groups
+        .iter()
+        .enumerate()
+        .max_by_key(|(id, g)| (g.len(), std::cmp::Reverse(*id)))
+        .map(|(id, _)| id)
+        .unwrap_or(0);
+    let unregistered = (0..n)
+        .filter(|&i| component[i] != best)
+        .map(|i| {
+            let most = groups[best]
+                .iter()
+                .map(|&j| counts[i][j])
+                .max()
+                .unwrap_or(0);
+            Unregistered {
+                name: photos[i].name.clone(),
+                reason: format!(
+                    "shares at most {most} matches with a registered photo (needs {min_matches})"
+                ),
+            }
+        })
+        .collect();
+    (groups.swap_remove(best), unregistered)
+}
+
+/// The intrinsics of the `group`'s photos and their matches, with views renumbered in it.
+fn restricted(
+    photos: &[Photo],
+    matches: &[Match],
+    group: &[usize],
+) -> (Vec<Intrinsics>, Vec<Match>) {
+    let index = |v: usize| group.iter().position(|&g| g == v);
+    let intrinsics = group.iter().map(|&i| photos[i].intrinsics).collect();
+    let matches = matches
+        .iter()
+        .filter_map(|m| {
+            Some(Match {
+                view_a: index(m.view_a)?,
+                view_b: index(m.view_b)?,
+                ..*m
+            })
+        })
+        .collect();
+    (intrinsics, matches)
+}
+
+/// The intrinsics of a photo's file, from those it was matched at.
+fn full_intrinsics(photo: &Photo) -> Intrinsics {
+    let k = photo.intrinsics;
+    let (w, h) = photo.full_size;
+    let (sx, sy) = (w as f64 / k.width as f64, h as f64 / k.height as f64);
+    Intrinsics {
+        fx: k.fx * sx,
+        fy: k.fy * sy,
+        cx: k.cx * sx,
+        cy: k.cy * sy,
+        width: w as u32,
+        height: h as u32,
+    }
+}
+
+/// The adjusted poses and the tracks' points in the gauge of the module docs: the first photo
+/// at the origin, the median depth 1.
+fn scaled_model(
+    photos: &[Photo],
+    group: &[usize],
+    intrinsics: &[Intrinsics],
+    poses: &[Se3],
+    matches: &[Match],
+    options: &PoseOptions,
+) -> (Vec<Se3>, Vec<ModelPoint>) {
+    let to_first = poses[0].inverse();
+    let poses: Vec<Se3> = poses.iter().map(|p| p.compose(&to_first)).collect();
+    let tracks: Vec<_> = triangulated_tracks(intrinsics, &poses, matches)
+        .into_iter()
+        .filter(|t| t.errors_px.iter().all(|e| *e <= options.max_error_px))
+        .collect();
+    let mut depths: Vec<f64> = tracks
+        .iter()
+        .flat_map(|t| {
+            t.track
+                .observations
+                .iter()
+                .map(|(v, _)| (poses[*v].rotation * t.point + poses[*v].translation).z)
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    depths.sort_by(f64::total_cmp);
+    let median = depths.get(depths.len() / 2).copied().unwrap_or(1.0);
+    let s = if median > 0.0 { 1.0 / median } else { 1.0 };
+    let poses: Vec<Se3> = poses
+        .iter()
+        .map(|p| Se3::new(p.rotation, p.translation * s))
+        .collect();
+    let points = tracks
+        .iter()
+        .map(|t| {
+            let (v0, p0) = t.track.observations[0];
+            let photo = &photos[group[v0]];
+            let rgb = colour_at(&photo.image, p0.x, p0.y);
+            let observations = t
+                .track
+                .observations
+                .iter()
+                .map(|(v, p)| {
+                    let photo = &photos[group[*v]];
+                    let sx = photo.full_size.0 as f64 / photo.image.width as f64;
+                    let sy = photo.full_size.1 as f64 / photo.image.height as f64;
+                    (*v, [p.x * sx, p.y * sy])
+                })
+                .collect();
+            let x = t.point * s;
+            ModelPoint {
+                xyz: [x.x, x.y, x.z],
+                rgb,
+                observations,
+                error_px: t.errors_px.iter().sum::<f64>() / t.errors_px.len() as f64,
+            }
+        })
+        .collect();
+    (poses, points)
+}
+
+/// The 8-bit colour of the pixel under `(x, y)` (centres at half-integers).
+fn colour_at(image: &fewview_scene::Image, x: f64, y: f64) -> [u8; 3] {
+    let (px, py) = (
+        (x.floor().max(0.0) as usize).min(image.width - 1),
+        (y.floor().max(0.0) as usize).min(image.height - 1),
+    );
+    let p = image.pixel(px, py);
+    let c = |k: usize| (p[k.min(p.len() - 1)].clamp(0.0, 1.0) * 255.0).round() as u8;
+    [c(0), c(1), c(2)]
+}
