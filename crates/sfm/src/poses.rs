@@ -10,6 +10,8 @@
 //! **Intrinsics** are held at their starting values (EXIF or an assumed field of view,
 //! [`crate::photos`]); refining the focal length and a radial coefficient is not done yet.
 
+use std::collections::HashMap;
+
 use fewview_match::dense::{DenseOptions, dense_matches};
 use fewview_match::refine::{AffineRefineOptions, refine_matches};
 use fewview_match::sift::{SiftMatcher, SiftOptions};
@@ -195,7 +197,50 @@ fn correspondences(
         matches.extend(dense_matches(&inputs[a], &inputs[b], a, b, &dense));
     }
     let images: Vec<&Image> = inputs.iter().map(|i| i.image).collect();
-    refine_matches(&images, &matches, &AffineRefineOptions::default())
+    let refined = refine_matches(&images, &matches, &AffineRefineOptions::default());
+    shared_ends(&matches, refined)
+}
+
+/// The refined matches with every end that was one pixel before the refinement one pixel
+/// again. The refinement moves each match's second end on its own, so a keypoint matched from
+/// two views lands on two nearby positions and the tracks of the bundle adjustment (matches
+/// that share a view and a pixel) fall apart into pairs; here each (view, keypoint) takes the
+/// position its first refinement gave it, in both roles.
+fn shared_ends(raw: &[Match], refined: Vec<Match>) -> Vec<Match> {
+    type Key = (usize, u32, u32);
+    let key = |view: usize, p: [f32; 2]| (view, p[0].to_bits(), p[1].to_bits());
+    // The refinement keeps each match's first end: it identifies the raw match of its pair.
+    let raw_b: HashMap<(usize, usize, u32, u32), [f32; 2]> = raw
+        .iter()
+        .map(|m| {
+            (
+                (m.view_a, m.view_b, m.a[0].to_bits(), m.a[1].to_bits()),
+                m.b,
+            )
+        })
+        .collect();
+    let original_b = |m: &Match| {
+        raw_b
+            .get(&(m.view_a, m.view_b, m.a[0].to_bits(), m.a[1].to_bits()))
+            .copied()
+    };
+    let mut position: HashMap<Key, [f32; 2]> = HashMap::new();
+    for m in &refined {
+        if let Some(b) = original_b(m) {
+            position.entry(key(m.view_b, b)).or_insert(m.b);
+        }
+    }
+    refined
+        .iter()
+        .map(|m| {
+            let b = original_b(m)
+                .and_then(|b| position.get(&key(m.view_b, b)))
+                .copied()
+                .unwrap_or(m.b);
+            let a = position.get(&key(m.view_a, m.a)).copied().unwrap_or(m.a);
+            Match { a, b, ..*m }
+        })
+        .collect()
 }
 
 /// Number of matches between photos `i` and `j` of `n`, as a symmetric table.

@@ -73,8 +73,16 @@ fn dataset_triplets_register_with_their_true_relative_poses() {
         let found: Vec<Camera> = model.photos.iter().map(|p| p.camera.clone()).collect();
         assert_eq!(found.len(), 3, "{scene}: {:?}", model.unregistered);
         let (rot, dir) = pair_errors(&found, &truth);
+        let w2c = |c: &[Camera]| c.iter().map(|c| c.world_to_camera).collect::<Vec<_>>();
+        let alg = fewview_metrics::pose_error::pose_error_pairwise(
+            &w2c(&found),
+            &w2c(&truth),
+            &Default::default(),
+        )
+        .unwrap();
         println!(
-            "{scene} {views:?}: worst pair rotation {rot:.4}°, baseline {dir:.4}°, {} points, median {:.3} px, {:.1} s",
+            "{scene} {views:?}: Alg. 1/2 rotation {:.4}°, worst pair rotation {rot:.4}°, baseline {dir:.4}°, {} points, median {:.3} px, {:.1} s",
+            alg.rotation_deg,
             model.report.points,
             model.report.median_error_px,
             t.elapsed().as_secs_f64()
