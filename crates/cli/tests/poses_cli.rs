@@ -1,5 +1,6 @@
 //! `fewview poses`: bad folders are one-line errors with nothing written; with `FEWVIEW_DATA`,
-//! fern's three training photos register and the written folder trains as a dataset.
+//! fern's three training photos register, and `train` on the folder of photos estimates the
+//! poses first.
 
 mod common;
 
@@ -87,15 +88,19 @@ fn fern_photos_register_and_train() {
     let model = fewview_scene::colmap::read_model(&out.join("sparse/0")).unwrap();
     assert_eq!(model.images.len(), 3);
     assert!(model.points.len() > 500, "{} points", model.points.len());
+    // `train` on the folder of photos itself estimates the poses first, into the run.
     let train = dir.path().join("train");
-    fewview_ok(&[
+    let run = fewview_ok(&[
         "train",
         "--data",
-        s(&out),
+        s(&images),
         "--iterations",
         "10",
         "--out",
         s(&train),
     ]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(stderr.contains("holds only photos"), "{stderr}");
+    assert!(train.join("poses/sparse/0/images.txt").exists());
     assert!(train.join("point_cloud.ply").exists());
 }

@@ -3,6 +3,7 @@
 pub mod bundle;
 pub mod error;
 pub mod export;
+pub mod folder;
 pub mod global_start;
 pub mod photos;
 pub mod poses;
@@ -12,6 +13,7 @@ pub mod se3;
 pub use bundle::{BundleOptions, BundleReport, bundle_adjust};
 pub use error::{Result, SfmError};
 pub use export::{place_images, write_model};
+pub use folder::{FolderOptions, poses_for_folder};
 pub use global_start::{GlobalStart, PairPose, global_start};
 pub use photos::{Photo, load_folder, load_photo, photo_files};
 pub use poses::{PoseModel, PoseOptions, estimate_poses};

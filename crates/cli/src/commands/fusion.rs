@@ -17,6 +17,7 @@ use fewview_splat::pipeline::{RunConfig, RunSummary, default_iterations};
 use super::dataset_args::{ViewList, object_only, parse_views};
 use super::output_paths::check_folder;
 use super::photo_args::{DemoSceneArgs, JitterArgs};
+use super::poses_first;
 use super::progress;
 use super::surface_first;
 use super::train::print_summary;
@@ -153,13 +154,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !args.study.is_empty() {
         return write_study(&args.study, &out);
     }
+    let mut args = args;
+    if let Some(data) = &args.data {
+        args.data = Some(poses_first::dataset_folder(data, &out)?);
+    }
     let (mut ds, demo, gains) = load(&args)?;
     let default = if demo.is_some() {
         2000
     } else {
         default_iterations(&ds)
     };
-    let mut args = args;
     if demo.is_some() && surface_first::wanted(&args.train.init) {
         bail!("--init surface runs the surface method on a dataset; pass --data");
     }

@@ -19,6 +19,7 @@ mod output_paths;
 mod photo_args;
 mod pose_error;
 mod poses;
+mod poses_first;
 mod progress;
 mod register;
 mod render;

@@ -3,8 +3,8 @@
 use std::path::PathBuf;
 
 use clap::Args as ClapArgs;
-use fewview_sfm::photos::{DEFAULT_FOV_DEG, FocalSource};
-use fewview_sfm::{PoseOptions, estimate_poses, load_folder, place_images, write_model};
+use fewview_sfm::photos::DEFAULT_FOV_DEG;
+use fewview_sfm::{FolderOptions, PoseModel, PoseOptions, poses_for_folder};
 
 use super::output_paths::check_folder;
 
@@ -47,24 +47,38 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::bail!("--max-side {}: expected at least 64 pixels", args.max_side);
     }
     check_folder(&args.out, "--out")?;
-    let photos = load_folder(&args.images, args.max_side, args.fov)?;
-    let assumed = photos
+    let options = FolderOptions {
+        max_side: args.max_side,
+        fov_deg: args.fov,
+        poses: PoseOptions {
+            min_matches: args.min_matches,
+            seed: args.seed,
+            ..PoseOptions::default()
+        },
+    };
+    let model = poses_for_folder(&args.images, &args.out, &options)?;
+    print_model(&model, args.fov);
+    println!(
+        "wrote {} (COLMAP text), transforms.json, cameras.json, poses_report.json and images/ in {}",
+        args.out.join("sparse/0").display(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// What a person wants to know of a model: assumed focal lengths, photos left out, the fit.
+pub fn print_model(model: &PoseModel, fov_deg: f64) {
+    let assumed = model
+        .photos
         .iter()
-        .filter(|p| p.focal_from == FocalSource::AssumedFov)
+        .filter(|p| p.focal_from == fewview_sfm::photos::FocalSource::AssumedFov)
         .count();
     if assumed > 0 {
         println!(
-            "{assumed} of {} photos have no EXIF focal length: assuming a {}° field of view",
-            photos.len(),
-            args.fov
+            "{assumed} of {} registered photos have no EXIF focal length: a {fov_deg}° field of view was assumed",
+            model.photos.len()
         );
     }
-    let options = PoseOptions {
-        min_matches: args.min_matches,
-        seed: args.seed,
-        ..PoseOptions::default()
-    };
-    let model = estimate_poses(&photos, &options)?;
     for u in &model.unregistered {
         println!("not registered: {}: {}", u.name, u.reason);
     }
@@ -73,12 +87,4 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "registered {} of {} photos; {} points, median reprojection error {:.3} px",
         r.registered, r.photos, r.points, r.median_error_px
     );
-    write_model(&model, &args.out)?;
-    place_images(&model, &args.images, &args.out)?;
-    println!(
-        "wrote {} (COLMAP text), transforms.json, cameras.json, poses_report.json and images/ in {}",
-        args.out.join("sparse/0").display(),
-        args.out.display()
-    );
-    Ok(())
 }

@@ -12,6 +12,7 @@ use fewview_splat::pipeline::{
 
 use super::dataset_args::DatasetArgs;
 use super::output_paths::check_folder;
+use super::poses_first;
 use super::progress;
 use super::surface_first;
 use super::train_args::TrainArgs;
@@ -37,12 +38,6 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut ds = args.dataset.load()?;
-    // The standard splits are disjoint; explicit `--train-views` / `--test-views` could overlap
-    // them or each other, and the held-out PSNR would then be measured on training views.
-    if let Err(e) = split::check_disjoint(&ds.train, &ds.test, args.dataset.folder()?) {
-        bail!("{e}; pass disjoint --train-views and --test-views");
-    }
     let out = args.out.clone().unwrap_or_else(|| {
         let name = args
             .dataset
@@ -55,6 +50,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     });
     check_folder(&out, "--out")?;
     let mut args = args;
+    let folder = poses_first::dataset_folder(args.dataset.folder()?, &out)?;
+    args.dataset.data = Some(folder);
+    let mut ds = args.dataset.load()?;
+    // The standard splits are disjoint; explicit `--train-views` / `--test-views` could overlap
+    // them or each other, and the held-out PSNR would then be measured on training views.
+    if let Err(e) = split::check_disjoint(&ds.train, &ds.test, args.dataset.folder()?) {
+        bail!("{e}; pass disjoint --train-views and --test-views");
+    }
     let bare_surface = surface_first::take(&mut args.train.init, &out);
     let cfg = args
         .train

@@ -1,0 +1,51 @@
+//! A folder of photos in, a folder `fewview train --data` reads out: what `fewview poses` runs,
+//! and what `train` and `fusion` run first when their `--data` folder holds only photos.
+
+use std::path::Path;
+
+use fewview_scene::load::detect_format;
+
+use crate::error::Result;
+use crate::export::{place_images, write_model};
+use crate::photos::{DEFAULT_FOV_DEG, load_folder, photo_files};
+use crate::poses::{PoseModel, PoseOptions, estimate_poses};
+
+/// Options of [`poses_for_folder`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct FolderOptions {
+    /// Photos are matched with their longer side scaled down to at most this many pixels.
+    pub max_side: usize,
+    /// Horizontal field of view (degrees) of photos without an EXIF focal length.
+    pub fov_deg: f64,
+    pub poses: PoseOptions,
+}
+
+impl Default for FolderOptions {
+    fn default() -> Self {
+        Self {
+            max_side: 1024,
+            fov_deg: DEFAULT_FOV_DEG,
+            poses: PoseOptions::default(),
+        }
+    }
+}
+
+/// Estimates the poses of the photos in `images` and writes the model, with the registered
+/// photos, into `out` ([`crate::export`]). Nothing is written when no model comes out.
+pub fn poses_for_folder(images: &Path, out: &Path, options: &FolderOptions) -> Result<PoseModel> {
+    let photos = load_folder(images, options.max_side, options.fov_deg)?;
+    let model = estimate_poses(&photos, &options.poses)?;
+    write_model(&model, out)?;
+    place_images(&model, images, out)?;
+    Ok(model)
+}
+
+/// Whether `dir` holds photos but no cameras in any format a dataset loader reads.
+pub fn holds_only_photos(dir: &Path) -> bool {
+    detect_format(dir).is_err() && photo_files(dir).is_ok_and(|f| !f.is_empty())
+}
+
+/// Whether `out` holds a model that [`poses_for_folder`] wrote.
+pub fn has_model(out: &Path) -> bool {
+    out.join("sparse/0/images.txt").is_file() && out.join("poses_report.json").is_file()
+}
