@@ -47,10 +47,24 @@ pub struct SiftMatcher {
     pub options: SiftOptions,
 }
 
-struct Features {
+/// The SIFT keypoints of one image and their descriptors, computed once and matched against
+/// any number of other images ([`SiftMatcher::match_features`]).
+#[derive(Clone, Debug, Default)]
+pub struct SiftFeatures {
     /// Pixel coordinates in the crate convention (centres at half-integers).
     points: Vec<[f32; 2]>,
     descriptors: Vec<[f32; 128]>,
+}
+
+impl SiftFeatures {
+    /// Number of keypoints.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
 }
 
 fn to_gray(image: &Image) -> GrayImage {
@@ -61,7 +75,7 @@ fn to_gray(image: &Image) -> GrayImage {
     })
 }
 
-fn features(input: &MatchInput, limit: Option<usize>) -> Features {
+fn features(input: &MatchInput, limit: Option<usize>) -> SiftFeatures {
     let res = sift_features::sift(&to_gray(input.image), limit);
     let d = res
         .descriptors
@@ -89,7 +103,7 @@ fn features(input: &MatchInput, limit: Option<usize>) -> Features {
         points.push([u, v]);
         descriptors.push(desc);
     }
-    Features {
+    SiftFeatures {
         points,
         descriptors,
     }
@@ -119,11 +133,16 @@ fn nearest_two(a: &[[f32; 128]], b: &[[f32; 128]]) -> Vec<(usize, f32, f32)> {
         .collect()
 }
 
-impl Matcher for SiftMatcher {
-    fn match_pair(&self, a: &MatchInput, b: &MatchInput) -> Vec<Match> {
+impl SiftMatcher {
+    /// The keypoints and descriptors of `input` (inside its mask, when it has one).
+    pub fn features(&self, input: &MatchInput) -> SiftFeatures {
+        features(input, self.options.max_features)
+    }
+
+    /// Matches between two images' features (`view_a`/`view_b` 0 and 1): Lowe's ratio test,
+    /// the mutual check and the RANSAC filter as the options say.
+    pub fn match_features(&self, fa: &SiftFeatures, fb: &SiftFeatures) -> Vec<Match> {
         let o = &self.options;
-        let fa = features(a, o.max_features);
-        let fb = features(b, o.max_features);
         if fa.points.is_empty() || fb.points.is_empty() {
             return Vec::new();
         }
@@ -158,6 +177,12 @@ impl Matcher for SiftMatcher {
             Some(px) => ransac_filter(out, px, o.ransac_iterations, o.seed),
             None => out,
         }
+    }
+}
+
+impl Matcher for SiftMatcher {
+    fn match_pair(&self, a: &MatchInput, b: &MatchInput) -> Vec<Match> {
+        self.match_features(&self.features(a), &self.features(b))
     }
 
     fn name(&self) -> &str {

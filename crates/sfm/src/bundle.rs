@@ -43,6 +43,10 @@ pub struct BundleOptions {
     pub tolerance: f64,
     /// Fewest tracks worth adjusting the poses on.
     pub min_tracks: usize,
+    /// Also adjust one focal length shared by all views: every `fx` and `fy` times a common
+    /// factor (photos of one camera; the surface method's calibrated views keep theirs).
+    #[serde(default)]
+    pub refine_focal: bool,
 }
 
 impl Default for BundleOptions {
@@ -52,6 +56,7 @@ impl Default for BundleOptions {
             max_iterations: 1000,
             tolerance: 1e-9,
             min_tracks: 30,
+            refine_focal: false,
         }
     }
 }
@@ -72,6 +77,9 @@ pub struct BundleReport {
     /// Median reprojection error (pixels) before and after.
     pub median_px_before: f64,
     pub median_px_after: f64,
+    /// With [`BundleOptions::refine_focal`]: the factor the focal lengths were multiplied by.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub focal_scale: Option<f64>,
 }
 
 /// A point seen in several views: (view, pixel) pairs, one per view.
@@ -248,62 +256,82 @@ fn weighted_cost(r: &[f64], w: &[f64]) -> f64 {
         .sum()
 }
 
-/// The weighted normal equations of one track with analytic Jacobians.
+/// The intrinsics with every focal length times `scale`.
+fn scaled(intrinsics: &[Intrinsics], scale: f64) -> Vec<Intrinsics> {
+    intrinsics
+        .iter()
+        .map(|k| Intrinsics {
+            fx: k.fx * scale,
+            fy: k.fy * scale,
+            ..*k
+        })
+        .collect()
+}
+
+/// The weighted normal equations of one track with analytic Jacobians. Camera parameters:
+/// 6 per free view (`6 (view − 1) + k`, twist rotation first), and with `focal_column` the
+/// logarithm of the shared focal factor, which every observation depends on
+/// (`∂pixel/∂log f = (fx x/z, fy y/z)`).
 fn track_system(
     cameras: &Cameras,
     poses: &[Se3],
     track: &Track,
     x: &Vector3<f64>,
-    r: &[f64],
-    w: &[f64],
+    (r, w): (&[f64], &[f64]),
+    focal_column: Option<usize>,
 ) -> BlockSystem {
     let mut v = Matrix3::zeros();
     let mut g = Vector3::zeros();
     let mut columns = Vec::new();
     let mut wrows = Vec::new();
-    let mut u_blocks: Vec<[[f64; 6]; 6]> = Vec::new();
     let mut gc = Vec::new();
+    // Per observation: its (column, Jacobian column) pairs.
+    let mut observed: Vec<Vec<(usize, Vector2<f64>)>> = Vec::new();
     for (i, (view, _)) in track.observations.iter().enumerate() {
         let pose = &poses[*view];
-        let Some((_, jp, c)) = cameras.project(*view, pose, x) else {
+        let Some((pixel, jp, c)) = cameras.project(*view, pose, x) else {
             continue;
         };
         let res = Vector2::new(r[2 * i], r[2 * i + 1]);
         let j_point = jp * pose.rotation;
         v += w[i] * j_point.transpose() * j_point;
         g += w[i] * j_point.transpose() * res;
-        if *view == 0 {
-            continue;
-        }
-        // d(camera point)/d(twist): −[c]× for the rotation, identity for the translation.
-        let skew = Matrix3::new(0.0, -c.z, c.y, c.z, 0.0, -c.x, -c.y, c.x, 0.0);
-        let j_rot = jp * (-skew);
-        let j_cam: [Vector2<f64>; 6] = std::array::from_fn(|k| {
-            if k < 3 {
-                j_rot.column(k).into()
-            } else {
-                jp.column(k - 3).into()
+        let mut jac: Vec<(usize, Vector2<f64>)> = Vec::new();
+        if *view > 0 {
+            // d(camera point)/d(twist): −[c]× for the rotation, identity for the translation.
+            let skew = Matrix3::new(0.0, -c.z, c.y, c.z, 0.0, -c.x, -c.y, c.x, 0.0);
+            let j_rot = jp * (-skew);
+            for k in 0..6 {
+                let column = if k < 3 {
+                    j_rot.column(k).into()
+                } else {
+                    jp.column(k - 3).into()
+                };
+                jac.push((6 * (view - 1) + k, column));
             }
-        });
-        let mut block = [[0.0; 6]; 6];
-        for a in 0..6 {
-            for b in 0..6 {
-                block[a][b] = w[i] * j_cam[a].dot(&j_cam[b]);
-            }
-            columns.push(6 * (view - 1) + a);
-            wrows.push(w[i] * j_point.transpose() * j_cam[a]);
-            gc.push(w[i] * j_cam[a].dot(&res));
         }
-        u_blocks.push(block);
+        if let Some(f) = focal_column {
+            let k = &cameras.k[*view];
+            jac.push((f, Vector2::new(pixel.x - k[(0, 2)], pixel.y - k[(1, 2)])));
+        }
+        for (column, j) in &jac {
+            columns.push(*column);
+            wrows.push(w[i] * j_point.transpose() * j);
+            gc.push(w[i] * j.dot(&res));
+        }
+        observed.push(jac.into_iter().map(|(c, j)| (c, j * w[i].sqrt())).collect());
     }
+    // `J_cᵀ J_c` is block diagonal over the observations (each residual sees its own columns).
     let n = columns.len();
     let mut u = vec![0.0; n * n];
-    for (b, block) in u_blocks.iter().enumerate() {
-        for a in 0..6 {
-            for c in 0..6 {
-                u[(6 * b + a) * n + 6 * b + c] = block[a][c];
+    let mut offset = 0;
+    for jac in &observed {
+        for (a, (_, ja)) in jac.iter().enumerate() {
+            for (b, (_, jb)) in jac.iter().enumerate() {
+                u[(offset + a) * n + offset + b] = ja.dot(jb);
             }
         }
+        offset += jac.len();
     }
     BlockSystem {
         v,
@@ -315,25 +343,34 @@ fn track_system(
     }
 }
 
-/// One iteration: residuals and Cauchy weights (at `scale` pixels) at the current estimate, the
-/// tracks' systems,
-/// then damped steps until one lowers the weighted cost (the damping rising ten-fold each time
-/// it does not) or the damping exceeds 10⁶.
+/// One iteration: residuals and Cauchy weights (at `scale` pixels) at the current estimate
+/// (the intrinsics `base` with their focal lengths times `exp(log_focal)`), the tracks'
+/// systems, then damped steps until one lowers the weighted cost (the damping rising ten-fold
+/// each time it does not) or the damping exceeds 10⁶. `log_focal` `None`: the focal is held.
 fn iterate(
-    cameras: &Cameras,
-    tracks: &[Track],
-    points: &[Vector3<f64>],
+    base: &[Intrinsics],
+    log_focal: Option<f64>,
+    (tracks, points): (&[Track], &[Vector3<f64>]),
     poses: &[Se3],
     scale: f64,
     lambda: &mut f64,
 ) -> LmStep<Vector3<f64>> {
+    let cameras_at = |log_focal: f64| Cameras::new(&scaled(base, log_focal.exp()));
+    let Some(cameras) = cameras_at(log_focal.unwrap_or(0.0)) else {
+        return LmStep {
+            cost_before: f64::INFINITY,
+            cost_after: f64::INFINITY,
+            accepted: None,
+            camera_step: None,
+        };
+    };
     let residuals: Vec<Vec<f64>> = tracks
         .par_iter()
         .zip(points)
         // Accepted steps keep every point in front of its cameras (a step that puts one behind
         // costs infinity and is refused), so no track lacks its residuals here.
         .map(|(t, x)| {
-            reprojection_errors(cameras, poses, t, x)
+            reprojection_errors(&cameras, poses, t, x)
                 .unwrap_or_else(|| vec![0.0; 2 * t.observations.len()])
         })
         .collect();
@@ -343,13 +380,16 @@ fn iterate(
         .zip(&weights)
         .map(|(r, w)| weighted_cost(r, w))
         .sum();
+    let pose_parameters = 6 * (poses.len() - 1);
+    let focal_column = log_focal.map(|_| pose_parameters);
     let systems: Vec<BlockSystem> = tracks
         .par_iter()
         .zip(points)
         .zip(residuals.par_iter().zip(&weights))
-        .map(|((t, x), (r, w))| track_system(cameras, poses, t, x, r, w))
+        .map(|((t, x), (r, w))| track_system(&cameras, poses, t, x, (r, w), focal_column))
         .collect();
-    let system = CameraSystem::new(6 * (poses.len() - 1), &systems);
+    let free = pose_parameters + usize::from(focal_column.is_some());
+    let system = CameraSystem::new(free, &systems);
     damped_step(
         &system,
         &systems,
@@ -357,14 +397,18 @@ fn iterate(
         cost_before,
         (lambda, 1e-9),
         |x, step| x + step,
-        |new_poses, new_points| {
+        |new_poses, new_points, step| {
+            let moved = focal_column.map(|f| cameras_at(log_focal.unwrap_or(0.0) + step[f]));
+            let Some(cameras) = moved.unwrap_or_else(|| cameras_at(0.0)) else {
+                return f64::INFINITY;
+            };
             // Summed in order after the parallel part, so that a run repeats bit for bit.
             let costs: Vec<f64> = tracks
                 .par_iter()
                 .zip(new_points)
                 .zip(&weights)
                 .map(|((t, x), w)| {
-                    reprojection_errors(cameras, new_poses, t, x)
+                    reprojection_errors(&cameras, new_poses, t, x)
                         .map_or(f64::INFINITY, |r| weighted_cost(&r, w))
                 })
                 .collect();
@@ -430,6 +474,7 @@ pub fn bundle_adjust(
     }
     report.median_px_before = median_error(&cameras, poses, &tracks, &points);
     let mut current = poses.to_vec();
+    let mut log_focal = options.refine_focal.then_some(0.0);
     let mut lambda = 1e-3;
     // The Cauchy scale is set once, from the residuals at the start: recomputed every
     // iteration it would shrink with the fit and keep re-deciding which tracks count.
@@ -439,25 +484,40 @@ pub fn bundle_adjust(
         .filter_map(|(t, x)| reprojection_errors(&cameras, poses, t, x))
         .flatten();
     let scale = (options.cauchy_sigmas * robust_sigma(start_residuals)).max(1e-9);
+    let focal_column = 6 * (poses.len() - 1);
     for iteration in 0..options.max_iterations {
-        let step = iterate(&cameras, &tracks, &points, &current, scale, &mut lambda);
+        let step = iterate(
+            intrinsics,
+            log_focal,
+            (&tracks, &points),
+            &current,
+            scale,
+            &mut lambda,
+        );
         report.iterations = iteration + 1;
         if iteration == 0 {
             report.initial_cost = step.cost_before;
         }
         report.final_cost = step.cost_after;
-        let Some((poses_after, points_after)) = step.accepted else {
+        let (Some((poses_after, points_after)), Some(camera_step)) =
+            (step.accepted, step.camera_step)
+        else {
             break;
         };
         current = poses_after;
         points = points_after;
+        log_focal = log_focal.map(|f| f + camera_step[focal_column]);
         let decrease =
             (step.cost_before - step.cost_after) / step.cost_before.max(f64::MIN_POSITIVE);
         if decrease < options.tolerance {
             break;
         }
     }
-    report.median_px_after = median_error(&cameras, &current, &tracks, &points);
+    report.focal_scale = log_focal.map(f64::exp);
+    let adjusted = scaled(intrinsics, report.focal_scale.unwrap_or(1.0));
+    if let Some(cameras) = Cameras::new(&adjusted) {
+        report.median_px_after = median_error(&cameras, &current, &tracks, &points);
+    }
     (keep_scale(poses, &current), report)
 }
 
@@ -618,7 +678,7 @@ mod tests {
         let x = points[5] + Vector3::new(0.01, -0.02, 0.015);
         let r = reprojection_errors(&cameras, &poses, &track, &x).unwrap();
         let w = vec![0.9, 0.5, 0.25];
-        let system = track_system(&cameras, &poses, &track, &x, &r, &w);
+        let system = track_system(&cameras, &poses, &track, &x, (&r, &w), None);
         let cost = |poses: &[Se3], x: &Vector3<f64>| {
             weighted_cost(
                 &reprojection_errors(&cameras, poses, &track, x).unwrap(),
@@ -692,6 +752,74 @@ mod tests {
                     "view {v}: baseline direction off by {cos}"
                 );
             }
+        }
+    }
+
+    /// The focal column's gradient against central differences of the cost in the logarithm
+    /// of the shared focal factor (summed over the observations that carry it).
+    #[test]
+    fn the_focal_column_matches_finite_differences_of_the_cost() {
+        let (intrinsics, poses, points) = rig();
+        let cameras = Cameras::new(&intrinsics).unwrap();
+        let track = Track {
+            observations: (0..3)
+                .map(|v| {
+                    let (p, _, _) = cameras.project(v, &poses[v], &points[7]).unwrap();
+                    (v, p + Vector2::new(0.5 - 0.3 * v as f64, -0.6))
+                })
+                .collect(),
+        };
+        let x = points[7] + Vector3::new(-0.01, 0.02, 0.01);
+        let r = reprojection_errors(&cameras, &poses, &track, &x).unwrap();
+        let w = vec![0.8, 0.6, 0.3];
+        let focal = 12;
+        let system = track_system(&cameras, &poses, &track, &x, (&r, &w), Some(focal));
+        let analytic: f64 = system
+            .columns
+            .iter()
+            .zip(&system.gc)
+            .filter(|(c, _)| **c == focal)
+            .map(|(_, g)| g)
+            .sum();
+        let cost = |log_focal: f64| {
+            let cameras = Cameras::new(&scaled(&intrinsics, log_focal.exp())).unwrap();
+            weighted_cost(
+                &reprojection_errors(&cameras, &poses, &track, &x).unwrap(),
+                &w,
+            )
+        };
+        let h = 1e-6;
+        let numeric = (cost(h) - cost(-h)) / (4.0 * h);
+        assert!(
+            (numeric - analytic).abs() < 1e-5 * (1.0 + numeric.abs()),
+            "{numeric} vs {analytic}"
+        );
+    }
+
+    /// Exact matches, poses turned and the focal lengths 3 % too long: the shared focal comes
+    /// back to the truth with the poses.
+    #[test]
+    fn a_shared_focal_three_percent_off_is_recovered() {
+        let (intrinsics, truth, points) = rig();
+        let matches = exact_matches(&intrinsics, &truth, &points);
+        let mut start = truth.clone();
+        let turn = Rotation3::from_axis_angle(
+            &Unit::new_normalize(Vector3::new(0.2, 1.0, 0.1)),
+            0.3f64.to_radians(),
+        );
+        start[2] = Se3::new(turn.into_inner() * truth[2].rotation, truth[2].translation);
+        let long = scaled(&intrinsics, 1.03);
+        let options = BundleOptions {
+            refine_focal: true,
+            ..BundleOptions::default()
+        };
+        let (adjusted, report) = bundle_adjust(&long, &start, &matches, &options);
+        let factor = report.focal_scale.unwrap();
+        assert!((factor * 1.03 - 1.0).abs() < 1e-4, "focal factor {factor}");
+        assert!(report.median_px_after < 1e-3, "{report:?}");
+        for v in 1..3 {
+            let error = rotation_angle_deg(&adjusted[v].rotation, &truth[v].rotation);
+            assert!(error < 1e-3, "view {v}: {error}°");
         }
     }
 

@@ -8,7 +8,7 @@ use fewview_scene::load::detect_format;
 use crate::error::Result;
 use crate::export::{place_images, write_model};
 use crate::photos::{DEFAULT_FOV_DEG, load_folder, photo_files};
-use crate::poses::{PoseModel, PoseOptions, estimate_poses};
+use crate::poses::{PoseModel, PoseOptions, PoseProgress, estimate_poses_with};
 
 /// Options of [`poses_for_folder`].
 #[derive(Clone, Debug, PartialEq)]
@@ -31,10 +31,16 @@ impl Default for FolderOptions {
 }
 
 /// Estimates the poses of the photos in `images` and writes the model, with the registered
-/// photos, into `out` ([`crate::export`]). Nothing is written when no model comes out.
-pub fn poses_for_folder(images: &Path, out: &Path, options: &FolderOptions) -> Result<PoseModel> {
+/// photos, into `out` ([`crate::export`]), reporting progress to `on_progress`. Nothing is
+/// written when no model comes out.
+pub fn poses_for_folder(
+    images: &Path,
+    out: &Path,
+    options: &FolderOptions,
+    on_progress: impl Fn(&PoseProgress) + Sync,
+) -> Result<PoseModel> {
     let photos = load_folder(images, options.max_side, options.fov_deg)?;
-    let model = estimate_poses(&photos, &options.poses)?;
+    let model = estimate_poses_with(&photos, &options.poses, on_progress)?;
     write_model(&model, out)?;
     place_images(&model, images, out)?;
     Ok(model)

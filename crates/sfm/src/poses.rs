@@ -7,16 +7,20 @@
 //! is the world: its camera sits at the origin with the identity rotation, and the scale puts
 //! the median depth of the tracks' points, over all their observations, at 1.
 //!
-//! **Intrinsics** are held at their starting values (EXIF or an assumed field of view,
-//! [`crate::photos`]); refining the focal length and a radial coefficient is not done yet.
+//! **Intrinsics** start from EXIF or an assumed field of view ([`crate::photos`]). When all
+//! photos share one camera, the bundle adjustment refines their common focal length (one
+//! factor on every `fx`, `fy`); the principal point stays at the centre, and lens distortion
+//! is not modelled yet.
 
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use fewview_match::dense::{DenseOptions, dense_matches};
 use fewview_match::refine::{AffineRefineOptions, refine_matches};
-use fewview_match::sift::{SiftMatcher, SiftOptions};
-use fewview_match::{Match, MatchInput, match_all_pairs};
+use fewview_match::sift::{SiftFeatures, SiftMatcher, SiftOptions};
+use fewview_match::{Match, MatchInput};
 use fewview_scene::{Camera, Image, Intrinsics, Se3};
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::bundle::{BundleOptions, BundleReport, bundle_adjust, triangulated_tracks};
@@ -35,6 +39,8 @@ pub struct PoseOptions {
     /// adjustment are left out of the model's points.
     pub max_error_px: f64,
     pub sift: SiftOptions,
+    /// The bundle adjustment's options; its focal refinement is switched on when all photos
+    /// share one camera (the same size and starting focal length), off otherwise.
     pub bundle: BundleOptions,
     /// Seed of RANSAC.
     pub seed: u64,
@@ -108,6 +114,15 @@ pub struct PoseModel {
 /// overlapping photos are listed in [`PoseModel::unregistered`] with the reason; fewer than two
 /// registered photos is an error.
 pub fn estimate_poses(photos: &[Photo], options: &PoseOptions) -> Result<PoseModel> {
+    estimate_poses_with(photos, options, |_| {})
+}
+
+/// [`estimate_poses`], reporting the progress of its long stages to `on_progress`.
+pub fn estimate_poses_with(
+    photos: &[Photo],
+    options: &PoseOptions,
+    on_progress: impl Fn(&PoseProgress) + Sync,
+) -> Result<PoseModel> {
     if photos.len() < 2 {
         return Err(SfmError::NoModel(format!(
             "{} photo(s): poses need at least two photos that overlap",
@@ -127,7 +142,7 @@ pub fn estimate_poses(photos: &[Photo], options: &PoseOptions) -> Result<PoseMod
             ..options.sift.clone()
         },
     };
-    let matches = correspondences(&inputs, &matcher, options);
+    let matches = correspondences(&inputs, &matcher, options, &on_progress);
     let (group, unregistered) = largest_group(photos, &matches, options.min_matches);
     if group.len() < 2 {
         return Err(SfmError::NoModel(format!(
@@ -145,7 +160,20 @@ pub fn estimate_poses(photos: &[Photo], options: &PoseOptions) -> Result<PoseMod
         options.seed,
     )
     .map_err(SfmError::NoModel)?;
-    let (poses, bundle) = bundle_adjust(&intrinsics, &start.poses, &matches, &options.bundle);
+    let bundle_options = BundleOptions {
+        refine_focal: intrinsics.iter().all(|k| *k == intrinsics[0]),
+        ..options.bundle
+    };
+    let (poses, bundle) = bundle_adjust(&intrinsics, &start.poses, &matches, &bundle_options);
+    let focal_scale = bundle.focal_scale.unwrap_or(1.0);
+    let intrinsics: Vec<Intrinsics> = intrinsics
+        .iter()
+        .map(|k| Intrinsics {
+            fx: k.fx * focal_scale,
+            fy: k.fy * focal_scale,
+            ..*k
+        })
+        .collect();
     let (poses, points) = scaled_model(photos, &group, &intrinsics, &poses, &matches, options);
     let mut errors: Vec<f64> = points.iter().map(|p| p.error_px).collect();
     errors.sort_by(f64::total_cmp);
@@ -162,9 +190,10 @@ pub fn estimate_poses(photos: &[Photo], options: &PoseOptions) -> Result<PoseMod
     let photos = group
         .iter()
         .zip(&poses)
-        .map(|(&i, pose)| RegisteredPhoto {
+        .zip(&intrinsics)
+        .map(|((&i, pose), k)| RegisteredPhoto {
             name: photos[i].name.clone(),
-            camera: Camera::new(full_intrinsics(&photos[i]), *pose),
+            camera: Camera::new(full_intrinsics(&photos[i], k), *pose),
             focal_from: photos[i].focal_from,
         })
         .collect();
@@ -176,25 +205,87 @@ pub fn estimate_poses(photos: &[Photo], options: &PoseOptions) -> Result<PoseMod
     })
 }
 
-/// SIFT matches of every pair, dense ones added to pairs with few, all refined by affine
-/// Lucas–Kanade (the refinement drops the matches whose windows do not agree).
+/// How far [`estimate_poses_with`] is: `done` of `total` steps of `stage`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PoseProgress {
+    pub stage: PoseStage,
+    pub done: usize,
+    pub total: usize,
+}
+
+/// The long stages of pose estimation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PoseStage {
+    /// SIFT features, one photo at a time.
+    Features,
+    /// Matching the features of every pair.
+    Matching,
+    /// The dense matcher on the pairs where SIFT found few matches.
+    DenseMatching,
+}
+
+impl PoseStage {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Features => "features",
+            Self::Matching => "matching",
+            Self::DenseMatching => "dense matching",
+        }
+    }
+}
+
+/// SIFT matches of every pair (each photo's features computed once), dense ones added to
+/// pairs with few, all refined by affine Lucas–Kanade (the refinement drops the matches whose
+/// windows do not agree).
 fn correspondences(
     inputs: &[MatchInput],
     matcher: &SiftMatcher,
     options: &PoseOptions,
+    on_progress: &(impl Fn(&PoseProgress) + Sync),
 ) -> Vec<Match> {
-    let mut matches = match_all_pairs(matcher, inputs);
-    let counts = match_counts(&matches, inputs.len());
+    let n = inputs.len();
+    let counter = AtomicUsize::new(0);
+    let step = |stage: PoseStage, total: usize| {
+        let done = counter.fetch_add(1, Ordering::Relaxed) + 1;
+        on_progress(&PoseProgress { stage, done, total });
+    };
+    let features: Vec<SiftFeatures> = inputs
+        .par_iter()
+        .map(|input| {
+            let f = matcher.features(input);
+            step(PoseStage::Features, n);
+            f
+        })
+        .collect();
+    let pairs: Vec<(usize, usize)> = (0..n)
+        .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
+        .collect();
+    counter.store(0, Ordering::Relaxed);
+    let mut matches: Vec<Match> = pairs
+        .par_iter()
+        .flat_map_iter(|&(a, b)| {
+            let found = matcher.match_features(&features[a], &features[b]);
+            step(PoseStage::Matching, pairs.len());
+            found.into_iter().map(move |m| Match {
+                view_a: a,
+                view_b: b,
+                ..m
+            })
+        })
+        .collect();
+    let counts = match_counts(&matches, n);
     let dense = DenseOptions {
         seed: options.seed,
         ..DenseOptions::default()
     };
-    let sparse_pairs: Vec<(usize, usize)> = (0..inputs.len())
-        .flat_map(|a| (a + 1..inputs.len()).map(move |b| (a, b)))
+    let sparse_pairs: Vec<(usize, usize)> = pairs
+        .into_iter()
         .filter(|&(a, b)| counts[a][b] < options.dense_below)
         .collect();
-    for (a, b) in sparse_pairs {
+    counter.store(0, Ordering::Relaxed);
+    for &(a, b) in &sparse_pairs {
         matches.extend(dense_matches(&inputs[a], &inputs[b], a, b, &dense));
+        step(PoseStage::DenseMatching, sparse_pairs.len());
     }
     let images: Vec<&Image> = inputs.iter().map(|i| i.image).collect();
     let refined = refine_matches(&images, &matches, &AffineRefineOptions::default());
@@ -339,9 +430,8 @@ fn restricted(
     (intrinsics, matches)
 }
 
-/// The intrinsics of a photo's file, from those it was matched at.
-fn full_intrinsics(photo: &Photo) -> Intrinsics {
-    let k = photo.intrinsics;
+/// The intrinsics `k` of a photo's working image at the resolution of its file.
+fn full_intrinsics(photo: &Photo, k: &Intrinsics) -> Intrinsics {
     let (w, h) = photo.full_size;
     let (sx, sy) = (w as f64 / k.width as f64, h as f64 / k.height as f64);
     Intrinsics {

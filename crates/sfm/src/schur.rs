@@ -106,17 +106,20 @@ impl CameraSystem {
 }
 
 /// What one Levenberg–Marquardt iteration did: the weighted cost before and after (under the
-/// iteration's weights) and, when a step lowered it, the new poses and block states.
+/// iteration's weights) and, when a step lowered it, the new poses and block states, and the
+/// whole camera step (its entries past the poses' are the caller's shared parameters).
 pub struct LmStep<T> {
     pub cost_before: f64,
     pub cost_after: f64,
     pub accepted: Option<(Vec<Se3>, Vec<T>)>,
+    pub camera_step: Option<DVector<f64>>,
 }
 
 /// Damped steps from `poses` and the blocks' `states` until one lowers `cost_before` (the
 /// damping then falls three-fold, to `min_lambda` at the least) or the damping exceeds 10⁶ (it
 /// rises ten-fold after each failed step). `moved` applies a block's step to its state; `cost`
-/// is the weighted cost of new poses and states.
+/// is the weighted cost of new poses and states, given the whole camera step too (for
+/// parameters beyond the poses' `6(n − 1)`).
 pub fn damped_step<T: Copy>(
     cameras: &CameraSystem,
     systems: &[BlockSystem],
@@ -124,7 +127,7 @@ pub fn damped_step<T: Copy>(
     cost_before: f64,
     (lambda, min_lambda): (&mut f64, f64),
     moved: impl Fn(&T, &Vector3<f64>) -> T,
-    cost: impl Fn(&[Se3], &[T]) -> f64,
+    cost: impl Fn(&[Se3], &[T], &DVector<f64>) -> f64,
 ) -> LmStep<T> {
     while *lambda <= 1e6 {
         let Some(step) = cameras.step(systems, *lambda) else {
@@ -137,13 +140,14 @@ pub fn damped_step<T: Copy>(
             .map(|(state, block)| block.as_ref().map_or(*state, |b| moved(state, b)))
             .collect();
         let new_poses = updated(poses, &step.cameras);
-        let cost_after = cost(&new_poses, &new_states);
+        let cost_after = cost(&new_poses, &new_states, &step.cameras);
         if cost_after.is_finite() && cost_after < cost_before {
             *lambda = (*lambda / 3.0).max(min_lambda);
             return LmStep {
                 cost_before,
                 cost_after,
                 accepted: Some((new_poses, new_states)),
+                camera_step: Some(step.cameras),
             };
         }
         *lambda *= 10.0;
@@ -152,6 +156,7 @@ pub fn damped_step<T: Copy>(
         cost_before,
         cost_after: cost_before,
         accepted: None,
+        camera_step: None,
     }
 }
 

@@ -4,9 +4,14 @@ use std::path::PathBuf;
 
 use clap::Args as ClapArgs;
 use fewview_sfm::photos::DEFAULT_FOV_DEG;
-use fewview_sfm::{FolderOptions, PoseModel, PoseOptions, poses_for_folder};
+use std::sync::Mutex;
+
+use fewview_sfm::{
+    FolderOptions, PoseModel, PoseOptions, PoseProgress, PoseStage, poses_for_folder,
+};
 
 use super::output_paths::check_folder;
+use super::progress;
 
 /// Estimate camera poses from a few photos, without COLMAP: SIFT matches between every pair
 /// (dense matches where SIFT finds few), relative poses by the five-point algorithm, rotation
@@ -56,7 +61,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ..PoseOptions::default()
         },
     };
-    let model = poses_for_folder(&args.images, &args.out, &options)?;
+    let model = with_progress(|on| poses_for_folder(&args.images, &args.out, &options, on))?;
     print_model(&model, args.fov);
     println!(
         "wrote {} (COLMAP text), transforms.json, cameras.json, poses_report.json and images/ in {}",
@@ -87,4 +92,29 @@ pub fn print_model(model: &PoseModel, fov_deg: f64) {
         "registered {} of {} photos; {} points, median reprojection error {:.3} px",
         r.registered, r.photos, r.points, r.median_error_px
     );
+}
+
+/// Runs `f` with a progress callback that shows a bar per stage of pose estimation.
+pub fn with_progress<T>(f: impl FnOnce(&(dyn Fn(&PoseProgress) + Sync)) -> T) -> T {
+    let current: Mutex<Option<(PoseStage, progress::Bar)>> = Mutex::new(None);
+    let on = |p: &PoseProgress| {
+        let mut current = current.lock().unwrap_or_else(|e| e.into_inner());
+        if current.as_ref().map(|(stage, _)| *stage) != Some(p.stage) {
+            if let Some((_, bar)) = current.take() {
+                bar.finish_and_clear();
+            }
+            *current = Some((
+                p.stage,
+                progress::iterations(p.total as u64, p.stage.name()),
+            ));
+        }
+        if let Some((_, bar)) = current.as_ref() {
+            bar.set_position(p.done as u64);
+        }
+    };
+    let out = f(&on);
+    if let Some((_, bar)) = current.lock().unwrap_or_else(|e| e.into_inner()).take() {
+        bar.finish_and_clear();
+    }
+    out
 }

@@ -28,7 +28,9 @@ pub fn dataset_folder(data: &Path, run: &Path) -> anyhow::Result<PathBuf> {
         data.display(),
         dir.display()
     );
-    let model = poses_for_folder(data, &dir, &FolderOptions::default())?;
+    let model = super::poses::with_progress(|on| {
+        poses_for_folder(data, &dir, &FolderOptions::default(), on)
+    })?;
     super::poses::print_model(&model, DEFAULT_FOV_DEG);
     Ok(dir)
 }

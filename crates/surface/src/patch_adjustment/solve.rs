@@ -101,7 +101,7 @@ pub(super) fn iterate(
         cost_before,
         (lambda, 1e-7),
         |state, step| state.moved(&[step.x, step.y, step.z]),
-        |new_poses, new_states| {
+        |new_poses, new_states, _| {
             // Summed in order after the parallel part, so that a run repeats bit for bit.
             let costs: Vec<f64> = patches
                 .par_iter()
