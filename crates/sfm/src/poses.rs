@@ -33,8 +33,11 @@ use crate::photos::{FocalSource, Photo};
 pub struct PoseOptions {
     /// Fewest matches for a pair of photos to count as overlapping.
     pub min_matches: usize,
-    /// Pairs with fewer SIFT matches than this also get the dense matcher's (`0`: never).
+    /// Pairs with fewer SIFT matches than this also get the dense matcher's (`0`: never)...
     pub dense_below: usize,
+    /// ...when there are at most this many photos (a pair of photos costs the dense matcher
+    /// seconds; with many photos SIFT alone ties them together, as in COLMAP).
+    pub dense_max_photos: usize,
     /// Tracks whose reprojection error exceeds this (pixels of the working images) after the
     /// adjustment are left out of the model's points.
     pub max_error_px: f64,
@@ -51,6 +54,7 @@ impl Default for PoseOptions {
         Self {
             min_matches: 20,
             dense_below: 200,
+            dense_max_photos: 10,
             max_error_px: 4.0,
             sift: SiftOptions::default(),
             bundle: BundleOptions::default(),
@@ -280,7 +284,7 @@ fn correspondences(
     };
     let sparse_pairs: Vec<(usize, usize)> = pairs
         .into_iter()
-        .filter(|&(a, b)| counts[a][b] < options.dense_below)
+        .filter(|&(a, b)| counts[a][b] < options.dense_below && n <= options.dense_max_photos)
         .collect();
     counter.store(0, Ordering::Relaxed);
     for &(a, b) in &sparse_pairs {

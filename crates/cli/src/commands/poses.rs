@@ -20,8 +20,9 @@ use super::progress;
 /// Writes `OUT/sparse/0/{cameras,images,points3D}.txt` (a COLMAP text model), `OUT/transforms.json`
 /// (nerfstudio), `OUT/cameras.json` (for `fewview pose-error`), `OUT/poses_report.json`, and the
 /// registered photos in `OUT/images/`, so that `fewview train --data OUT` trains on them. The model is fixed up to a similarity: the first
-/// registered photo is at the origin, and the median depth of the points is 1. Intrinsics are
-/// held at their starting values: the EXIF 35 mm focal length, else `--fov` across the width.
+/// registered photo is at the origin, and the median depth of the points is 1. The focal length
+/// starts from the EXIF 35 mm one, else `--fov` across the width, and is refined by the bundle
+/// adjustment when all photos share one camera.
 #[derive(Debug, ClapArgs)]
 pub struct Args {
     /// Folder of photos (`.jpg`, `.jpeg`, `.png`).
