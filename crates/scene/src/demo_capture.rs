@@ -70,20 +70,9 @@ pub fn write_demo_capture(
             .map(|r| (0..4).map(|c| gl[(r, c)]).collect())
             .collect();
         frames.push(json!({ "file_path": format!("images/{name}"), "transform_matrix": rows }));
-        let q = nalgebra::UnitQuaternion::from_matrix(&view.camera.world_to_camera.rotation);
-        let t = view.camera.world_to_camera.translation;
-        let _ = writeln!(
-            images_txt,
-            "{} {:.17} {:.17} {:.17} {:.17} {:.17} {:.17} {:.17} 1 {name}\n",
-            i + 1,
-            q.w,
-            q.i,
-            q.j,
-            q.k,
-            t.x,
-            t.y,
-            t.z
-        );
+        let line = crate::colmap::text::image_line(i + 1, &view.camera.world_to_camera, 1, &name);
+        // An empty second line: no 2D points.
+        let _ = writeln!(images_txt, "{line}\n");
     }
     let doc = json!({
         "camera_model": "OPENCV",

@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use fewview_scene::Intrinsics;
 use fewview_scene::atomic::write_bytes;
 use fewview_scene::axes::opengl_to_opencv;
+use fewview_scene::colmap::text::image_line;
 use serde_json::json;
 
 use crate::error::{Result, SfmError};
@@ -108,22 +109,7 @@ fn images_txt(model: &PoseModel, camera_of: &[usize]) -> String {
     );
     for (i, photo) in model.photos.iter().enumerate() {
         let pose = &photo.camera.world_to_camera;
-        let q = nalgebra::UnitQuaternion::from_matrix(&pose.rotation);
-        let t = pose.translation;
-        let _ = writeln!(
-            s,
-            "{} {:.17} {:.17} {:.17} {:.17} {:.17} {:.17} {:.17} {} {}",
-            i + 1,
-            q.w,
-            q.i,
-            q.j,
-            q.k,
-            t.x,
-            t.y,
-            t.z,
-            camera_of[i],
-            photo.name
-        );
+        let _ = writeln!(s, "{}", image_line(i + 1, pose, camera_of[i], &photo.name));
         let line: Vec<String> = observed[i]
             .iter()
             .map(|(x, y, id)| format!("{x:.3} {y:.3} {id}"))

@@ -30,6 +30,14 @@ fn pair_errors(found: &[Camera], truth: &[Camera]) -> (f64, f64) {
     (rot, dir)
 }
 
+/// The surface paper's Alg. 1/2 mean rotation error (degrees) of `found` against `truth`.
+fn alg_rotation_deg(found: &[Camera], truth: &[Camera]) -> f64 {
+    let w2c = |c: &[Camera]| c.iter().map(|c| c.world_to_camera).collect::<Vec<_>>();
+    fewview_metrics::pose_error::pose_error_pairwise(&w2c(found), &w2c(truth), &Default::default())
+        .unwrap()
+        .rotation_deg
+}
+
 /// The views `views` of a dataset under `FEWVIEW_DATA` as photos with their known intrinsics.
 fn dataset_photos(scene: &str, views: &[usize], downscale: u32) -> (Vec<Photo>, Vec<Camera>) {
     let root = std::path::PathBuf::from(std::env::var("FEWVIEW_DATA").expect("FEWVIEW_DATA"));
@@ -72,16 +80,9 @@ fn dataset_triplets_register_with_their_true_relative_poses() {
         let found: Vec<Camera> = model.photos.iter().map(|p| p.camera.clone()).collect();
         assert_eq!(found.len(), 3, "{scene}: {:?}", model.unregistered);
         let (rot, dir) = pair_errors(&found, &truth);
-        let w2c = |c: &[Camera]| c.iter().map(|c| c.world_to_camera).collect::<Vec<_>>();
-        let alg = fewview_metrics::pose_error::pose_error_pairwise(
-            &w2c(&found),
-            &w2c(&truth),
-            &Default::default(),
-        )
-        .unwrap();
         println!(
             "{scene} {views:?}: Alg. 1/2 rotation {:.4}°, worst pair rotation {rot:.4}°, baseline {dir:.4}°, {} points, median {:.3} px, {:.1} s",
-            alg.rotation_deg,
+            alg_rotation_deg(&found, &truth),
             model.report.points,
             model.report.median_error_px,
             t.elapsed().as_secs_f64()
@@ -138,19 +139,12 @@ fn twenty_fern_photos_register_with_their_focal() {
     let model = estimate_poses(&photos, &PoseOptions::default()).unwrap();
     assert_eq!(model.photos.len(), 20, "{:?}", model.unregistered);
     let focal_error = model.photos[0].camera.intrinsics.fx / truth[0].intrinsics.fx - 1.0;
-    let w2c = |c: &[Camera]| c.iter().map(|c| c.world_to_camera).collect::<Vec<_>>();
     let found: Vec<Camera> = model.photos.iter().map(|p| p.camera.clone()).collect();
-    let alg = fewview_metrics::pose_error::pose_error_pairwise(
-        &w2c(&found),
-        &w2c(&truth),
-        &Default::default(),
-    )
-    .unwrap();
+    let rotation = alg_rotation_deg(&found, &truth);
     println!(
-        "fern, 20 photos from a 50° guess: focal {:+.3} %, Alg. 1/2 rotation {:.4}°",
-        100.0 * focal_error,
-        alg.rotation_deg
+        "fern, 20 photos from a 50° guess: focal {:+.3} %, Alg. 1/2 rotation {rotation:.4}°",
+        100.0 * focal_error
     );
     assert!(focal_error.abs() < 0.01, "focal off by {focal_error}");
-    assert!(alg.rotation_deg < 0.2, "{}°", alg.rotation_deg);
+    assert!(rotation < 0.2, "{rotation}°");
 }
