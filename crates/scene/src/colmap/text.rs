@@ -140,10 +140,6 @@ fn images_with_lines(text: &str, path: &Path) -> Result<Vec<(ColmapImage, usize)
     Ok(out)
 }
 
-/// `images.txt` (read from `path`) with the poses of the images in `poses` (by id:
-/// `cam_from_world` quaternion `(qw, qx, qy, qz)` and translation) replaced; every other line,
-/// the 2D points included, as stored, and the image line's camera id and name as they were.
-
 /// The first line of an image in `images.txt`: `IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME`
 /// for the world-to-camera `pose` (no newline).
 pub fn image_line(image_id: usize, pose: &crate::Se3, camera_id: usize, name: &str) -> String {
@@ -154,6 +150,10 @@ pub fn image_line(image_id: usize, pose: &crate::Se3, camera_id: usize, name: &s
         q.w, q.i, q.j, q.k, t.x, t.y, t.z
     )
 }
+
+/// `images.txt` (read from `path`) with the poses of the images in `poses` (by id:
+/// `cam_from_world` quaternion `(qw, qx, qy, qz)` and translation) replaced; every other line,
+/// the 2D points included, as stored, and the image line's camera id and name as they were.
 /// An id the file lacks is an error.
 pub fn replace_image_poses(path: &Path, poses: &BTreeMap<u32, PoseFields>) -> Result<String> {
     let text = read(path)?;
