@@ -16,6 +16,9 @@ pub enum SfmError {
     /// A photo that cannot be read (the message names the file).
     #[error(transparent)]
     Photo(#[from] fewview_scene::SceneError),
+    /// A learned matcher's weights that exist but cannot be loaded (the message names the file).
+    #[error("{0}")]
+    Matcher(String),
     /// The photos do not give a model (too few, or nothing shared).
     #[error("{0}")]
     NoModel(String),

@@ -16,9 +16,10 @@ use std::collections::HashMap;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use fewview_match::dense::{DenseOptions, dense_matches};
+use fewview_match::learned::{MatcherKind, matcher_for};
 use fewview_match::refine::{AffineRefineOptions, refine_matches};
 use fewview_match::sift::{SiftFeatures, SiftMatcher, SiftOptions};
-use fewview_match::{Match, MatchInput};
+use fewview_match::{Match, MatchInput, Matcher};
 use fewview_scene::{Camera, Image, Intrinsics, Se3};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -42,6 +43,9 @@ pub struct PoseOptions {
     /// adjustment are left out of the model's points.
     pub max_error_px: f64,
     pub sift: SiftOptions,
+    /// The matcher of the sparse correspondences: SIFT (`Classical`) or a learned one, which
+    /// falls back to SIFT, and says so in the report, without its weights.
+    pub matcher: MatcherKind,
     /// The bundle adjustment's options; its focal refinement is switched on when all photos
     /// share one camera (the same size and starting focal length), off otherwise.
     pub bundle: BundleOptions,
@@ -57,6 +61,7 @@ impl Default for PoseOptions {
             dense_max_photos: 10,
             max_error_px: 4.0,
             sift: SiftOptions::default(),
+            matcher: MatcherKind::Classical,
             bundle: BundleOptions::default(),
             seed: 0,
         }
@@ -99,6 +104,10 @@ pub struct PoseReport {
     pub overlapping_pairs: usize,
     pub pairs: Vec<PairPose>,
     pub matches: usize,
+    /// The matcher that ran, and why it is not the one asked for when it is not.
+    pub matcher: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub matcher_fallback: Option<String>,
     pub bundle: BundleReport,
     pub points: usize,
     /// Median reprojection error of the model's points (pixels of the working images).
@@ -140,13 +149,22 @@ pub fn estimate_poses_with(
             mask: None,
         })
         .collect();
-    let matcher = SiftMatcher {
+    let sift = SiftMatcher {
         options: SiftOptions {
             seed: options.seed,
             ..options.sift.clone()
         },
     };
-    let matches = correspondences(&inputs, &matcher, options, &on_progress);
+    // A learned matcher when asked and its weights load; SIFT (with the reason) otherwise.
+    let (learned, fallback) = match options.matcher {
+        MatcherKind::Classical => (None, None),
+        kind => {
+            let (matcher, fallback) = matcher_for(kind, &sift.options, &inputs)
+                .map_err(|e| SfmError::Matcher(e.to_string()))?;
+            (fallback.is_none().then_some(matcher), fallback)
+        }
+    };
+    let matches = correspondences(&inputs, (&sift, learned.as_deref()), options, &on_progress);
     let (group, unregistered) = largest_group(photos, &matches, options.min_matches);
     if group.len() < 2 {
         return Err(SfmError::NoModel(format!(
@@ -187,6 +205,11 @@ pub fn estimate_poses_with(
         overlapping_pairs: overlapping_pairs(&matches, group.len(), options.min_matches),
         pairs: start.pairs,
         matches: matches.len(),
+        matcher: match (&learned, &fallback) {
+            (Some(_), _) => options.matcher.name().to_string(),
+            _ => MatcherKind::Classical.name().to_string(),
+        },
+        matcher_fallback: fallback,
         bundle,
         points: points.len(),
         median_error_px: errors.get(errors.len() / 2).copied().unwrap_or(f64::NAN),
@@ -243,7 +266,7 @@ impl PoseStage {
 /// windows do not agree).
 fn correspondences(
     inputs: &[MatchInput],
-    matcher: &SiftMatcher,
+    (sift, learned): (&SiftMatcher, Option<&dyn Matcher>),
     options: &PoseOptions,
     on_progress: &(impl Fn(&PoseProgress) + Sync),
 ) -> Vec<Match> {
@@ -253,30 +276,46 @@ fn correspondences(
         let done = counter.fetch_add(1, Ordering::Relaxed) + 1;
         on_progress(&PoseProgress { stage, done, total });
     };
-    let features: Vec<SiftFeatures> = inputs
-        .par_iter()
-        .map(|input| {
-            let f = matcher.features(input);
-            step(PoseStage::Features, n);
-            f
-        })
-        .collect();
     let pairs: Vec<(usize, usize)> = (0..n)
         .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
         .collect();
-    counter.store(0, Ordering::Relaxed);
-    let mut matches: Vec<Match> = pairs
-        .par_iter()
-        .flat_map_iter(|&(a, b)| {
-            let found = matcher.match_features(&features[a], &features[b]);
-            step(PoseStage::Matching, pairs.len());
-            found.into_iter().map(move |m| Match {
-                view_a: a,
-                view_b: b,
-                ..m
-            })
+    let with_views = |(a, b): (usize, usize), found: Vec<Match>| {
+        found.into_iter().map(move |m| Match {
+            view_a: a,
+            view_b: b,
+            ..m
         })
-        .collect();
+    };
+    let mut matches: Vec<Match> = match learned {
+        // A learned matcher runs its network on its own threads: one pair at a time.
+        Some(matcher) => pairs
+            .iter()
+            .flat_map(|&(a, b)| {
+                let found = matcher.match_pair(&inputs[a], &inputs[b]);
+                step(PoseStage::Matching, pairs.len());
+                with_views((a, b), found)
+            })
+            .collect(),
+        None => {
+            let features: Vec<SiftFeatures> = inputs
+                .par_iter()
+                .map(|input| {
+                    let f = sift.features(input);
+                    step(PoseStage::Features, n);
+                    f
+                })
+                .collect();
+            counter.store(0, Ordering::Relaxed);
+            pairs
+                .par_iter()
+                .flat_map_iter(|&(a, b)| {
+                    let found = sift.match_features(&features[a], &features[b]);
+                    step(PoseStage::Matching, pairs.len());
+                    with_views((a, b), found)
+                })
+                .collect()
+        }
+    };
     let counts = match_counts(&matches, n);
     let dense = DenseOptions {
         seed: options.seed,

@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use clap::Args as ClapArgs;
+use fewview_match::learned::MatcherKind;
 use fewview_sfm::photos::DEFAULT_FOV_DEG;
 use std::sync::Mutex;
 
@@ -40,6 +41,10 @@ pub struct Args {
     /// Fewest matches for two photos to count as overlapping.
     #[arg(long, value_name = "N", default_value_t = PoseOptions::default().min_matches)]
     pub min_matches: usize,
+    /// Matcher of the sparse correspondences: `classical` (SIFT), `xfeat`, `xfeat-star` or
+    /// `lighterglue` (weights from `scripts/setup.sh`; without them SIFT runs, and says so).
+    #[arg(long, value_enum, default_value_t = MatcherKind::Classical)]
+    pub matcher: MatcherKind,
     /// Seed of RANSAC.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -58,6 +63,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         fov_deg: args.fov,
         poses: PoseOptions {
             min_matches: args.min_matches,
+            matcher: args.matcher,
             seed: args.seed,
             ..PoseOptions::default()
         },
@@ -84,6 +90,9 @@ pub fn print_model(model: &PoseModel, fov_deg: f64) {
             "{assumed} of {} registered photos have no EXIF focal length: a {fov_deg}° field of view was assumed",
             model.photos.len()
         );
+    }
+    if let Some(why) = &model.report.matcher_fallback {
+        println!("{why}");
     }
     for u in &model.unregistered {
         println!("not registered: {}: {}", u.name, u.reason);
