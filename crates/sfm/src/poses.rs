@@ -39,6 +39,9 @@ pub struct PoseOptions {
     /// ...when there are at most this many photos (a pair of photos costs the dense matcher
     /// seconds; with many photos SIFT alone ties them together, as in COLMAP).
     pub dense_max_photos: usize,
+    /// Spacing of the dense matcher's grid, as a fraction of the photos' long side (the
+    /// surface method's dense matches: 0.01; poses need fewer tracks than a surface).
+    pub dense_spacing: f64,
     /// Tracks whose reprojection error exceeds this (pixels of the working images) after the
     /// adjustment are left out of the model's points.
     pub max_error_px: f64,
@@ -59,6 +62,7 @@ impl Default for PoseOptions {
             min_matches: 20,
             dense_below: 200,
             dense_max_photos: 10,
+            dense_spacing: 0.015,
             max_error_px: 4.0,
             sift: SiftOptions::default(),
             matcher: MatcherKind::Classical,
@@ -317,7 +321,13 @@ fn correspondences(
         }
     };
     let counts = match_counts(&matches, n);
+    let long_side = inputs
+        .iter()
+        .map(|i| i.image.width.max(i.image.height))
+        .max()
+        .unwrap_or(0) as f64;
     let dense = DenseOptions {
+        spacing_px: Some(options.dense_spacing * long_side),
         seed: options.seed,
         ..DenseOptions::default()
     };
