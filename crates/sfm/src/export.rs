@@ -1,16 +1,18 @@
 //! A [`PoseModel`] written as the tools of the field read it: a COLMAP text model
 //! (`sparse/0/cameras.txt`, `images.txt`, `points3D.txt`), nerfstudio's `transforms.json`,
-//! `cameras.json` (the camera list `fewview pose-error` reads) and `poses_report.json`, with the
+//! `cameras.json` (the camera list `fewview pose-error` reads), `poses_report.json` and
+//! `cameras.png` (the cameras and points seen from above), with the
 //! registered photos placed in `images/` beside them so that the folder loads as a dataset.
 //! Every file is written atomically.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use fewview_scene::Intrinsics;
 use fewview_scene::atomic::write_bytes;
 use fewview_scene::axes::opengl_to_opencv;
 use fewview_scene::colmap::text::image_line;
+use fewview_scene::{Image, Intrinsics};
+use nalgebra::Vector3;
 use serde_json::json;
 
 use crate::error::{Result, SfmError};
@@ -31,12 +33,16 @@ pub fn write_model(model: &PoseModel, out: &Path) -> Result<Vec<PathBuf>> {
     for (path, text) in &files {
         write_bytes(path, text.as_bytes()).map_err(|e| SfmError::input(path, e.to_string()))?;
     }
+    let picture = out.join("cameras.png");
+    top_view(model, 800)
+        .save_png(&picture)
+        .map_err(|e| SfmError::input(&picture, e.to_string()))?;
     let cameras_json = out.join("cameras.json");
     let cameras: Vec<_> = model.photos.iter().map(|p| p.camera.clone()).collect();
     fewview_geom::io::cameras::write_cameras(&cameras_json, &cameras)
         .map_err(|e| SfmError::input(&cameras_json, e.to_string()))?;
     let mut written: Vec<PathBuf> = files.into_iter().map(|(p, _)| p).collect();
-    written.push(cameras_json);
+    written.extend([cameras_json, picture]);
     Ok(written)
 }
 
@@ -187,4 +193,135 @@ fn report_json(model: &PoseModel) -> String {
         "gauge": "first registered photo at the origin with the identity rotation; median track depth 1",
     });
     serde_json::to_string_pretty(&doc).unwrap_or_default()
+}
+
+/// The model seen from above: the points in their colours and each camera as a red dot with
+/// its viewing direction, projected onto the plane of the cameras' mean right and forward axes
+/// (the ground plane of photos taken upright), `size` pixels wide.
+pub fn top_view(model: &PoseModel, size: usize) -> Image {
+    let (right, forward) = mean_axes(model);
+    let plane = |x: &Vector3<f64>| (x.dot(&right), x.dot(&forward));
+    let centres: Vec<Vector3<f64>> = model.photos.iter().map(|p| p.camera.center()).collect();
+    let mut points: Vec<(f64, f64)> = model
+        .points
+        .iter()
+        .map(|p| plane(&Vector3::from(p.xyz)))
+        .filter(|(u, v)| u.is_finite() && v.is_finite())
+        .collect();
+    if points.is_empty() {
+        points.push((0.0, 0.0));
+    }
+    let quantile = |values: &mut Vec<f64>, q: f64| {
+        values.sort_by(f64::total_cmp);
+        values[((values.len() as f64 - 1.0) * q).round() as usize]
+    };
+    // The 1st to 99th percentiles of the points, and every camera, fill the picture.
+    let (mut us, mut vs): (Vec<f64>, Vec<f64>) = points.into_iter().unzip();
+    let (mut u0, mut u1) = (quantile(&mut us, 0.01), quantile(&mut us, 0.99));
+    let (mut v0, mut v1) = (quantile(&mut vs, 0.01), quantile(&mut vs, 0.99));
+    for (u, v) in centres.iter().map(plane) {
+        (u0, u1, v0, v1) = (u0.min(u), u1.max(u), v0.min(v), v1.max(v));
+    }
+    let span = (u1 - u0).max(v1 - v0).max(1e-9) * 1.15;
+    let (cu, cv) = (0.5 * (u0 + u1), 0.5 * (v0 + v1));
+    let mut image = Image::filled(size, size, &[1.0, 1.0, 1.0]);
+    let to_pixel = |(u, v): (f64, f64)| {
+        let x = ((u - cu) / span + 0.5) * size as f64;
+        let y = (0.5 - (v - cv) / span) * size as f64;
+        (x, y)
+    };
+    let mut dot = |(x, y): (f64, f64), radius: isize, colour: [f32; 3]| {
+        for dy in -radius..=radius {
+            for dx in -radius..=radius {
+                let (px, py) = (x as isize + dx, y as isize + dy);
+                if px >= 0 && py >= 0 && (px as usize) < size && (py as usize) < size {
+                    for (c, value) in colour.iter().enumerate() {
+                        image.set(px as usize, py as usize, c, *value);
+                    }
+                }
+            }
+        }
+    };
+    for p in &model.points {
+        let colour = p.rgb.map(|c| c as f32 / 255.0);
+        dot(to_pixel(plane(&Vector3::from(p.xyz))), 0, colour);
+    }
+    for (photo, centre) in model.photos.iter().zip(&centres) {
+        let axis: Vector3<f64> = photo.camera.world_to_camera.rotation.row(2).transpose();
+        for k in 1..=20 {
+            let along = centre + axis * (0.02 * span * k as f64 / 20.0 * 5.0);
+            dot(to_pixel(plane(&along)), 0, [0.8, 0.1, 0.1]);
+        }
+        dot(to_pixel(plane(centre)), 3, [0.8, 0.1, 0.1]);
+    }
+    image
+}
+
+/// The cameras' mean right (x) and forward (z) axes, made orthonormal.
+fn mean_axes(model: &PoseModel) -> (Vector3<f64>, Vector3<f64>) {
+    let sum = |row: usize| -> Vector3<f64> {
+        model
+            .photos
+            .iter()
+            .map(|p| p.camera.world_to_camera.rotation.row(row).transpose())
+            .sum()
+    };
+    let right = sum(0).try_normalize(1e-12).unwrap_or_else(Vector3::x);
+    let forward = sum(2) - right * sum(2).dot(&right);
+    let forward = forward.try_normalize(1e-12).unwrap_or_else(Vector3::z);
+    (right, forward)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::photos::FocalSource;
+    use crate::poses::{ModelPoint, PoseReport, RegisteredPhoto};
+    use fewview_scene::Camera;
+
+    /// Three cameras on an arc looking at a ring of points: the picture shows the points in
+    /// their colour and the cameras in red, inside the frame.
+    #[test]
+    fn the_top_view_draws_points_and_cameras() {
+        let k = Intrinsics::centered(300.0, 400, 300);
+        let photos = (0..3)
+            .map(|i| {
+                let a = (i as f64 - 1.0) * 0.4;
+                let eye = Vector3::new(3.0 * a.sin(), 0.2, -3.0 * a.cos());
+                RegisteredPhoto {
+                    name: format!("{i}.png"),
+                    camera: Camera::look_at(k, eye, Vector3::zeros(), -Vector3::y()),
+                    focal_from: FocalSource::AssumedFov,
+                }
+            })
+            .collect();
+        let points = (0..200)
+            .map(|i| {
+                let t = i as f64 * 0.0314;
+                ModelPoint {
+                    xyz: [t.cos(), 0.0, t.sin()],
+                    rgb: [0, 0, 255],
+                    observations: Vec::new(),
+                    error_px: 0.0,
+                }
+            })
+            .collect();
+        let model = PoseModel {
+            photos,
+            unregistered: Vec::new(),
+            points,
+            report: PoseReport::default(),
+        };
+        let picture = top_view(&model, 200);
+        if let Ok(path) = std::env::var("FEWVIEW_TOP_VIEW_PNG") {
+            picture.save_png(std::path::Path::new(&path)).unwrap();
+        }
+        let count = |want: [f32; 3]| {
+            (0..200 * 200)
+                .filter(|i| picture.pixel(i % 200, i / 200) == want)
+                .count()
+        };
+        assert!(count([0.0, 0.0, 1.0]) > 100, "points drawn");
+        assert!(count([0.8, 0.1, 0.1]) > 3 * 40, "cameras drawn");
+    }
 }
