@@ -19,7 +19,8 @@ use super::progress;
 /// averaging, camera centres from the baselines, and a bundle adjustment of poses and points.
 ///
 /// Writes `OUT/sparse/0/{cameras,images,points3D}.txt` (a COLMAP text model), `OUT/transforms.json`
-/// (nerfstudio), `OUT/cameras.json` (for `fewview pose-error`), `OUT/poses_report.json`, and the
+/// (nerfstudio), `OUT/cameras.json` (for `fewview pose-error`), `OUT/poses_report.json`,
+/// `OUT/cameras.png` (the cameras and points seen from above), and the
 /// registered photos in `OUT/images/`, so that `fewview train --data OUT` trains on them. The model is fixed up to a similarity: the first
 /// registered photo is at the origin, and the median depth of the points is 1. The focal length
 /// starts from the EXIF 35 mm one, else `--fov` across the width, and is refined by the bundle
@@ -71,7 +72,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let model = with_progress(|on| poses_for_folder(&args.images, &args.out, &options, on))?;
     print_model(&model, args.fov);
     println!(
-        "wrote {} (COLMAP text), transforms.json, cameras.json, poses_report.json and images/ in {}",
+        "wrote {} (COLMAP text), transforms.json, cameras.json, cameras.png, poses_report.json and images/ in {}",
         args.out.join("sparse/0").display(),
         args.out.display()
     );
