@@ -40,7 +40,8 @@ pub struct PoseOptions {
     /// seconds; with many photos SIFT alone ties them together, as in COLMAP).
     pub dense_max_photos: usize,
     /// Spacing of the dense matcher's grid, as a fraction of the photos' long side (the
-    /// surface method's dense matches: 0.01; poses need fewer tracks than a surface).
+    /// surface method's dense matches: 0.01; poses need fewer tracks than a surface, and the
+    /// grid's cost falls with the square of its spacing).
     pub dense_spacing: f64,
     /// Tracks whose reprojection error exceeds this (pixels of the working images) after the
     /// adjustment are left out of the model's points.
@@ -62,7 +63,7 @@ impl Default for PoseOptions {
             min_matches: 20,
             dense_below: 200,
             dense_max_photos: 10,
-            dense_spacing: 0.015,
+            dense_spacing: 0.0125,
             max_error_px: 4.0,
             sift: SiftOptions::default(),
             matcher: MatcherKind::Classical,
