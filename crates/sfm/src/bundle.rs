@@ -256,8 +256,9 @@ fn weighted_cost(r: &[f64], w: &[f64]) -> f64 {
         .sum()
 }
 
-/// The intrinsics with every focal length times `scale`.
-fn scaled(intrinsics: &[Intrinsics], scale: f64) -> Vec<Intrinsics> {
+/// The intrinsics with every focal length times `scale` (what [`BundleReport::focal_scale`]
+/// asks of the intrinsics a bundle adjustment started from).
+pub fn scaled_focal(intrinsics: &[Intrinsics], scale: f64) -> Vec<Intrinsics> {
     intrinsics
         .iter()
         .map(|k| Intrinsics {
@@ -355,7 +356,7 @@ fn iterate(
     scale: f64,
     lambda: &mut f64,
 ) -> LmStep<Vector3<f64>> {
-    let cameras_at = |log_focal: f64| Cameras::new(&scaled(base, log_focal.exp()));
+    let cameras_at = |log_focal: f64| Cameras::new(&scaled_focal(base, log_focal.exp()));
     let Some(cameras) = cameras_at(log_focal.unwrap_or(0.0)) else {
         return LmStep {
             cost_before: f64::INFINITY,
@@ -514,7 +515,7 @@ pub fn bundle_adjust(
         }
     }
     report.focal_scale = log_focal.map(f64::exp);
-    let adjusted = scaled(intrinsics, report.focal_scale.unwrap_or(1.0));
+    let adjusted = scaled_focal(intrinsics, report.focal_scale.unwrap_or(1.0));
     if let Some(cameras) = Cameras::new(&adjusted) {
         report.median_px_after = median_error(&cameras, &current, &tracks, &points);
     }
@@ -782,7 +783,7 @@ mod tests {
             .map(|(_, g)| g)
             .sum();
         let cost = |log_focal: f64| {
-            let cameras = Cameras::new(&scaled(&intrinsics, log_focal.exp())).unwrap();
+            let cameras = Cameras::new(&scaled_focal(&intrinsics, log_focal.exp())).unwrap();
             weighted_cost(
                 &reprojection_errors(&cameras, &poses, &track, &x).unwrap(),
                 &w,
@@ -808,7 +809,7 @@ mod tests {
             0.3f64.to_radians(),
         );
         start[2] = Se3::new(turn.into_inner() * truth[2].rotation, truth[2].translation);
-        let long = scaled(&intrinsics, 1.03);
+        let long = scaled_focal(&intrinsics, 1.03);
         let options = BundleOptions {
             refine_focal: true,
             ..BundleOptions::default()

@@ -13,9 +13,13 @@ pub enum SfmError {
     /// A file that cannot be used as it is.
     #[error("{}: {message}", path.display())]
     Input { path: PathBuf, message: String },
-    /// A photo that cannot be read (the message names the file).
+    /// A photo that cannot be read, or an output that cannot be written (the message names
+    /// the file).
     #[error(transparent)]
-    Photo(#[from] fewview_scene::SceneError),
+    Scene(#[from] fewview_scene::SceneError),
+    /// `cameras.json` that cannot be written (the message names the file).
+    #[error(transparent)]
+    Geom(#[from] fewview_geom::GeomError),
     /// A learned matcher's weights that exist but cannot be loaded (the message names the file).
     #[error("{0}")]
     Matcher(String),

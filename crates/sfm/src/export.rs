@@ -13,7 +13,7 @@ use fewview_scene::axes::opengl_to_opencv;
 use fewview_scene::colmap::text::image_line;
 use fewview_scene::{Image, Intrinsics};
 use nalgebra::Vector3;
-use serde_json::json;
+use serde_json::{Value, json};
 
 use crate::error::{Result, SfmError};
 use crate::poses::PoseModel;
@@ -23,24 +23,25 @@ pub fn write_model(model: &PoseModel, out: &Path) -> Result<Vec<PathBuf>> {
     let sparse = out.join("sparse").join("0");
     std::fs::create_dir_all(&sparse).map_err(|e| SfmError::io(&sparse, e))?;
     let (camera_of, cameras) = distinct_cameras(model);
+    let json = |path: PathBuf, doc: Value| match serde_json::to_string_pretty(&doc) {
+        Ok(text) => Ok((path, text)),
+        Err(e) => Err(SfmError::input(&path, format!("cannot write JSON: {e}"))),
+    };
     let files = [
         (sparse.join("cameras.txt"), cameras_txt(&cameras)),
         (sparse.join("images.txt"), images_txt(model, &camera_of)),
         (sparse.join("points3D.txt"), points_txt(model)),
-        (out.join("transforms.json"), transforms_json(model)),
-        (out.join("poses_report.json"), report_json(model)),
+        json(out.join("transforms.json"), transforms_json(model))?,
+        json(out.join("poses_report.json"), report_json(model))?,
     ];
     for (path, text) in &files {
-        write_bytes(path, text.as_bytes()).map_err(|e| SfmError::input(path, e.to_string()))?;
+        write_bytes(path, text.as_bytes())?;
     }
     let picture = out.join("cameras.png");
-    top_view(model, 800)
-        .save_png(&picture)
-        .map_err(|e| SfmError::input(&picture, e.to_string()))?;
+    top_view(model, 800).save_png(&picture)?;
     let cameras_json = out.join("cameras.json");
     let cameras: Vec<_> = model.photos.iter().map(|p| p.camera.clone()).collect();
-    fewview_geom::io::cameras::write_cameras(&cameras_json, &cameras)
-        .map_err(|e| SfmError::input(&cameras_json, e.to_string()))?;
+    fewview_geom::io::cameras::write_cameras(&cameras_json, &cameras)?;
     let mut written: Vec<PathBuf> = files.into_iter().map(|(p, _)| p).collect();
     written.extend([cameras_json, picture]);
     Ok(written)
@@ -159,7 +160,7 @@ fn points_txt(model: &PoseModel) -> String {
 
 /// nerfstudio's `transforms.json`: per-frame pinhole intrinsics and OpenGL camera-to-world
 /// matrices, with the images expected under `images/`.
-fn transforms_json(model: &PoseModel) -> String {
+fn transforms_json(model: &PoseModel) -> Value {
     let frames: Vec<_> = model
         .photos
         .iter()
@@ -176,23 +177,21 @@ fn transforms_json(model: &PoseModel) -> String {
             })
         })
         .collect();
-    let doc = json!({ "camera_model": "OPENCV", "frames": frames });
-    serde_json::to_string_pretty(&doc).unwrap_or_default()
+    json!({ "camera_model": "OPENCV", "frames": frames })
 }
 
-fn report_json(model: &PoseModel) -> String {
+fn report_json(model: &PoseModel) -> Value {
     let photos: Vec<_> = model
         .photos
         .iter()
         .map(|p| json!({ "name": p.name, "focal_from": p.focal_from, "focal_px": p.camera.intrinsics.fx }))
         .collect();
-    let doc = json!({
+    json!({
         "registered": photos,
         "unregistered": model.unregistered,
         "report": model.report,
         "gauge": "first registered photo at the origin with the identity rotation; median track depth 1",
-    });
-    serde_json::to_string_pretty(&doc).unwrap_or_default()
+    })
 }
 
 /// The model seen from above: the points in their colours and each camera as a red dot with

@@ -104,7 +104,7 @@ pub fn load_photo(path: &Path, max_side: usize, fov_deg: f64) -> Result<Photo> {
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
+        .ok_or_else(|| SfmError::input(path, "not a file name"))?;
     Ok(Photo {
         name,
         image,

@@ -24,7 +24,9 @@ use fewview_scene::{Camera, Image, Intrinsics, Se3};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::bundle::{BundleOptions, BundleReport, bundle_adjust, triangulated_tracks};
+use crate::bundle::{
+    BundleOptions, BundleReport, bundle_adjust, scaled_focal, triangulated_tracks,
+};
 use crate::error::{Result, SfmError};
 use crate::global_start::{PairPose, relative_start};
 use crate::photos::{FocalSource, Photo};
@@ -192,15 +194,7 @@ pub fn estimate_poses_with(
         ..options.bundle
     };
     let (poses, bundle) = bundle_adjust(&intrinsics, &start.poses, &matches, &bundle_options);
-    let focal_scale = bundle.focal_scale.unwrap_or(1.0);
-    let intrinsics: Vec<Intrinsics> = intrinsics
-        .iter()
-        .map(|k| Intrinsics {
-            fx: k.fx * focal_scale,
-            fy: k.fy * focal_scale,
-            ..*k
-        })
-        .collect();
+    let intrinsics = scaled_focal(&intrinsics, bundle.focal_scale.unwrap_or(1.0));
     let (poses, points) = scaled_model(photos, &group, &intrinsics, &poses, &matches, options);
     let mut errors: Vec<f64> = points.iter().map(|p| p.error_px).collect();
     errors.sort_by(f64::total_cmp);
