@@ -32,7 +32,6 @@ pub fn write_model(model: &PoseModel, out: &Path) -> Result<Vec<PathBuf>> {
         (sparse.join("images.txt"), images_txt(model, &camera_of)),
         (sparse.join("points3D.txt"), points_txt(model)),
         json(out.join("transforms.json"), transforms_json(model))?,
-        json(out.join("poses_report.json"), report_json(model))?,
     ];
     for (path, text) in &files {
         write_bytes(path, text.as_bytes())?;
@@ -42,8 +41,11 @@ pub fn write_model(model: &PoseModel, out: &Path) -> Result<Vec<PathBuf>> {
     let cameras_json = out.join("cameras.json");
     let cameras: Vec<_> = model.photos.iter().map(|p| p.camera.clone()).collect();
     fewview_geom::io::cameras::write_cameras(&cameras_json, &cameras)?;
+    // Last: its presence says the folder is complete ([`crate::folder::has_model`]).
+    let (report, text) = json(out.join("poses_report.json"), report_json(model))?;
+    write_bytes(&report, text.as_bytes())?;
     let mut written: Vec<PathBuf> = files.into_iter().map(|(p, _)| p).collect();
-    written.extend([cameras_json, picture]);
+    written.extend([cameras_json, picture, report]);
     Ok(written)
 }
 

@@ -41,8 +41,9 @@ pub fn poses_for_folder(
 ) -> Result<PoseModel> {
     let photos = load_folder(images, options.max_side, options.fov_deg)?;
     let model = estimate_poses_with(&photos, &options.poses, on_progress)?;
-    write_model(&model, out)?;
+    // The photos first: the model's report, written last, marks a finished folder.
     place_images(&model, images, out)?;
+    write_model(&model, out)?;
     Ok(model)
 }
 
@@ -51,7 +52,7 @@ pub fn holds_only_photos(dir: &Path) -> bool {
     detect_format(dir).is_err() && photo_files(dir).is_ok_and(|f| !f.is_empty())
 }
 
-/// Whether `out` holds a model that [`poses_for_folder`] wrote.
+/// Whether `out` holds a model that [`poses_for_folder`] finished (its report is written last).
 pub fn has_model(out: &Path) -> bool {
     out.join("sparse/0/images.txt").is_file() && out.join("poses_report.json").is_file()
 }
