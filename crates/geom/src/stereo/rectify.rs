@@ -2,10 +2,15 @@
 //! for rectification of stereo pairs"), with the common optical axis taken as the average of the
 //! two original axes (as Bouguet's variant does) so that both views turn as little as possible.
 //!
-//! Both rectified cameras keep their original centres, share one rotation and one set of
-//! intrinsics, and see the second centre at `+x`: corresponding points lie on the same image row
-//! and their disparity `x_left − x_right = f·B / z` is positive in front of the cameras. Each
-//! original view maps to its rectified view by the homography `K_r R_r R_oᵀ K_o⁻¹`.
+//! Both rectified cameras keep their original centres, share one rotation, one focal length,
+//! one row of principal points and one image size, and see the second centre at `+x`:
+//! corresponding points lie on the same image row and their disparity `x_left − x_right` is
+//! `f·B / z + offset`, where `offset = cx_left − cx_right`. The offset is 0 (one shared set of
+//! intrinsics) unless the two views turn so far towards each other that one canvas cannot hold
+//! both images; then each rectified image is centred on its own original (OpenCV's
+//! `stereoRectify` without `CALIB_ZERO_DISPARITY` does the same), and disparities near the
+//! cameras' meeting point are near 0 or negative. Each original view maps to its rectified view
+//! by the homography `K_r R_r R_oᵀ K_o⁻¹`.
 //!
 //! All pixel coordinates are continuous, with pixel `(i, j)` centred at `(i + 0.5, j + 0.5)`, as
 //! [`Camera::project`] uses.
@@ -46,16 +51,18 @@ pub struct RectifiedImage {
 /// The rectifying transforms of a calibrated stereo pair.
 #[derive(Clone, Debug)]
 pub struct Rectification {
-    /// Common intrinsics of both rectified images: `fx = fy = f`, the same `(cx, cy)`, the size of
-    /// the first view's image.
+    /// Intrinsics of the left rectified image: `fx = fy = f` and the canvas size, both shared
+    /// with the right one, which differs only in `cx` (by [`Self::offset`]).
     pub intrinsics: Intrinsics,
-    /// The rectified first camera: common intrinsics and rotation, the first original centre.
+    /// The rectified first camera: the common rotation, the first original centre.
     pub left: Camera,
-    /// The rectified second camera: common intrinsics and rotation, the second original centre,
-    /// at `(baseline, 0, 0)` in the left rectified camera's frame.
+    /// The rectified second camera: the common rotation, the second original centre, at
+    /// `(baseline, 0, 0)` in the left rectified camera's frame.
     pub right: Camera,
     /// Distance between the two centres (scene units).
     pub baseline: f64,
+    /// `cx_left − cx_right` (rectified pixels): the disparity of a point at infinity.
+    pub offset: f64,
     first: Camera,
     second: Camera,
     left_maps: SideMaps,
@@ -110,17 +117,21 @@ impl Rectification {
             + second.intrinsics.fy)
             / 4.0;
         principal_point(f, &rotation, first, second)?;
-        let (cx, cy, width, height) = canvas(f, &rotation, first, second);
+        let canvas = canvas(f, &rotation, first, second);
         let intrinsics = Intrinsics {
             fx: f,
             fy: f,
-            cx,
-            cy,
-            width,
-            height,
+            cx: canvas.cx[0],
+            cy: canvas.cy,
+            width: canvas.width,
+            height: canvas.height,
+        };
+        let right_intrinsics = Intrinsics {
+            cx: canvas.cx[1],
+            ..intrinsics
         };
         let left = Camera::new(intrinsics, Se3::new(rotation, -(rotation * c1)));
-        let right = Camera::new(intrinsics, Se3::new(rotation, -(rotation * c2)));
+        let right = Camera::new(right_intrinsics, Se3::new(rotation, -(rotation * c2)));
         let left_maps = SideMaps::new(first, &left);
         let right_maps = SideMaps::new(second, &right);
         Ok(Self {
@@ -128,6 +139,7 @@ impl Rectification {
             left,
             right,
             baseline,
+            offset: canvas.cx[0] - canvas.cx[1],
             first: first.clone(),
             second: second.clone(),
             left_maps,
@@ -163,14 +175,19 @@ impl Rectification {
         self.intrinsics.fx * self.baseline
     }
 
-    /// Rectified z-depth of a disparity `d` (rectified pixels): `f·B / d`.
+    /// Rectified z-depth of a disparity `d` (rectified pixels): `f·B / (d − offset)`.
     pub fn disparity_to_depth(&self, d: f64) -> f64 {
-        self.focal_baseline() / d
+        self.focal_baseline() / (d - self.offset)
     }
 
-    /// Disparity (rectified pixels) of a point at rectified z-depth `z`: `f·B / z`.
+    /// Disparity (rectified pixels) of a point at rectified z-depth `z`: `f·B / z + offset`.
     pub fn depth_to_disparity(&self, z: f64) -> f64 {
-        self.focal_baseline() / z
+        self.focal_baseline() / z + self.offset
+    }
+
+    /// Whether `d` is a disparity of a point in front of the cameras (finite, above the offset).
+    fn in_front(&self, d: f32) -> Option<f64> {
+        (d.is_finite() && d as f64 > self.offset).then_some(d as f64)
     }
 
     /// Original pixel coordinates `(u, v)` of `side` → rectified pixel coordinates. `NaN` when the
@@ -223,7 +240,7 @@ impl Rectification {
 
     /// The z-depth map of the original camera of `side` (its image size, 0 where unknown) from
     /// `disparity`, a disparity map of that side's rectified image (rectified size, row-major,
-    /// `x_left − x_right`; values not finite or `≤ 0` mean no disparity).
+    /// `x_left − x_right`; values not finite or `≤ offset` mean no disparity).
     ///
     /// Each original pixel centre is mapped into the rectified image, where the disparity is
     /// interpolated bilinearly when the four surrounding pixels are valid and within one pixel of
@@ -239,7 +256,7 @@ impl Rectification {
         )?;
         let k = &self.original(side).intrinsics;
         let (w, h) = (k.width as usize, k.height as usize);
-        let as_disparity = |d: f32| (d.is_finite() && d > 0.0).then_some(d as f64);
+        let as_disparity = |d: f32| self.in_front(d);
         let mut out = vec![0f32; w * h];
         if w == 0 {
             return Ok(out);
@@ -288,7 +305,7 @@ impl Rectification {
                 };
                 let z_rect = fb / inv / self.depth_scale_to_original(side, qu, qv);
                 let d = self.depth_to_disparity(z_rect);
-                if d.is_finite() && d > 0.0 {
+                if z_rect.is_finite() && z_rect > 0.0 && d.is_finite() {
                     row[i] = d as f32;
                 }
             }
@@ -309,7 +326,7 @@ impl Rectification {
     fn depth_scale_to_original(&self, side: Side, u: f64, v: f64) -> f64 {
         let orig = self.original(side).world_to_camera.rotation;
         let rect = self.rectified(side).world_to_camera.rotation;
-        let k = &self.intrinsics;
+        let k = &self.rectified(side).intrinsics;
         let ray = Vector3::new((u - k.cx) / k.fx, (v - k.cy) / k.fy, 1.0);
         (orig * rect.transpose() * ray).z
     }
@@ -447,53 +464,90 @@ const MAX_CANVAS_SCALE: f64 = 2.0;
 /// Pixels added around the rectified canvas on every side.
 const CANVAS_MARGIN: f64 = 2.0;
 
+/// The rectified images' size and principal points.
+struct Canvas {
+    /// `cx` of the left and the right rectified image.
+    cx: [f64; 2],
+    cy: f64,
+    width: u32,
+    height: u32,
+}
+
 /// The rectified image: the bounding box of both original images mapped into the common frame
 /// (so that a pair whose baseline runs diagonally across the images, and whose rectified images
 /// therefore turn, loses no part of either image), at most [`MAX_CANVAS_SCALE`] times the first
 /// image per axis around the box's centre, with a margin of [`CANVAS_MARGIN`] pixels so that
-/// every original pixel centre has rectified neighbours on all sides. Returns
-/// `(cx, cy, width, height)`.
-fn canvas(
-    f: f64,
-    rotation: &Matrix3<f64>,
-    first: &Camera,
-    second: &Camera,
-) -> (f64, f64, u32, u32) {
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for camera in [first, second] {
-        let k = &camera.intrinsics;
-        let to_common = rotation * camera.world_to_camera.rotation.transpose() * inverse_k(k);
-        for (u, v) in [
-            (0.0, 0.0),
-            (k.width as f64, 0.0),
-            (0.0, k.height as f64),
-            (k.width as f64, k.height as f64),
-        ] {
-            let ray = to_common * Vector3::new(u, v, 1.0);
-            if ray.z <= 0.0 {
-                continue;
-            }
-            let p = [f * ray.x / ray.z, f * ray.y / ray.z];
-            for a in 0..2 {
-                lo[a] = lo[a].min(p[a]);
-                hi[a] = hi[a].max(p[a]);
-            }
-        }
-    }
+/// every original pixel centre has rectified neighbours on all sides. When the two images lie
+/// so far apart along the rows that their joint box exceeds that limit (cameras turned towards
+/// each other), each rectified image is instead centred on its own image's box: one width, one
+/// row of principal points, two `cx`.
+fn canvas(f: f64, rotation: &Matrix3<f64>, first: &Camera, second: &Camera) -> Canvas {
+    let boxes = [first, second].map(|c| image_box(f, rotation, c));
+    let joint = |a: usize| {
+        (
+            boxes[0].lo[a].min(boxes[1].lo[a]),
+            boxes[0].hi[a].max(boxes[1].hi[a]),
+        )
+    };
     let k = &first.intrinsics;
-    let limit = [
+    let (width_limit, height_limit) = (
         MAX_CANVAS_SCALE * k.width as f64,
         MAX_CANVAS_SCALE * k.height as f64,
-    ];
-    let mut size = [0u32; 2];
-    let mut principal = [0.0; 2];
-    for a in 0..2 {
-        let centre = 0.5 * (lo[a] + hi[a]);
-        let extent = ((hi[a] - lo[a]).min(limit[a]) + 2.0 * CANVAS_MARGIN).ceil();
-        size[a] = extent as u32;
-        principal[a] = 0.5 * extent - centre;
+    );
+    let (height, cy) = fit(joint(1), height_limit);
+    let (x_lo, x_hi) = joint(0);
+    let (width, cx) = if x_hi - x_lo <= width_limit {
+        let (width, cx) = fit((x_lo, x_hi), width_limit);
+        (width, [cx, cx])
+    } else {
+        let widest = boxes.iter().map(|b| b.hi[0] - b.lo[0]).fold(0.0, f64::max);
+        let (width, _) = fit((0.0, widest), width_limit);
+        let centre = |b: &ImageBox| 0.5 * (b.lo[0] + b.hi[0]);
+        (width, boxes.each_ref().map(|b| 0.5 * width - centre(b)))
+    };
+    Canvas {
+        cx,
+        cy,
+        width: width as u32,
+        height: height as u32,
     }
-    (principal[0], principal[1], size[0], size[1])
+}
+
+/// The canvas extent (with its margin) and principal point that hold the span `(lo, hi)` of one
+/// axis, or its middle `limit` pixels.
+fn fit((lo, hi): (f64, f64), limit: f64) -> (f64, f64) {
+    let extent = ((hi - lo).min(limit) + 2.0 * CANVAS_MARGIN).ceil();
+    (extent, 0.5 * extent - 0.5 * (lo + hi))
+}
+
+/// The bounding box of an image's corners seen by a camera of focal length `f` and rotation
+/// `rotation` at the same centre (corners behind it left out).
+struct ImageBox {
+    lo: [f64; 2],
+    hi: [f64; 2],
+}
+
+fn image_box(f: f64, rotation: &Matrix3<f64>, camera: &Camera) -> ImageBox {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    let k = &camera.intrinsics;
+    let to_common = rotation * camera.world_to_camera.rotation.transpose() * inverse_k(k);
+    for (u, v) in [
+        (0.0, 0.0),
+        (k.width as f64, 0.0),
+        (0.0, k.height as f64),
+        (k.width as f64, k.height as f64),
+    ] {
+        let ray = to_common * Vector3::new(u, v, 1.0);
+        if ray.z <= 0.0 {
+            continue;
+        }
+        let p = [f * ray.x / ray.z, f * ray.y / ray.z];
+        for a in 0..2 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    ImageBox { lo, hi }
 }
 
 /// Refuses a per-pixel map whose length is not `w × h`.
@@ -638,6 +692,29 @@ mod tests {
         (first, second)
     }
 
+    /// Two narrow cameras (about 15° across) 60° apart on a ring of radius 3 around the point
+    /// `(0.2, 0, 4)`, both looking at it: one canvas cannot hold both images side by side.
+    fn converged_pair() -> (Camera, Camera) {
+        let k = Intrinsics {
+            fx: 1200.0,
+            fy: 1200.0,
+            cx: 160.0,
+            cy: 120.0,
+            width: W,
+            height: H,
+        };
+        let target = Vector3::new(0.2, 0.0, 4.0);
+        let look_at = |degrees: f64| {
+            let a = degrees * DEG;
+            let centre = target + 3.0 * Vector3::new(a.sin(), 0.05, -a.cos());
+            let z = (target - centre).normalize();
+            let x = Vector3::y().cross(&z).normalize();
+            let r = Matrix3::from_rows(&[x.transpose(), z.cross(&x).transpose(), z.transpose()]);
+            Camera::new(k, Se3::new(r, -(r * centre)))
+        };
+        (look_at(-30.0), look_at(30.0))
+    }
+
     /// A slanted plane `n·X = offset` in front of the pair.
     struct Plane {
         n: Vector3<f64>,
@@ -744,8 +821,13 @@ mod tests {
 
     #[test]
     fn corresponding_points_share_a_rectified_row() {
-        let (first, second) = pair();
-        let rect = Rectification::new(&first, &second).unwrap();
+        for (first, second) in [pair(), converged_pair()] {
+            points_share_a_row(&first, &second);
+        }
+    }
+
+    fn points_share_a_row(first: &Camera, second: &Camera) {
+        let rect = Rectification::new(first, second).unwrap();
         let mut rng = rand::rngs::StdRng::seed_from_u64(7);
         let (mut worst_row, mut worst_disp, mut worst_round) = (0f64, 0f64, 0f64);
         let mut n = 0;
@@ -768,7 +850,7 @@ mod tests {
             worst_row = worst_row.max((vl - vr).abs());
             let z_rect = rect.left.world_to_camera.transform_point(&p).z;
             let want = rect.depth_to_disparity(z_rect);
-            worst_disp = worst_disp.max(((ul - ur) - want).abs() / want);
+            worst_disp = worst_disp.max(((ul - ur) - want).abs() / (want - rect.offset));
             for (side, (a, b), (x, y)) in [
                 (Side::Left, (u, v), (ul, vl)),
                 (Side::Right, (u2, v2), (ur, vr)),
@@ -787,7 +869,14 @@ mod tests {
 
     #[test]
     fn depth_round_trips_through_rectified_disparity() {
-        let (first, second) = pair();
+        depth_round_trips(pair(), 1e-4);
+        // Its geometric disparities (about 1,400 px) change by more than one unit from pixel to
+        // pixel on the slanted plane, where the sampler takes the nearest pixel instead of
+        // interpolating: up to half a pixel's change of depth.
+        depth_round_trips(converged_pair(), 1e-3);
+    }
+
+    fn depth_round_trips((first, second): (Camera, Camera), tolerance: f64) {
         let rect = Rectification::new(&first, &second).unwrap();
         let plane = Plane::new();
         for side in [Side::Left, Side::Right] {
@@ -804,7 +893,7 @@ mod tests {
             for (&b, &e) in back.iter().zip(&disparity) {
                 if b.is_finite() {
                     disp_count += 1;
-                    disp_err = disp_err.max(((b - e) / e).abs() as f64);
+                    disp_err = disp_err.max(((b - e) as f64 / (e as f64 - rect.offset)).abs());
                 }
             }
             let again = rect.depth_from_disparity(side, &back).unwrap();
@@ -813,18 +902,23 @@ mod tests {
                 "{side:?}: depth → disparity max rel. error {disp_err:.2e} ({disp_count} px), \
                  round trip max rel. error {err2:.2e}, coverage {frac2:.3}"
             );
-            assert!(disp_err < 1e-4, "{side:?} disparity error {disp_err}");
+            assert!(disp_err < tolerance, "{side:?} disparity error {disp_err}");
             // The canvas holds both images, so a part of it lies outside this one.
             assert!(disp_count as f64 > 0.6 * back.len() as f64);
-            assert!(err2 < 1e-4, "{side:?} round-trip error {err2}");
+            assert!(err2 < tolerance, "{side:?} round-trip error {err2}");
             assert!(frac2 > 0.8, "{side:?} round-trip coverage {frac2}");
         }
     }
 
     #[test]
     fn rectified_images_match_rendering_in_the_rectified_camera() {
-        let (first, second) = pair();
-        let rect = Rectification::new(&first, &second).unwrap();
+        for (first, second) in [pair(), converged_pair()] {
+            rectified_images_match_rendering(&first, &second);
+        }
+    }
+
+    fn rectified_images_match_rendering(first: &Camera, second: &Camera) {
+        let rect = Rectification::new(first, second).unwrap();
         let plane = Plane::new();
         for side in [Side::Left, Side::Right] {
             let original = render(rect.original(side), &plane);
@@ -915,6 +1009,40 @@ mod tests {
         assert!((k.fx - (400.0 + 402.0 + 420.0 + 418.0) / 4.0).abs() < 1e-12);
         // The canvas holds both images (turned by a few degrees) and no more than twice either.
         assert!(k.width >= W && k.height >= H && k.width <= 2 * W && k.height <= 2 * H);
+    }
+
+    #[test]
+    fn views_turned_towards_each_other_are_each_centred_on_their_canvas() {
+        let (first, second) = converged_pair();
+        let rect = Rectification::new(&first, &second).unwrap();
+        let (kl, kr) = (rect.left.intrinsics, rect.right.intrinsics);
+        assert_eq!((kl.fx, kl.fy, kl.cy), (kr.fx, kr.fy, kr.cy));
+        assert_eq!((kl.width, kl.height), (kr.width, kr.height));
+        assert!(kl.width <= 2 * W && kl.height <= 2 * H, "{kl:?}");
+        // Each original image centre lands near its rectified image's centre.
+        for side in [Side::Left, Side::Right] {
+            let (u, v) = rect.to_rectified(side, W as f64 / 2.0, H as f64 / 2.0);
+            let k = rect.rectified(side).intrinsics;
+            let (du, dv) = (u - k.width as f64 / 2.0, v - k.height as f64 / 2.0);
+            assert!(
+                du.abs() < 0.1 * W as f64 && dv.abs() < 0.1 * H as f64,
+                "{side:?}: {du}, {dv}"
+            );
+        }
+        // The point both cameras look at sits near zero disparity; points at infinity at the
+        // offset, which is large and negative (the right image turned to the left).
+        let z = rect
+            .left
+            .world_to_camera
+            .transform_point(&Vector3::new(0.2, 0.0, 4.0))
+            .z;
+        let at_target = rect.depth_to_disparity(z);
+        assert!(at_target.abs() < 0.2 * W as f64, "{at_target}");
+        assert!(rect.offset < -(W as f64), "offset {}", rect.offset);
+        assert!((rect.disparity_to_depth(at_target) - z).abs() < 1e-9 * z);
+        // The shared canvas of a pair that fits keeps one principal point.
+        let (a, b) = pair();
+        assert_eq!(Rectification::new(&a, &b).unwrap().offset, 0.0);
     }
 
     #[test]

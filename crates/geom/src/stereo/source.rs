@@ -130,7 +130,10 @@ pub fn disparity_range(rect: &Rectification, near: f64, far: f64) -> (i32, usize
 /// The disparity range of rectified pair `rect` for rectified z-depths exactly `near..far`:
 /// the first disparity and a count of 16 to [`MAX_DISPARITIES`], a multiple of 16.
 pub fn exact_disparity_range(rect: &Rectification, near: f64, far: f64) -> (i32, usize) {
-    let lo = rect.depth_to_disparity(far).floor().max(0.0) as i32;
+    let lo = rect
+        .depth_to_disparity(far)
+        .floor()
+        .max(rect.offset.floor()) as i32;
     let hi = rect.depth_to_disparity(near).ceil() as i64;
     let count = (hi - lo as i64 + 1).clamp(16, MAX_DISPARITIES as i64) as usize;
     (lo, count.div_ceil(16) * 16)
@@ -187,7 +190,7 @@ pub fn match_pair(
         || rect.rectify_image(Side::Right, r.image),
     );
     if photometry == Photometry::GainMatched {
-        let middle = params.min_disparity.max(0) as usize + params.num_disparities / 2;
+        let middle = (params.min_disparity + params.num_disparities as i32 / 2).max(0) as usize;
         match_gains(&left, &mut right, middle);
     }
     let (lu8, ru8) = (eight_bit_rgb(&left.image), eight_bit_rgb(&right.image));
