@@ -47,6 +47,7 @@ pub struct SplatBaselineOptions {
 
 /// The 3DGS baseline's start.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum BaselineInit {
     /// What `fewview train` does on the same views ([`InitStrategy::Auto`]: the stereo start
     /// of the overlapping input pairs, else random points): the baseline as the PoseGaussian paper and its

@@ -4,16 +4,18 @@
 //! stereo module run on every frame's source images, so that their depth, and with it their
 //! renders, change from frame to frame even where the person does not move: the flicker the
 //! pose conditioning and the Temporal Pose Stabilizer remove. [`DepthInput::Stereo`] puts that
-//! setting back with classical stereo: each input view is rectified with its nearest input
-//! camera and matched by Semi-Global Matching (`fewview-geom`, the code of the fusion method's
-//! stereo start), searched only over the depths the visual hull allows, and the hull's depth
-//! fills what stereo leaves unmatched. [`DepthInput::Hull`] (the visual hull alone, smooth over
-//! time) and [`DepthInput::Dataset`] (the capture's exact depth, an oracle) are the ablations.
+//! setting back with classical stereo: each input view is rectified with a partner input camera
+//! and matched by Semi-Global Matching (`fewview-geom`, the code of the fusion method's stereo
+//! start), searched only over the depths the visual hull allows, and the hull's depth fills what
+//! stereo leaves unmatched. [`DepthInput::Hull`] (the visual hull alone, smooth over time) and
+//! [`DepthInput::Dataset`] (the capture's exact depth, an oracle) are the ablations.
 //!
-//! A deviation: GPS-Gaussian rectifies the two source views of each target together. Our
-//! inference computes each input view's maps once per frame and shares them between targets
-//! (the stabilizer works per input view too), so each input view has one stereo partner, its
-//! nearest input camera by view direction.
+//! GPS-Gaussian rectifies the two source views of each target together. Our inference computes
+//! each input view's maps once per frame and shares them between targets (the stabilizer works
+//! per input view too), so each input view has one stereo partner ([`StereoPartner`]): by
+//! default its second nearest input camera, which on the paper's split (every third camera of a
+//! ring held out) is exactly the other source view of the held-out camera it flanks, 60° away on
+//! the synthetic capture; the nearest (30°) is the alternative.
 
 use fewview_geom::stereo::pairs::{StereoView, overlap_fraction};
 use fewview_geom::stereo::rectify::Side;
@@ -29,12 +31,15 @@ use crate::maps::{DepthMap, Mask};
 
 /// Where the depth the network reads comes from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum DepthInput {
-    /// Two-view stereo per frame, bounded by the visual hull (the paper's setting).
+    /// Two-view stereo per frame with a partner input camera, searched over the visual hull's
+    /// depth range, the hull where it does not match (the paper's setting: per-frame depth that
+    /// flickers).
     #[default]
     Stereo,
-    /// The visual hull of the input masks.
+    /// The visual hull of the input masks (smooth over time).
     Hull,
     /// The capture's own depth maps (an oracle; the synthetic capture has them).
     Dataset,
@@ -89,9 +94,41 @@ impl Default for DepthBracket {
     }
 }
 
+/// Which input camera each view is matched with.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
+pub enum StereoPartner {
+    /// The input camera whose optical axis is nearest: the shortest baseline, the easiest match.
+    Nearest,
+    /// The second nearest. On a ring where every third camera is held out (the PoseGaussian
+    /// paper's split), it is the other source view of the held-out camera this view flanks:
+    /// GPS-Gaussian's stereo pair, twice the nearest's angle.
+    #[default]
+    SecondNearest,
+}
+
+impl StereoPartner {
+    /// What runs stored before the choice existed used: the nearest.
+    pub fn before_choice() -> Self {
+        Self::Nearest
+    }
+
+    /// The rank among the other cameras by nearness of the optical axis (0 = nearest).
+    fn rank(self) -> usize {
+        match self {
+            Self::Nearest => 0,
+            Self::SecondNearest => 1,
+        }
+    }
+}
+
 /// How stereo depth is searched and kept.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StereoSettings {
+    /// Which input camera each view is matched with.
+    #[serde(default = "StereoPartner::before_choice")]
+    pub partner: StereoPartner,
     /// Semi-Global Matching's parameters; the disparity range is set per pair.
     pub sgm: SgmParams,
     /// How far in front of the hull's depth stereo may put the surface (metres).
@@ -106,6 +143,7 @@ impl Default for StereoSettings {
     fn default() -> Self {
         let bracket = DepthBracket::default();
         Self {
+            partner: StereoPartner::default(),
             sgm: SgmParams::default(),
             hull_front: bracket.front as f64,
             hull_behind: bracket.behind as f64,
@@ -136,25 +174,26 @@ pub struct PairDepth {
 }
 
 /// The index in `cameras` of each camera's stereo partner: the other camera whose optical axis
-/// is nearest its own (lowest index on ties). An error with fewer than two cameras.
-pub fn stereo_partners(cameras: &[&Camera]) -> Result<Vec<usize>> {
-    if cameras.len() < 2 {
-        return Err(HumanError::argument(
-            "stereo depth",
-            "needs at least two input cameras",
-        ));
+/// is nearest its own, or second nearest (`partner`; lower index on ties). An error with too
+/// few cameras.
+pub fn stereo_partners(cameras: &[&Camera], partner: StereoPartner) -> Result<Vec<usize>> {
+    if cameras.len() < 2 + partner.rank() {
+        let m = format!(
+            "needs at least {} input cameras with this partner choice",
+            2 + partner.rank()
+        );
+        return Err(HumanError::argument("stereo depth", m));
     }
     let axis = |c: &Camera| c.world_to_camera.rotation.row(2).transpose();
     Ok((0..cameras.len())
         .map(|i| {
             let a = axis(cameras[i]);
-            (0..cameras.len())
+            let mut others: Vec<(f64, usize)> = (0..cameras.len())
                 .filter(|&j| j != i)
-                .max_by(|&j, &k| {
-                    let (dj, dk) = (a.dot(&axis(cameras[j])), a.dot(&axis(cameras[k])));
-                    dj.total_cmp(&dk).then(k.cmp(&j))
-                })
-                .expect("two cameras at least")
+                .map(|j| (-a.dot(&axis(cameras[j])), j))
+                .collect();
+            others.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+            others[partner.rank()].1
         })
         .collect())
 }
@@ -400,9 +439,33 @@ mod tests {
             .map(|&d| ring_camera(d))
             .collect();
         let refs: Vec<&Camera> = cameras.iter().collect();
-        assert_eq!(stereo_partners(&refs).unwrap(), vec![1, 0, 3, 2, 5, 4]);
-        let err = stereo_partners(&refs[..1]).unwrap_err().to_string();
-        assert!(err.contains("at least two"), "{err}");
+        assert_eq!(
+            stereo_partners(&refs, StereoPartner::Nearest).unwrap(),
+            vec![1, 0, 3, 2, 5, 4]
+        );
+        let err = stereo_partners(&refs[..1], StereoPartner::Nearest)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("at least 2"), "{err}");
+    }
+
+    #[test]
+    fn the_second_nearest_partner_on_the_papers_ring_is_the_other_source() {
+        // Input cameras of a 12-camera ring with every third one held out (2, 5, 8, 11): each
+        // pairs with the other camera flanking its held-out neighbour.
+        let cameras: Vec<Camera> = [0.0, 30.0, 90.0, 120.0, 180.0, 210.0, 270.0, 300.0]
+            .iter()
+            .map(|&d| ring_camera(d))
+            .collect();
+        let refs: Vec<&Camera> = cameras.iter().collect();
+        assert_eq!(
+            stereo_partners(&refs, StereoPartner::SecondNearest).unwrap(),
+            vec![7, 2, 1, 4, 3, 6, 5, 0]
+        );
+        let err = stereo_partners(&refs[..2], StereoPartner::SecondNearest)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("at least 3"), "{err}");
     }
 
     #[test]

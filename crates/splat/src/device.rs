@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 
 /// The compute device a run asks for.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum ComputeDevice {
     /// Host threads (rayon).

@@ -157,11 +157,15 @@ impl SurfaceRun {
 }
 
 /// Which poses a run started from a surface run trains with.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum SurfacePoses {
     /// The refined ones when the surface run started from poses other than the dataset's.
+    #[default]
     Auto,
+    /// The surface run's refined poses.
     Refined,
+    /// The dataset's poses.
     Dataset,
 }
 

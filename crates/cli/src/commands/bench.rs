@@ -58,8 +58,8 @@ pub struct Args {
     pub runs: usize,
     /// Where the rasterizer and training steps run: `cpu`, or `gpu` (builds with `--features
     /// gpu`; the rasterizer's CPU figures are then measured on the same scene as the yardstick).
-    #[arg(long, value_enum, default_value_t = super::train_args::DeviceArg::Cpu)]
-    pub device: super::train_args::DeviceArg,
+    #[arg(long, value_enum, default_value_t)]
+    pub device: fewview_splat::ComputeDevice,
     /// Image size of the rasterizer benchmark, `WIDTHxHEIGHT`.
     #[arg(long, default_value = "504x378", value_parser = parse_size, value_name = "WxH")]
     pub raster_size: (usize, usize),
@@ -187,7 +187,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         threads: rayon::current_num_threads(),
         avx2_fma,
     };
-    let device = fewview_splat::ComputeDevice::from(args.device);
+    let device = args.device;
     let (width, height) = args.raster_size;
     if let Some(dir) = &args.write_scene {
         write_scene(dir, args.gaussians, width, height)?;
@@ -368,7 +368,7 @@ fn fern_train_bench(args: &Args) -> anyhow::Result<Option<fewview_splat::bench::
             Ok(Some(fewview_splat::bench::train_step_bench(
                 &ds,
                 args.train_steps,
-                args.device.into(),
+                args.device,
             )?))
         }
         _ => {

@@ -183,7 +183,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             seed: args.train.seed,
         })
     };
-    let poses = surface_first::run_if(bare_surface, first, &out, args.train.surface_poses.into())?;
+    let poses = surface_first::run_if(bare_surface, first, &out, args.train.surface_poses)?;
     if let Some(line) = adopt_init_poses(&mut ds, &cfg, poses)? {
         eprintln!("{line}");
     }

@@ -8,6 +8,7 @@ use fewview_geom::stereo::source::Photometry;
 use fewview_splat::ComputeDevice;
 use fewview_splat::pipeline::{InitStrategy, MAX_INIT_POINTS, RunConfig};
 use fewview_splat::stereo_start::{DepthFrom, StereoInit};
+use fewview_splat::surface_start::SurfacePoses;
 use fewview_splat::train::{AppearanceConfig, AppearanceModel, TrainConfig};
 
 /// What the Gaussians are composited over during training on images with alpha.
@@ -45,8 +46,8 @@ pub struct TrainArgs {
     /// dataset's (`dataset`), or the refined ones when the surface run started from poses other
     /// than the dataset's (`auto`; with a bare `--init surface`, which refines the input's own
     /// poses: the refined ones).
-    #[arg(long, value_enum, default_value_t = SurfacePosesArg::Auto)]
-    pub surface_poses: SurfacePosesArg,
+    #[arg(long, value_enum, default_value_t)]
+    pub surface_poses: SurfacePoses,
     /// With `--init surface:DIR`: weight of the L1 distance between the rendered depth and the
     /// mesh's depth in the training views, relative to the mesh's depth (0: none).
     #[arg(long, value_name = "W",
@@ -62,8 +63,8 @@ pub struct TrainArgs {
     /// (OpenCV's matcher, robust to moderate exposure differences) or `gain-matched` (a gain per
     /// channel first; keeps more points when the photos' exposures differ by more than about
     /// one EV).
-    #[arg(long, value_enum, default_value_t = StereoPhotometryArg::AsIs)]
-    pub stereo_photometry: StereoPhotometryArg,
+    #[arg(long, value_enum, default_value_t)]
+    pub stereo_photometry: Photometry,
     /// Number of random initial points.
     #[arg(long, default_value_t = 20_000)]
     pub init_points: usize,
@@ -82,15 +83,15 @@ pub struct TrainArgs {
     pub checkpoint_every: usize,
     /// Where to train: `cpu` (every build) or `gpu` (the first GPU wgpu finds: Vulkan, Metal or
     /// DX12; builds with `--features gpu`). The two agree to rounding, not bit for bit.
-    #[arg(long, value_enum, default_value_t = DeviceArg::Cpu)]
-    pub device: DeviceArg,
+    #[arg(long, value_enum, default_value_t)]
+    pub device: ComputeDevice,
     /// Per-photo appearance: `affine` learns a 3×4 colour transform per training photo, applied
     /// to the render before the loss (identity at the start, pulled towards it), so photos whose
     /// exposure or white balance differ need not be explained by the Gaussians' colours; new
     /// views are rendered without it (gsplat's appearance optimisation, a bilateral grid of one
     /// cell). `none` compares renders with the photos as they are.
-    #[arg(long, value_enum, default_value_t = AppearanceArg::None)]
-    pub appearance: AppearanceArg,
+    #[arg(long, value_enum, default_value_t)]
+    pub appearance: AppearanceModel,
     /// Adam learning rate of the colour transforms.
     #[arg(long, value_name = "LR", default_value_t = AppearanceConfig::default().lr,
           value_parser = super::number_args::non_negative_f32)]
@@ -99,72 +100,6 @@ pub struct TrainArgs {
     #[arg(long, value_name = "W", default_value_t = AppearanceConfig::default().weight,
           value_parser = super::number_args::non_negative_f32)]
     pub appearance_weight: f32,
-}
-
-/// `--stereo-photometry`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum StereoPhotometryArg {
-    AsIs,
-    GainMatched,
-}
-
-impl From<StereoPhotometryArg> for Photometry {
-    fn from(a: StereoPhotometryArg) -> Self {
-        match a {
-            StereoPhotometryArg::AsIs => Self::AsIs,
-            StereoPhotometryArg::GainMatched => Self::GainMatched,
-        }
-    }
-}
-
-/// `--surface-poses`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum SurfacePosesArg {
-    Auto,
-    Refined,
-    Dataset,
-}
-
-impl From<SurfacePosesArg> for fewview_splat::surface_start::SurfacePoses {
-    fn from(a: SurfacePosesArg) -> Self {
-        match a {
-            SurfacePosesArg::Auto => Self::Auto,
-            SurfacePosesArg::Refined => Self::Refined,
-            SurfacePosesArg::Dataset => Self::Dataset,
-        }
-    }
-}
-
-/// `--appearance`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum AppearanceArg {
-    None,
-    Affine,
-}
-
-impl From<AppearanceArg> for AppearanceModel {
-    fn from(a: AppearanceArg) -> Self {
-        match a {
-            AppearanceArg::None => Self::None,
-            AppearanceArg::Affine => Self::Affine,
-        }
-    }
-}
-
-/// `--device`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum DeviceArg {
-    Cpu,
-    Gpu,
-}
-
-impl From<DeviceArg> for ComputeDevice {
-    fn from(d: DeviceArg) -> Self {
-        match d {
-            DeviceArg::Cpu => Self::Cpu,
-            DeviceArg::Gpu => Self::Gpu,
-        }
-    }
 }
 
 impl TrainArgs {
@@ -181,7 +116,7 @@ impl TrainArgs {
         train.random_background = self.train_background == TrainBackground::Random;
         train.checkpoint_interval = self.checkpoint_every;
         train.appearance = AppearanceConfig {
-            model: self.appearance.into(),
+            model: self.appearance,
             lr: self.appearance_lr,
             weight: self.appearance_weight,
         };
@@ -192,7 +127,7 @@ impl TrainArgs {
         let stereo = StereoInit {
             depth,
             fraction: self.stereo_fraction,
-            photometry: self.stereo_photometry.into(),
+            photometry: self.stereo_photometry,
             ..StereoInit::default()
         };
         if self.init_points == 0 {
@@ -210,7 +145,7 @@ impl TrainArgs {
             init,
             init_points: self.init_points,
             stereo,
-            device: self.device.into(),
+            device: self.device,
             surface_depth_weight: self.surface_depth_weight,
         })
     }

@@ -58,6 +58,7 @@ pub enum DisparityRange {
 
 /// How the two photos of a pair are brought to one brightness before they are matched.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum Photometry {
     /// As they are (OpenCV's `StereoSGBM`: its cost compares x-derivatives of the images,

@@ -301,7 +301,7 @@ pub fn prepare_frame(
 /// pair matched once.
 fn add_stereo_depth(views: &mut [PreparedView], settings: &StereoSettings) -> Result<()> {
     let cameras: Vec<&Camera> = views.iter().map(|v| &v.camera).collect();
-    let partners = stereo_partners(&cameras)?;
+    let partners = stereo_partners(&cameras, settings.partner)?;
     let mut pairs: Vec<(usize, usize)> = partners
         .iter()
         .enumerate()

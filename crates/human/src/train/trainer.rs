@@ -25,6 +25,7 @@ use crate::net::{NetConfig, PoseGaussianNet, PoseMapConfig, Variant, checkpoint}
 
 /// The two network presets (NetConfig::paper and NetConfig::cpu).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum Preset {
     /// 512×512 inputs, widths 32/64/96/128: for a GPU.

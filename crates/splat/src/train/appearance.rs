@@ -17,6 +17,7 @@ use super::adam::{AdamConfig, AdamState};
 
 /// Which appearance model training uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum AppearanceModel {
     /// The render is compared with the photo as it is.

@@ -1,0 +1,84 @@
+//! What the `human` subcommands share: the capture's flags, TPS's flags, runs and frame ranges.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::Args as ClapArgs;
+use fewview_human::tps::TpsConfig;
+use fewview_human::{MultiView, Split};
+
+/// The capture, its sequence and the output folder, shared by the subcommands.
+#[derive(Debug, ClapArgs)]
+pub struct CaptureArgs {
+    /// The capture's folder: the synthetic layout (`cameras.json`, `joints.json`, `SEQ/`) or
+    /// ZJU-MoCap's (`annots.npy`, `Camera_B*/`, `mask/`, here or in `SEQ/`; 2D pose from
+    /// `joints3d/<n>.npy`).
+    #[arg(long, value_name = "DIR")]
+    pub data: PathBuf,
+    /// The sequence inside `--data` (ignored when `--data` itself holds `annots.npy`).
+    #[arg(long, default_value = "seq_a")]
+    pub sequence: String,
+    /// Output folder.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+}
+
+/// The Temporal Pose Stabilizer's settings (our design; see `fewview_human::tps`).
+#[derive(Debug, ClapArgs)]
+pub struct TpsArgs {
+    /// Weight of the previous frame's (warped) maps where the body is still, in [0, 1].
+    #[arg(long, default_value_t = TpsConfig::default().max_weight)]
+    pub tps_weight: f32,
+    /// Joint speed (metres per frame) at which that weight falls to 1/e of itself.
+    #[arg(long, default_value_t = TpsConfig::default().speed_scale)]
+    pub tps_speed: f32,
+}
+
+impl TpsArgs {
+    pub fn config(&self) -> anyhow::Result<TpsConfig> {
+        let config = TpsConfig {
+            max_weight: self.tps_weight,
+            speed_scale: self.tps_speed,
+            ..TpsConfig::default()
+        };
+        config.check()?;
+        Ok(config)
+    }
+}
+
+/// The run in `dir`, rendering from `source_views` views per target when given.
+pub fn load_model(
+    dir: &std::path::Path,
+    source_views: Option<usize>,
+) -> anyhow::Result<fewview_human::infer::Model> {
+    let mut model = fewview_human::infer::Model::load(dir)?;
+    if let Some(n) = source_views {
+        if n == 0 {
+            bail!("--source-views must be at least 1");
+        }
+        model.config.source_views = n;
+    }
+    Ok(model)
+}
+
+/// The split `run` was trained with, or PoseGaussian's default protocol for runs without
+/// `split.json`.
+pub fn run_split(run: &std::path::Path, capture: &dyn MultiView) -> anyhow::Result<Split> {
+    let split = match Split::load(run)? {
+        Some(split) => split,
+        None => Split::for_capture(capture, fewview_human::split::PAPER_INPUT_CAMERAS, None)?,
+    };
+    split.check_fits(capture)?;
+    Ok(split)
+}
+
+pub fn parse_frames(text: &str) -> anyhow::Result<std::ops::Range<usize>> {
+    let (a, b) = text
+        .split_once("..=")
+        .with_context(|| format!("--frames {text}: expected A..=B"))?;
+    let (a, b): (usize, usize) = (a.trim().parse()?, b.trim().parse()?);
+    if b <= a {
+        bail!("--frames {text}: needs at least two frames");
+    }
+    Ok(a..b + 1)
+}
