@@ -9,11 +9,11 @@ use fewview_scene::Dataset;
 use serde::Serialize;
 
 use crate::config::RunConfig;
-use crate::cputime::measure;
 use crate::error::Result;
 use crate::field::EncoderKind;
 use crate::pipeline::prepare;
 use crate::train::Trainer;
+use fewview_scene::cputime::measure;
 
 /// Iterations per second of one configuration.
 #[derive(Clone, Debug, Serialize)]
@@ -66,7 +66,7 @@ fn rate(
         for _ in 0..iterations {
             trainer.step()?;
         }
-        Ok::<(), crate::SurfaceError>(())
+        Ok::<(), crate::error::SurfaceError>(())
     });
     result?;
     Ok(StepRate {

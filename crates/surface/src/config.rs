@@ -3,7 +3,6 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::bundle::BundleOptions;
 use crate::matching::densify::DensifyOptions;
 use crate::matching::learned::MatcherKind;
 use crate::matching::refine::AffineRefineOptions;
@@ -12,6 +11,7 @@ use crate::patch_adjustment::PatchAdjustmentOptions;
 use crate::schedule::{PoseTiming, Schedule};
 use crate::train::TrainConfig;
 use crate::warmup::{WarmupOptions, WarmupReport};
+use fewview_sfm::bundle::BundleOptions;
 
 /// Where the initial poses come from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

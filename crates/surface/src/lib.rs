@@ -47,7 +47,6 @@ pub mod rays;
 #[doc(hidden)]
 pub mod render;
 pub mod schedule;
-use fewview_sfm::schur;
 pub mod sdf_scene;
 pub mod table1;
 pub mod train;

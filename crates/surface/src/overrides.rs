@@ -7,8 +7,6 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-use crate::adam::ExpSchedule;
-use crate::bundle::BundleOptions;
 use crate::config::{InitialPoses, RunConfig};
 use crate::error::{Result, SurfaceError};
 use crate::field::{EncoderKind, FdScheme};
@@ -19,6 +17,8 @@ use crate::matching::sift::SiftOptions;
 use crate::patch_adjustment::PatchAdjustmentOptions;
 use crate::schedule::Schedule;
 use crate::warmup::{Connectivity, WarmupOptions};
+use fewview_optim::ExpSchedule;
+use fewview_sfm::bundle::BundleOptions;
 
 /// Whether and how dense matches are grown from the sparse ones
 /// ([`RunConfig::densify`], [`RunConfig::densify_if_needed`]).

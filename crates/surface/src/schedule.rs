@@ -12,8 +12,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::adam::ExpSchedule;
 use crate::train::TrainConfig;
+use fewview_optim::ExpSchedule;
 
 /// When the poses start to move (a fraction of the iterations) and their learning rate: the
 /// two fields of [`TrainConfig`] a schedule sets.

@@ -16,7 +16,6 @@ use fewview_scene::{Image, Intrinsics, Se3, View};
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use crate::adam::{AdamConfig, AdamState, ExpSchedule};
 use crate::error::{Result, SurfaceError};
 use crate::field::{Field, FieldConfig};
 use crate::losses::{self, CorrespondenceBatch, GrayStack};
@@ -24,6 +23,7 @@ use crate::matching::Match;
 use crate::pose::{d9_to_pose, d9_to_rows, pose_to_d9};
 use crate::rays::{camera_dirs, intrinsics_rows, select_rows, world_rays};
 use crate::render::{Rendered, SampleConfig, eikonal_loss, render_rays, sample_rays};
+use fewview_optim::{AdamConfig, AdamState, ExpSchedule};
 
 /// Loss weights and switches (defaults: the surface paper §B.1).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -9,7 +9,7 @@
 use num_traits::Float;
 use rayon::prelude::*;
 
-use super::{GridLayout, LevelLayout};
+use super::layout::{GridLayout, LevelLayout};
 
 const PRIME_Y: u32 = 2_654_435_761;
 const PRIME_Z: u32 = 805_459_861;

@@ -15,7 +15,8 @@ use burn::backend::{Autodiff, Backend, Dispatch, Flex, backend_extension};
 use burn::tensor::{Shape, Tensor, TensorData};
 use fewview_optim::flex_f32;
 
-use super::{GridLayout, kernels};
+use super::kernels;
+use super::layout::GridLayout;
 
 /// The non-tensor arguments of one encoding: the grid layout and the coarse-to-fine weights.
 #[derive(Clone, Debug, PartialEq)]

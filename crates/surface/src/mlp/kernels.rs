@@ -8,7 +8,7 @@
 use num_traits::Float;
 use rayon::prelude::*;
 
-use super::{Activation, MlpSpec};
+use super::spec::{Activation, MlpSpec};
 
 /// Rows per parallel work item.
 const ROWS: usize = 256;

@@ -13,7 +13,8 @@ use burn::backend::{Autodiff, Backend, Dispatch, Flex, backend_extension};
 use burn::tensor::Tensor;
 use fewview_optim::flex_f32;
 
-use super::{MlpSpec, kernels};
+use super::kernels;
+use super::spec::MlpSpec;
 use crate::hashgrid::op::flex;
 
 /// The network as a Burn backend extension.

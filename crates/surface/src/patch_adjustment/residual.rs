@@ -6,7 +6,7 @@ use fewview_scene::{Image, Intrinsics, Se3};
 use nalgebra::{Matrix3, Vector2, Vector3};
 use rayon::prelude::*;
 
-use super::PatchAdjustmentOptions;
+use super::options::PatchAdjustmentOptions;
 use crate::matching::refine::{Plane, Window};
 
 /// The images, cameras and window the patches are compared through.

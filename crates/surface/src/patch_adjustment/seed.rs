@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use crate::matching::Match;
 
-use super::PatchAdjustmentOptions;
+use super::options::PatchAdjustmentOptions;
 use super::residual::{Patch, PatchState, Views};
 
 /// Patches from the matches whose windows lie inside the reference view (and its mask), whose

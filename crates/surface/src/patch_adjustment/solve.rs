@@ -6,9 +6,9 @@ use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
 use crate::pose::se3_exp;
-use crate::schur::{BlockSystem, CameraSystem, LmStep, damped_step, robust_sigma};
+use fewview_sfm::schur::{BlockSystem, CameraSystem, LmStep, damped_step, robust_sigma};
 
-use super::PatchAdjustmentOptions;
+use super::options::PatchAdjustmentOptions;
 use super::residual::{Patch, PatchState, Views};
 
 /// Forward-difference steps: log depth, normal tilts (radians), camera twists.

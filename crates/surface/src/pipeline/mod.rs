@@ -47,9 +47,9 @@ pub use self::report::{
 use crate::checkpoint;
 use crate::config::RunConfig;
 use crate::error::{Result, SurfaceError};
-use crate::global_start::PairPose;
 use crate::schedule::PoseTiming;
 use crate::train::{StepStats, TrainConfig, Trainer};
+use fewview_sfm::global_start::PairPose;
 
 /// The angle (degrees) between each pair's relative rotation and the true one, `R_b R_aᵀ` of
 /// the true world-to-camera rotations.
@@ -436,7 +436,7 @@ fn train(
 ) -> Result<Trained> {
     on_event(Event::Stage("training"));
     let wall = std::time::Instant::now();
-    let cpu = crate::cputime::process_cpu_seconds();
+    let cpu = fewview_scene::cputime::process_cpu_seconds();
     let start_it = trainer.state.iteration;
     let mut last = StepStats::default();
     let mut pose_steps_skipped = 0;
@@ -471,7 +471,7 @@ fn train(
         pose_steps_skipped,
         history,
         wall: wall.elapsed().as_secs_f64(),
-        cpu: crate::cputime::process_cpu_seconds() - cpu,
+        cpu: fewview_scene::cputime::process_cpu_seconds() - cpu,
         done: trainer.state.iteration - start_it,
     })
 }

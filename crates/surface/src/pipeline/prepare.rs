@@ -3,7 +3,6 @@
 
 use fewview_scene::{Camera, Dataset, Image, Intrinsics, Se3};
 
-use crate::bundle::{BundleReport, bundle_adjust};
 use crate::config::{InitialPoses, RunConfig};
 use crate::error::{Result, SurfaceError};
 use crate::matching::dense::{DenseOptions, dense_matches};
@@ -18,6 +17,7 @@ use crate::patch_adjustment::{PatchAdjustmentReport, adjust_patches};
 use crate::pose::perturb_poses;
 use crate::train::TrainView;
 use crate::warmup::{WarmupReport, epipolar_warmup, matches_tie_the_views};
+use fewview_sfm::bundle::{BundleReport, bundle_adjust};
 
 /// Training inputs derived from a dataset.
 pub struct Prepared {

@@ -3,12 +3,12 @@
 use fewview_metrics::pose_error::PoseError;
 use serde::Serialize;
 
-use crate::bundle::BundleReport;
 use crate::matching::MatchPrecision;
 use crate::patch_adjustment::PatchAdjustmentReport;
 use crate::schedule::PoseTiming;
 use crate::train::StepStats;
 use crate::warmup::WarmupReport;
+use fewview_sfm::bundle::BundleReport;
 
 /// What a run reports.
 #[derive(Clone, Debug, Serialize)]

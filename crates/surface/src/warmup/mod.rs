@@ -34,9 +34,9 @@ use self::solve::{
     anneal, cauchy, covariance_scaled, distances, halving_scales, in_front_fraction, median_abs,
     median_variance,
 };
-use crate::global_start::global_start;
 use crate::matching::Match;
 use crate::pose::into_frame_of;
+use fewview_sfm::global_start::global_start;
 
 /// Refines world-to-camera `poses` (one per view, `intrinsics` alike) so that `matches`
 /// (view indices into them) satisfy their epipolar constraints. Returns the poses unchanged,

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::global_start::PairPose;
+use fewview_sfm::global_start::PairPose;
 
 /// Options of [`super::epipolar_warmup`].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
