@@ -11,6 +11,7 @@ pub mod lpips;
 pub mod popping;
 pub mod pose_error;
 pub mod psnr;
+pub mod relative_pose;
 pub mod ssim;
 pub mod temporal;
 

@@ -38,15 +38,25 @@ pub fn write_model(model: &PoseModel, out: &Path) -> Result<Vec<PathBuf>> {
     }
     let picture = out.join("cameras.png");
     top_view(model, 800).save_png(&picture)?;
-    let cameras_json = out.join("cameras.json");
-    let cameras: Vec<_> = model.photos.iter().map(|p| p.camera.clone()).collect();
-    fewview_geom::io::cameras::write_cameras(&cameras_json, &cameras)?;
+    let (cameras_json, text) = json(out.join("cameras.json"), named_cameras(model))?;
+    write_bytes(&cameras_json, text.as_bytes())?;
     // Last: its presence says the folder is complete ([`crate::folder::has_model`]).
     let (report, text) = json(out.join("poses_report.json"), report_json(model))?;
     write_bytes(&report, text.as_bytes())?;
     let mut written: Vec<PathBuf> = files.into_iter().map(|(p, _)| p).collect();
     written.extend([cameras_json, picture, report]);
     Ok(written)
+}
+
+/// The registered cameras as `fewview pose-error` reads them, each with its photo's file name
+/// (by which `pose-error` finds the same view in a dataset folder).
+fn named_cameras(model: &PoseModel) -> Value {
+    let named = model.photos.iter().map(|p| {
+        let mut camera = fewview_geom::io::cameras::camera_to_json(&p.camera);
+        camera["name"] = Value::from(p.name.clone());
+        camera
+    });
+    Value::Array(named.collect())
 }
 
 /// Places the registered photos of `model`, read from `images_dir`, in `out/images/` (a hard

@@ -6,28 +6,16 @@
 // Tests report what they measured.
 #![allow(clippy::print_stdout)]
 
-use fewview_geom::similarity::rotation_angle_deg;
+use fewview_metrics::relative_pose::relative_errors;
 use fewview_scene::Camera;
 use fewview_sfm::photos::FocalSource;
 use fewview_sfm::{Photo, PoseOptions, estimate_poses};
 
 /// Worst pairwise relative-rotation error and baseline-direction error (degrees).
 fn pair_errors(found: &[Camera], truth: &[Camera]) -> (f64, f64) {
-    let (mut rot, mut dir) = (0.0f64, 0.0f64);
-    for i in 0..found.len() {
-        for j in i + 1..found.len() {
-            let rel = |c: &[Camera]| {
-                let (a, b) = (&c[i].world_to_camera, &c[j].world_to_camera);
-                let r = b.rotation * a.rotation.transpose();
-                let baseline = a.rotation * (b.inverse().translation - a.inverse().translation);
-                (r, baseline.normalize())
-            };
-            let ((rf, bf), (rt, bt)) = (rel(found), rel(truth));
-            rot = rot.max(rotation_angle_deg(&(rf * rt.transpose())));
-            dir = dir.max(bf.angle(&bt).to_degrees());
-        }
-    }
-    (rot, dir)
+    let w2c = |c: &[Camera]| c.iter().map(|c| c.world_to_camera).collect::<Vec<_>>();
+    let e = relative_errors(&w2c(found), &w2c(truth)).unwrap();
+    (e.rotation_max_deg, e.direction_max_deg)
 }
 
 /// The surface paper's Alg. 1/2 mean rotation error (degrees) of `found` against `truth`.

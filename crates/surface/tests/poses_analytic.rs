@@ -7,6 +7,7 @@
 #![allow(clippy::print_stdout)]
 
 use fewview_geom::similarity::rotation_angle_deg;
+use fewview_metrics::relative_pose::relative_errors;
 use fewview_scene::Camera;
 use fewview_sfm::photos::FocalSource;
 use fewview_sfm::{Photo, PoseOptions, estimate_poses, write_model};
@@ -39,17 +40,9 @@ fn three_analytic_views_register_with_their_true_relative_poses() {
     let model = estimate_poses(&photos, &PoseOptions::default()).unwrap();
     assert_eq!(model.photos.len(), 3, "{:?}", model.unregistered);
     let found: Vec<Camera> = model.photos.iter().map(|p| p.camera.clone()).collect();
-    let (mut rot, mut dir) = (0.0f64, 0.0f64);
-    for (i, j) in [(0, 1), (1, 2), (0, 2)] {
-        let rel = |c: &[Camera]| {
-            let (a, b) = (&c[i].world_to_camera, &c[j].world_to_camera);
-            let baseline = a.rotation * (b.inverse().translation - a.inverse().translation);
-            (b.rotation * a.rotation.transpose(), baseline.normalize())
-        };
-        let ((rf, bf), (rt, bt)) = (rel(&found), rel(&truth));
-        rot = rot.max(rotation_angle_deg(&(rf * rt.transpose())));
-        dir = dir.max(bf.angle(&bt).to_degrees());
-    }
+    let w2c = |c: &[Camera]| c.iter().map(|c| c.world_to_camera).collect::<Vec<_>>();
+    let errors = relative_errors(&w2c(&found), &w2c(&truth)).unwrap();
+    let (rot, dir) = (errors.rotation_max_deg, errors.direction_max_deg);
     println!(
         "analytic scene, 3 views: worst pair rotation {rot:.4}°, baseline {dir:.4}°, {} points, median {:.3} px",
         model.report.points, model.report.median_error_px
