@@ -771,3 +771,91 @@ fn outputs_that_cannot_be_written_are_refused_before_any_work() {
     );
     assert!(!nodir.exists(), "nothing written");
 }
+
+/// The world-to-camera poses of a COLMAP `images.txt`, by image name.
+fn colmap_poses(images_txt: &Path) -> Vec<(String, [[f64; 4]; 4])> {
+    let text = std::fs::read_to_string(images_txt).unwrap();
+    let lines: Vec<&str> = text.lines().filter(|l| !l.starts_with('#')).collect();
+    lines
+        .chunks(2)
+        .map(|pair| {
+            let f: Vec<&str> = pair[0].split_whitespace().collect();
+            let v: Vec<f64> = f[1..8].iter().map(|x| x.parse().unwrap()).collect();
+            let (w, x, y, z) = (v[0], v[1], v[2], v[3]);
+            let r = [
+                [
+                    1.0 - 2.0 * (y * y + z * z),
+                    2.0 * (x * y - w * z),
+                    2.0 * (x * z + w * y),
+                ],
+                [
+                    2.0 * (x * y + w * z),
+                    1.0 - 2.0 * (x * x + z * z),
+                    2.0 * (y * z - w * x),
+                ],
+                [
+                    2.0 * (x * z - w * y),
+                    2.0 * (y * z + w * x),
+                    1.0 - 2.0 * (x * x + y * y),
+                ],
+            ];
+            let mut m = [[0.0; 4]; 4];
+            for i in 0..3 {
+                m[i][..3].copy_from_slice(&r[i]);
+                m[i][3] = v[4 + i];
+            }
+            m[3][3] = 1.0;
+            (f[9].to_string(), m)
+        })
+        .collect()
+}
+
+/// A dataset folder as the truth: the estimate's cameras are found by name (here a shuffled
+/// subset of the demo capture's own poses, so every error is at its floor), and a name the
+/// dataset lacks is a one-line error.
+#[test]
+fn pose_error_takes_a_dataset_folders_views_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("capture");
+    let (ok, _, err) = fewview(&["demo", "--width", "32", "--write-capture", s(&data)]);
+    assert!(ok, "{err}");
+    let mut poses = colmap_poses(&data.join("sparse/0/images.txt"));
+    assert!(poses.len() >= 4, "{} views", poses.len());
+    poses.reverse();
+    poses.pop();
+    let est = |names: &[(String, [[f64; 4]; 4])]| {
+        let list: Vec<serde_json::Value> = names
+            .iter()
+            .map(|(n, m)| {
+                let k = serde_json::json!({ "fx": 30.0, "fy": 30.0, "cx": 16.0, "cy": 12.0, "width": 32, "height": 24 });
+                serde_json::json!({ "name": n, "intrinsics": k, "world_to_camera": m })
+            })
+            .collect();
+        let path = dir.path().join("est.json");
+        std::fs::write(&path, serde_json::Value::Array(list).to_string()).unwrap();
+        path
+    };
+    let path = est(&poses);
+    let (ok, stdout, err) = fewview(&["pose-error", "--est", s(&path), "--gt", s(&data)]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    let floor = v["rotation_floor_deg_f64"].as_f64().unwrap();
+    assert!(
+        (v["rotation_deg"].as_f64().unwrap() - floor).abs() < 1e-6,
+        "{v}"
+    );
+    assert!(
+        v["relative"]["rotation_max_deg"].as_f64().unwrap() < 1e-4,
+        "{v}"
+    );
+    assert!(
+        v["relative"]["direction_max_deg"].as_f64().unwrap() < 1e-4,
+        "{v}"
+    );
+
+    poses[0].0 = "missing.png".into();
+    let path = est(&poses);
+    let (ok, _, err) = fewview(&["pose-error", "--est", s(&path), "--gt", s(&data)]);
+    assert!(!ok && err.contains("no view named missing.png"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "one-line error: {err}");
+}
