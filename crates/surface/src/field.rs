@@ -25,14 +25,18 @@ use crate::mlp::{Activation, MlpSpec, init_default, init_geometric};
 
 /// Which geometry encoder.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum EncoderKind {
+    /// A multi-resolution hash grid and a small MLP (Instant-NSR, Neuralangelo).
     HashGrid,
+    /// The paper's 8×256 MLP with positional encoding (NeuS).
     NeusMlp,
 }
 
 /// Finite-difference stencil for the SDF gradient.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum FdScheme {
     /// Four taps at the vertices of a regular tetrahedron, `∇s ≈ Σ vₖ s(P + ε vₖ) / (4ε)`

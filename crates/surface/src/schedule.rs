@@ -63,6 +63,7 @@ impl PoseTiming {
 
 /// A named set of pose-schedule settings for [`crate::config::RunConfig`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum Schedule {
     /// The surface paper: no warm-up, poses refined from the first iteration at 10⁻³ → 10⁻⁴.
@@ -79,5 +80,9 @@ pub enum Schedule {
     /// holding the unrefined noisy poses for most of the run would waste it, so the run falls
     /// back to [`PoseTiming::PAPER`] ([`crate::config::RunConfig::pose_timing_without_warmup`]).
     #[default]
+    #[cfg_attr(
+        feature = "cli",
+        value(help = "The epipolar warm-up and adjustments, then a late release of the poses")
+    )]
     Cpu,
 }

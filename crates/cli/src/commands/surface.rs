@@ -83,10 +83,10 @@ pub struct Args {
     /// Start from the perturbed ground truth (`noisy`) or from the dataset's poses (`loaded`).
     #[arg(long, value_enum, default_value_t = InitialPosesArg::Noisy)]
     pub initial_poses: InitialPosesArg,
-    /// Pose schedule: `cpu` (warm-up and adjustments, then a late release; deviations that
-    /// converge on a CPU budget) or `paper` (the surface paper §B.1).
-    #[arg(long, value_enum, default_value_t = ScheduleArg::Cpu)]
-    pub schedule: ScheduleArg,
+    /// Pose schedule (`cpu`: deviations from the surface paper's §B.1 that converge on a CPU
+    /// budget).
+    #[arg(long, value_enum, default_value_t)]
+    pub schedule: Schedule,
     /// Pose learning rate at the start and end of its decay (default from `--schedule`).
     #[arg(long, value_name = "START,END", value_parser = pose_rates)]
     pub pose_lr: Option<ExpSchedule>,
@@ -142,10 +142,9 @@ pub struct Args {
     /// Bundle-adjust the matches' tracks after the warm-up (default from `--schedule`).
     #[arg(long, value_name = "on|off")]
     pub bundle_adjustment: Option<Toggle>,
-    /// What the warm-up's pairs must form: `rigid` (baseline lengths tied together, e.g.
-    /// chained triangles) or `connected` (any connected graph).
-    #[arg(long, value_enum, default_value_t = ConnectivityArg::Rigid)]
-    pub warmup_connectivity: ConnectivityArg,
+    /// What the warm-up's pairs must form.
+    #[arg(long, value_enum, default_value_t)]
+    pub warmup_connectivity: Connectivity,
     /// Hold the poses fixed for this fraction of the iterations (default from `--schedule`).
     #[arg(long, value_name = "FRACTION")]
     pub pose_start: Option<f64>,
@@ -153,11 +152,11 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Geometry encoder (`neus-mlp`: the paper's 8×256 MLP, slow on a CPU).
-    #[arg(long, value_enum, default_value_t = EncoderArg::HashGrid)]
-    pub encoder: EncoderArg,
+    #[arg(long, value_enum, default_value_t = EncoderKind::HashGrid)]
+    pub encoder: EncoderKind,
     /// Finite-difference stencil of the normals (4 or 6 taps).
-    #[arg(long, value_enum, default_value_t = FdArg::Tetrahedron)]
-    pub fd: FdArg,
+    #[arg(long, value_enum, default_value_t = FdScheme::Tetrahedron)]
+    pub fd: FdScheme,
     /// Coarse samples per ray.
     #[arg(long, default_value_t = 32)]
     pub coarse: usize,
@@ -234,22 +233,6 @@ fn loss_weight(s: &str) -> std::result::Result<(WeightName, f32), String> {
     Ok((name, non_negative_f32(value.trim())?))
 }
 
-/// `--schedule` ([`Schedule`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum ScheduleArg {
-    Cpu,
-    Paper,
-}
-
-impl From<ScheduleArg> for Schedule {
-    fn from(arg: ScheduleArg) -> Self {
-        match arg {
-            ScheduleArg::Cpu => Schedule::Cpu,
-            ScheduleArg::Paper => Schedule::Paper,
-        }
-    }
-}
-
 /// `--initial-poses` ([`InitialPoses`]; the noise σ is `--pose-noise`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum InitialPosesArg {
@@ -271,55 +254,6 @@ impl MatchRefineArg {
             MatchRefineArg::Affine => Some(WarpModel::Affine),
             MatchRefineArg::Quadratic => Some(WarpModel::Quadratic),
             MatchRefineArg::None => None,
-        }
-    }
-}
-
-/// `--warmup-connectivity` ([`Connectivity`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum ConnectivityArg {
-    #[value(alias = "triangles")]
-    Rigid,
-    Connected,
-}
-
-impl From<ConnectivityArg> for Connectivity {
-    fn from(arg: ConnectivityArg) -> Self {
-        match arg {
-            ConnectivityArg::Rigid => Connectivity::Rigid,
-            ConnectivityArg::Connected => Connectivity::Connected,
-        }
-    }
-}
-
-/// `--encoder` ([`EncoderKind`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum EncoderArg {
-    HashGrid,
-    NeusMlp,
-}
-
-impl From<EncoderArg> for EncoderKind {
-    fn from(arg: EncoderArg) -> Self {
-        match arg {
-            EncoderArg::HashGrid => EncoderKind::HashGrid,
-            EncoderArg::NeusMlp => EncoderKind::NeusMlp,
-        }
-    }
-}
-
-/// `--fd` ([`FdScheme`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum FdArg {
-    Tetrahedron,
-    Central,
-}
-
-impl From<FdArg> for FdScheme {
-    fn from(arg: FdArg) -> Self {
-        match arg {
-            FdArg::Tetrahedron => FdScheme::Tetrahedron,
-            FdArg::Central => FdScheme::Central,
         }
     }
 }
@@ -418,13 +352,13 @@ impl Args {
             pose_warmup: switch(self.pose_warmup),
             warmup_min_matches: self.warmup_min_matches,
             warmup_cauchy_px: self.warmup_cauchy,
-            warmup_connectivity: self.warmup_connectivity.into(),
+            warmup_connectivity: self.warmup_connectivity,
             warmup_covariance: switch(self.warmup_covariance),
             global_start: !self.no_global_start,
             bundle_adjustment: switch(self.bundle_adjustment),
             patch_adjustment: switch(self.patch_adjustment),
-            encoder: self.encoder.into(),
-            fd_scheme: self.fd.into(),
+            encoder: self.encoder,
+            fd_scheme: self.fd,
             n_coarse: self.coarse,
             n_importance: self.importance,
             losses: self.loss_switches(),
@@ -440,7 +374,7 @@ impl Args {
 
     /// The run's configuration: `--schedule` with the other flags on top.
     pub fn config(&self) -> anyhow::Result<RunConfig> {
-        Ok(RunConfig::resolve(self.schedule.into(), &self.overrides())?)
+        Ok(RunConfig::resolve(self.schedule, &self.overrides())?)
     }
 
     /// Where the views come from: `--synthetic` or `--data`.

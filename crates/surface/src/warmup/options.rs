@@ -44,6 +44,7 @@ fn yes() -> bool {
 
 /// What the pairs of views with enough matches must form for the warm-up to run.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum Connectivity {
     /// The baseline directions of the pairs fix every camera centre up to one translation and
@@ -53,12 +54,20 @@ pub enum Connectivity {
     /// still reads.)
     #[default]
     #[serde(alias = "rigid-triangles")]
+    #[cfg_attr(
+        feature = "cli",
+        value(
+            alias = "triangles",
+            help = "Baseline lengths tied together (e.g. chained triangles)"
+        )
+    )]
     Rigid,
     /// Any connected graph (a chain of three views, a ring). The relative rotations and the
     /// baseline directions are still fixed, but the lengths of baselines outside triangles are
     /// not: they keep the initial poses' values (the damped solver does not move along
     /// directions the cost cannot see) for the joint optimisation to correct. On the wide DTU
     /// triplet, whose outer pair shares almost no matches, this is the only way to run.
+    #[cfg_attr(feature = "cli", value(help = "Any connected graph of pairs"))]
     Connected,
 }
 
