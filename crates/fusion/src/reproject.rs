@@ -34,6 +34,7 @@ pub struct Reference {
 
 /// What decides that a reprojected pixel shows what the virtual camera sees.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum Occlusion {
     /// The virtual view's own rendered depth (our reading of the supplement's occlusion test).

@@ -92,12 +92,11 @@ pub struct Args {
     /// pseudo ground truth of l1-virtual and poisson) is built from them.
     #[arg(long)]
     pub match_exposure: bool,
-    /// What decides that a photo reprojected into a virtual view shows what that view sees:
-    /// `own-depth` (the virtual view's rendered depth must agree; a floater there hides the
-    /// photos behind it from the loss) or `meshes` (the two photos' meshes against each other,
-    /// whatever the virtual view renders in front).
-    #[arg(long, value_enum, default_value_t = OcclusionArg::OwnDepth)]
-    pub occlusion: OcclusionArg,
+    /// What decides that a photo reprojected into a virtual view shows what that view sees
+    /// (with `own-depth`, a floater in the virtual view hides the photos behind it from the
+    /// loss; `meshes` ignores what the virtual view renders in front).
+    #[arg(long, value_enum, default_value_t)]
+    pub occlusion: Occlusion,
     /// Skip the transition video and its scores.
     #[arg(long)]
     pub no_transition: bool,
@@ -123,22 +122,6 @@ pub struct Args {
     /// (same dataset flags), e.g. after a change of the scores.
     #[arg(long, conflicts_with_all = ["resume", "no_transition"])]
     pub rescore: bool,
-}
-
-/// `--occlusion`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum OcclusionArg {
-    OwnDepth,
-    Meshes,
-}
-
-impl From<OcclusionArg> for Occlusion {
-    fn from(a: OcclusionArg) -> Self {
-        match a {
-            OcclusionArg::OwnDepth => Self::OwnDepth,
-            OcclusionArg::Meshes => Self::Meshes,
-        }
-    }
 }
 
 fn parse_variant(s: &str) -> Result<Variant, String> {
@@ -205,7 +188,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         refresh_interval: args.refresh,
         match_exposure: args.match_exposure,
         reproject: ReprojectOptions {
-            occlusion: args.occlusion.into(),
+            occlusion: args.occlusion,
             ..ReprojectOptions::default()
         },
         ..FusionConfig::default()
