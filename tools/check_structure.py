@@ -34,7 +34,6 @@ MAX_COMMAND_LINES = 400
 CLI_EXCEPTIONS = {
     "lines:surface.rs",
     "lines:bench.rs",
-    "lines:fusion.rs",
 }
 
 ROOT = Path(__file__).resolve().parent.parent
