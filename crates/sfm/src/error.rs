@@ -17,9 +17,6 @@ pub enum SfmError {
     /// the file).
     #[error(transparent)]
     Scene(#[from] fewview_scene::SceneError),
-    /// `cameras.json` that cannot be written (the message names the file).
-    #[error(transparent)]
-    Geom(#[from] fewview_geom::GeomError),
     /// A learned matcher's weights that exist but cannot be loaded (the message names the file).
     #[error("{0}")]
     Matcher(String),
