@@ -772,40 +772,15 @@ fn outputs_that_cannot_be_written_are_refused_before_any_work() {
     assert!(!nodir.exists(), "nothing written");
 }
 
-/// The world-to-camera poses of a COLMAP `images.txt`, by image name.
+/// The world-to-camera poses (row-major 4×4) of a COLMAP `images.txt`, by image name.
 fn colmap_poses(images_txt: &Path) -> Vec<(String, [[f64; 4]; 4])> {
-    let text = std::fs::read_to_string(images_txt).unwrap();
-    let lines: Vec<&str> = text.lines().filter(|l| !l.starts_with('#')).collect();
-    lines
-        .chunks(2)
-        .map(|pair| {
-            let f: Vec<&str> = pair[0].split_whitespace().collect();
-            let v: Vec<f64> = f[1..8].iter().map(|x| x.parse().unwrap()).collect();
-            let (w, x, y, z) = (v[0], v[1], v[2], v[3]);
-            let r = [
-                [
-                    1.0 - 2.0 * (y * y + z * z),
-                    2.0 * (x * y - w * z),
-                    2.0 * (x * z + w * y),
-                ],
-                [
-                    2.0 * (x * y + w * z),
-                    1.0 - 2.0 * (x * x + z * z),
-                    2.0 * (y * z - w * x),
-                ],
-                [
-                    2.0 * (x * z - w * y),
-                    2.0 * (y * z + w * x),
-                    1.0 - 2.0 * (x * x + y * y),
-                ],
-            ];
-            let mut m = [[0.0; 4]; 4];
-            for i in 0..3 {
-                m[i][..3].copy_from_slice(&r[i]);
-                m[i][3] = v[4 + i];
-            }
-            m[3][3] = 1.0;
-            (f[9].to_string(), m)
+    let images = fewview_scene::colmap::text::read_images(images_txt).unwrap();
+    images
+        .iter()
+        .map(|image| {
+            let m = image.world_to_camera().unwrap().to_matrix4();
+            let rows = std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]));
+            (image.name.clone(), rows)
         })
         .collect()
 }

@@ -7,6 +7,7 @@
 //! `R_i (c_j − c_i) / ‖c_j − c_i‖` with `c = −Rᵀ t`. The rotation error is the angle of
 //! `R_ij,found R_ij,trueᵀ`; the direction error the angle between the two unit baselines.
 
+use fewview_geom::similarity::rotation_angle_deg;
 use fewview_scene::Se3;
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
@@ -39,18 +40,21 @@ pub fn relative_errors(found: &[Se3], truth: &[Se3]) -> Result<RelativeErrors, P
         for j in i + 1..found.len() {
             let (rf, bf) = relative(&found[i], &found[j]);
             let (rt, bt) = relative(&truth[i], &truth[j]);
-            rotations.push(angle_deg(&(rf * rt.transpose())));
+            rotations.push(rotation_angle_deg(&(rf * rt.transpose())));
             if let (Some(bf), Some(bt)) = (bf, bt) {
                 directions.push(bf.angle(&bt).to_degrees());
             }
         }
     }
+    let pairs = rotations.len();
+    let (rotation_median_deg, rotation_max_deg) = median_and_max(rotations);
+    let (direction_median_deg, direction_max_deg) = median_and_max(directions);
     Ok(RelativeErrors {
-        pairs: rotations.len(),
-        rotation_median_deg: median(&mut rotations.clone()),
-        rotation_max_deg: rotations.iter().copied().fold(0.0, f64::max),
-        direction_median_deg: median(&mut directions.clone()),
-        direction_max_deg: directions.iter().copied().fold(0.0, f64::max),
+        pairs,
+        rotation_median_deg,
+        rotation_max_deg,
+        direction_median_deg,
+        direction_max_deg,
     })
 }
 
@@ -63,26 +67,16 @@ fn relative(i: &Se3, j: &Se3) -> (Matrix3<f64>, Option<Vector3<f64>>) {
     (j.rotation * i.rotation.transpose(), direction)
 }
 
-/// The angle of a rotation matrix, degrees (from its trace, clamped to `[−1, 1]`).
-fn angle_deg(r: &Matrix3<f64>) -> f64 {
-    ((r.trace() - 1.0) / 2.0)
-        .clamp(-1.0, 1.0)
-        .acos()
-        .to_degrees()
-}
-
-/// The median (the mean of the middle two for an even count); 0 for none.
-fn median(values: &mut [f64]) -> f64 {
-    if values.is_empty() {
-        return 0.0;
-    }
+/// The median (the mean of the middle two for an even count) and the largest; 0 for none.
+fn median_and_max(mut values: Vec<f64>) -> (f64, f64) {
     values.sort_by(f64::total_cmp);
     let n = values.len();
-    if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    }
+    let median = match n {
+        0 => 0.0,
+        _ if n % 2 == 1 => values[n / 2],
+        _ => 0.5 * (values[n / 2 - 1] + values[n / 2]),
+    };
+    (median, values.last().copied().unwrap_or(0.0))
 }
 
 #[cfg(test)]
