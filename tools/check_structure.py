@@ -202,37 +202,49 @@ def resolve(root, current, parts, modules):
     return None
 
 
-def crate_graph(crate):
+def crate_modules(crate, keep=lambda path: True):
+    """Each kept file's module with its path and code (comments, strings and test items
+    blanked), and every module of the crate, inline ones included."""
     files = {}
     for path in source_files(crate):
         mod = module_of(crate, path)
-        if mod is None:
-            continue
-        files[tuple(mod)] = without_test_items(strip_comments_and_strings(path.read_text()))
+        if mod is not None and keep(path):
+            code = without_test_items(strip_comments_and_strings(path.read_text()))
+            files[tuple(mod)] = (path, code)
     modules = set(files)
     # Inline modules (other than the cut-out tests) are modules of their own file.
-    for mod, code in list(files.items()):
-        for name, _, _ in inline_modules(code):
-            modules.add(mod + (name,))
+    for mod, (_, code) in files.items():
+        for inline, _, _ in inline_modules(code):
+            modules.add(mod + (inline,))
+    return files, modules
+
+
+def module_paths(mod, code, modules):
+    """`(here, target)` for every `use` and path in the code of file module `mod`: the module
+    the path stands in (an inline module of the file, or `mod`) and the module it names."""
+    spans = inline_modules(code)
+
+    def owner(pos):
+        for inline, s, e in spans:
+            if s <= pos <= e:
+                return mod + (inline,)
+        return mod
+
+    for m in USE_RE.finditer(code):
+        here = owner(m.start())
+        for parts in use_paths(m.group(2)):
+            yield here, resolve(m.group(1), here, parts, modules)
+    for m in PATH_RE.finditer(code):
+        here = owner(m.start())
+        parts = [p.strip() for p in m.group(2).split("::") if p.strip()]
+        yield here, resolve(m.group(1), here, parts, modules)
+
+
+def crate_graph(crate):
+    files, modules = crate_modules(crate)
     edges = {m: set() for m in modules}
-    for mod, code in files.items():
-        spans = inline_modules(code)
-
-        def owner(pos):
-            for name, s, e in spans:
-                if s <= pos <= e:
-                    return mod + (name,)
-            return mod
-
-        for m in USE_RE.finditer(code):
-            here = owner(m.start())
-            for parts in use_paths(m.group(2)):
-                target = resolve(m.group(1), here, parts, modules)
-                add_edge(edges, here, target)
-        for m in PATH_RE.finditer(code):
-            here = owner(m.start())
-            parts = [p.strip() for p in m.group(2).split("::") if p.strip()]
-            target = resolve(m.group(1), here, parts, modules)
+    for mod, (_, code) in files.items():
+        for here, target in module_paths(mod, code, modules):
             add_edge(edges, here, target)
     return edges
 
@@ -319,33 +331,13 @@ def name(mod):
 
 def upward_imports(crate):
     """(file, ancestor module) of every path in a file's own code (not its inline modules',
-    which may use their file) that names a module above the file."""
-    files = {}
-    for path in source_files(crate):
-        mod = module_of(crate, path)
-        test_file = path.stem == "tests" or path.stem.endswith("_tests")
-        if mod is not None and not test_file:
-            code = without_test_items(strip_comments_and_strings(path.read_text()))
-            files[tuple(mod)] = (path, code)
-    modules = set(files)
-    for mod, (_, code) in list(files.items()):
-        for inline, _, _ in inline_modules(code):
-            modules.add(mod + (inline,))
+    which may use their file) that names a module above the file. Test files are not read."""
+    not_tests = lambda path: path.stem != "tests" and not path.stem.endswith("_tests")  # noqa: E731
+    files, modules = crate_modules(crate, not_tests)
     found = set()
     for mod, (path, code) in files.items():
-        spans = inline_modules(code)
-        outside = lambda pos: not any(s <= pos <= e for _, s, e in spans)  # noqa: E731
-        hits = [
-            (m.start(), m.group(1), parts)
-            for m in USE_RE.finditer(code)
-            for parts in use_paths(m.group(2))
-        ] + [
-            (m.start(), m.group(1), [p.strip() for p in m.group(2).split("::") if p.strip()])
-            for m in PATH_RE.finditer(code)
-        ]
-        for pos, root, parts in hits:
-            target = resolve(root, mod, parts, modules)
-            if outside(pos) and target is not None and target != mod and target == mod[: len(target)]:
+        for here, target in module_paths(mod, code, modules):
+            if here == mod and target is not None and target != mod and target == mod[: len(target)]:
                 found.add((path.relative_to(ROOT).as_posix(), name(target)))
     return found
 
