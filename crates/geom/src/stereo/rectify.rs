@@ -478,9 +478,10 @@ struct Canvas {
 /// therefore turn, loses no part of either image), at most [`MAX_CANVAS_SCALE`] times the first
 /// image per axis around the box's centre, with a margin of [`CANVAS_MARGIN`] pixels so that
 /// every original pixel centre has rectified neighbours on all sides. When the two images lie
-/// so far apart along the rows that their joint box exceeds that limit (cameras turned towards
-/// each other), each rectified image is instead centred on its own image's box: one width, one
-/// row of principal points, two `cx`.
+/// so far apart along the rows that the clipped joint canvas would keep less than
+/// [`MIN_KEPT_WIDTH`] of either image (cameras turned far towards each other), each rectified
+/// image is instead centred on its own image's box: one width, one row of principal points,
+/// two `cx`.
 fn canvas(f: f64, rotation: &Matrix3<f64>, first: &Camera, second: &Camera) -> Canvas {
     let boxes = [first, second].map(|c| image_box(f, rotation, c));
     let joint = |a: usize| {
@@ -496,7 +497,7 @@ fn canvas(f: f64, rotation: &Matrix3<f64>, first: &Camera, second: &Camera) -> C
     );
     let (height, cy) = fit(joint(1), height_limit);
     let (x_lo, x_hi) = joint(0);
-    let (width, cx) = if x_hi - x_lo <= width_limit {
+    let (width, cx) = if keeps_most(&boxes, (x_lo, x_hi), width_limit) {
         let (width, cx) = fit((x_lo, x_hi), width_limit);
         (width, [cx, cx])
     } else {
@@ -511,6 +512,24 @@ fn canvas(f: f64, rotation: &Matrix3<f64>, first: &Camera, second: &Camera) -> C
         width: width as u32,
         height: height as u32,
     }
+}
+
+/// The least fraction of each image's rectified width a shared canvas must keep.
+///
+/// Pairs that clip a little (DTU's 40° pairs lose their outer image borders) keep the shared
+/// canvas, the standard form; on DTU's wide triplets the per-image canvas gave the stereo start
+/// more floaters (docs/experiments.md).
+const MIN_KEPT_WIDTH: f64 = 0.5;
+
+/// Whether the middle `limit` pixels of the joint span `(lo, hi)` keep at least
+/// [`MIN_KEPT_WIDTH`] of each image's box.
+fn keeps_most(boxes: &[ImageBox; 2], (lo, hi): (f64, f64), limit: f64) -> bool {
+    let centre = 0.5 * (lo + hi);
+    let (c_lo, c_hi) = (centre - 0.5 * limit, centre + 0.5 * limit);
+    boxes.iter().all(|b| {
+        let kept = (b.hi[0].min(c_hi) - b.lo[0].max(c_lo)).max(0.0);
+        kept >= MIN_KEPT_WIDTH * (b.hi[0] - b.lo[0])
+    })
 }
 
 /// The canvas extent (with its margin) and principal point that hold the span `(lo, hi)` of one

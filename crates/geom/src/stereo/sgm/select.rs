@@ -22,6 +22,7 @@ fn select_row(s: &[i16], layout: &Layout, p: &Resolved, out: &mut [i16]) {
     // For each right pixel: the lowest cost any left pixel matched it with, and that disparity.
     let mut right_cost = vec![i16::MAX; w];
     let mut right_disp = vec![invalid; w];
+    let edges = claimable_columns(w, p);
     // Right to left, so that among equal costs the rightmost left pixel claims a right pixel.
     for i in (0..layout.columns).rev() {
         let sp = &s[i * d..(i + 1) * d];
@@ -31,15 +32,7 @@ fn select_row(s: &[i16], layout: &Layout, p: &Resolved, out: &mut [i16]) {
         }
         let x = layout.x0 + i;
         let xr = x as i64 - best as i64 - p.min_d as i64;
-        // With `Border::Partial`, a match whose block (with its Sobel neighbours) reaches past
-        // the right image's left edge is dropped: near that edge, pixels whose true match lies
-        // outside the right image have only wrong candidates, and no right pixel may claim them
-        // to fail the check below. (OpenCV's columns never come this close.)
-        let inner = match p.border {
-            Border::Partial => p.half_block as i64 + 1,
-            Border::OpenCv => 0,
-        };
-        if xr < inner || xr >= w as i64 {
+        if !(edges.0..edges.1).contains(&xr) {
             continue;
         }
         let xr = xr as usize;
@@ -50,6 +43,24 @@ fn select_row(s: &[i16], layout: &Layout, p: &Resolved, out: &mut [i16]) {
         out[x] = (sub_pixel(sp, best) + p.min_d * DISP_SCALE) as i16;
     }
     left_right_check(out, &right_disp, layout, p, invalid);
+}
+
+/// The right image's columns a left pixel's match may land in. With `Border::Partial`, a match
+/// whose block (with its Sobel neighbours) reaches past an edge of the right image that the
+/// candidates can cross is dropped: near that edge, pixels whose true match lies outside the
+/// right image have only wrong candidates, and no right pixel may claim them to fail the check
+/// below. Positive disparities cross the left edge; negative ones (a rectification with
+/// per-image principal points) cross the right edge. (OpenCV's columns never come this close.)
+fn claimable_columns(w: usize, p: &Resolved) -> (i64, i64) {
+    let w = w as i64;
+    let inner = match p.border {
+        Border::Partial => p.half_block as i64 + 1,
+        Border::OpenCv => return (0, w),
+    };
+    let max_d = p.min_d as i64 + p.d as i64 - 1;
+    let lo = if max_d > 0 { inner } else { 0 };
+    let hi = if p.min_d < 0 { w - inner } else { w };
+    (lo, hi)
 }
 
 /// The first disparity index of the smallest cost, and that cost.

@@ -81,6 +81,55 @@ fn a_shifted_texture_gives_its_shift_everywhere_matched() {
 }
 
 #[test]
+fn a_texture_shifted_right_gives_its_negative_shift_and_no_match_past_the_right_edge() {
+    // A rectification with one principal point per image gives negative disparities: the
+    // right view sees the texture moved to the right. Left pixels near the right edge then
+    // have their true match outside the right image, and must stay unmatched rather than take
+    // a wrong candidate.
+    let (w, h, channels, shift) = (120, 60, 3, 7);
+    let left = texture(w, h, channels, 5);
+    let mut right = vec![0u8; left.len()];
+    for y in 0..h {
+        for x in 0..w {
+            let src = x.saturating_sub(shift);
+            for c in 0..channels {
+                right[(y * w + x) * channels + c] = left[(y * w + src) * channels + c];
+            }
+        }
+    }
+    let l = GrayOrRgb::new(w, h, channels, &left).unwrap();
+    let r = GrayOrRgb::new(w, h, channels, &right).unwrap();
+    let params = SgmParams {
+        min_disparity: -32,
+        num_disparities: 32,
+        ..Default::default()
+    };
+    let disp = match_left(&l, &r, &params).unwrap();
+    let mut matched = 0;
+    for y in 0..h {
+        for x in 0..w {
+            match disp.get(x, y) {
+                Some(d) => {
+                    assert!(
+                        x + shift < w,
+                        "({x}, {y}): matched past the right edge ({d})"
+                    );
+                    // The leftmost columns see the right view's replicated border.
+                    let left_border = x < shift + 3;
+                    assert!(
+                        left_border || (d + shift as f32).abs() < 0.25,
+                        "({x}, {y}): {d}"
+                    );
+                    matched += 1;
+                }
+                None => assert!(x < shift + 3 || x + shift + 3 >= w, "({x}, {y}) lost"),
+            }
+        }
+    }
+    assert!(matched as f64 > 0.8 * (w * h) as f64, "{matched}");
+}
+
+#[test]
 fn median_matches_a_naive_sort_with_replicated_borders() {
     let (w, h) = (7, 5);
     let mut rng = StdRng::seed_from_u64(1);
