@@ -19,7 +19,7 @@ else
   echo "data tests: off (set FEWVIEW_DATA to ../shared/data to run them)"
 fi
 
-cargo test --release --workspace -- "${extra[@]}" "$@"
+cargo test --release --workspace --no-fail-fast -- "${extra[@]}" "$@"
 
 # The GPU code (feature `gpu`, off in the workspace build), on the first adapter wgpu finds
 # (Mesa's lavapipe on a machine without a GPU): the rasterizer's parity tests against the CPU

@@ -8,7 +8,7 @@ mod common;
 
 use std::path::Path;
 
-use fewview_human::depth::{DepthInput, StereoSettings};
+use fewview_human::depth::{DepthInput, StereoPartner, StereoSettings};
 use fewview_human::depth_report::{DepthReportConfig, measure};
 use fewview_human::train::prepare::{
     DepthSettings, Framing, InferenceInputs, frame_hull, hull_config, prepare_frame,
@@ -57,7 +57,10 @@ fn seq_a_stereo_depth_against_exact_depth() {
         size: [128, 256],
         crop_margin: 0.1,
         hull_voxel: 0.01,
-        stereo: StereoSettings::default(),
+        stereo: StereoSettings {
+            partner: StereoPartner::Nearest,
+            ..StereoSettings::default()
+        },
     };
     let (report, prepared) = measure(&inputs, &config).unwrap();
     println!("{}", serde_json::to_string(&report).unwrap());
