@@ -25,7 +25,7 @@
 use std::collections::HashMap;
 
 use fewview_scene::{Intrinsics, Se3};
-use nalgebra::{DMatrix, Matrix2x3, Matrix3, Vector2, Vector3};
+use nalgebra::{DMatrix, Matrix2, Matrix2x3, Matrix3, Vector2, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -47,6 +47,11 @@ pub struct BundleOptions {
     /// factor (photos of one camera; the surface method's calibrated views keep theirs).
     #[serde(default)]
     pub refine_focal: bool,
+    /// Also adjust one radial distortion coefficient shared by all views, COLMAP's
+    /// `SIMPLE_RADIAL` model: normalised coordinates `x` are seen at `x (1 + k1 |x|²)`
+    /// (photos of one camera whose lens bends straight lines; started at 0).
+    #[serde(default)]
+    pub refine_radial: bool,
 }
 
 impl Default for BundleOptions {
@@ -57,6 +62,7 @@ impl Default for BundleOptions {
             tolerance: 1e-9,
             min_tracks: 30,
             refine_focal: false,
+            refine_radial: false,
         }
     }
 }
@@ -80,6 +86,9 @@ pub struct BundleReport {
     /// With [`BundleOptions::refine_focal`]: the factor the focal lengths were multiplied by.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub focal_scale: Option<f64>,
+    /// With [`BundleOptions::refine_radial`]: the radial coefficient `k1`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radial_k1: Option<f64>,
 }
 
 /// A point seen in several views: (view, pixel) pairs, one per view.
@@ -139,15 +148,21 @@ pub fn tracks_from_matches(matches: &[Match]) -> Vec<Track> {
         .collect()
 }
 
-/// The cameras' intrinsic matrices and their inverses.
+/// The cameras' intrinsic matrices, their inverses and the shared radial coefficient.
 struct Cameras {
     k: Vec<Matrix3<f64>>,
     k_inv: Vec<Matrix3<f64>>,
+    k1: f64,
 }
 
 impl Cameras {
     /// `None` unless every focal length is positive (the only way a pinhole `K` is singular).
     fn new(intrinsics: &[Intrinsics]) -> Option<Self> {
+        Self::with_radial(intrinsics, 0.0)
+    }
+
+    /// The cameras of `intrinsics` seen through a `SIMPLE_RADIAL` lens of coefficient `k1`.
+    fn with_radial(intrinsics: &[Intrinsics], k1: f64) -> Option<Self> {
         if !intrinsics.iter().all(|i| i.fx > 0.0 && i.fy > 0.0) {
             return None;
         }
@@ -169,7 +184,23 @@ impl Cameras {
                 )
             })
             .collect();
-        Some(Self { k, k_inv })
+        Some(Self { k, k_inv, k1 })
+    }
+
+    /// The normalised coordinates of pixel `p` of view `v`: `K⁻¹ p`, with the lens's bend
+    /// undone by fixed-point iteration (`x = x_d / (1 + k1 |x|²)`, which converges for the
+    /// moderate coefficients of photo lenses).
+    fn normalised(&self, v: usize, p: &Vector2<f64>) -> Vector2<f64> {
+        let d = self.k_inv[v] * Vector3::new(p.x, p.y, 1.0);
+        let distorted = Vector2::new(d.x, d.y);
+        if self.k1 == 0.0 {
+            return distorted;
+        }
+        let mut x = distorted;
+        for _ in 0..20 {
+            x = distorted / (1.0 + self.k1 * x.norm_squared());
+        }
+        x
     }
 
     /// The pixel of world point `x` in view `v`, and the 2 × 3 Jacobian of that pixel with
@@ -186,10 +217,18 @@ impl Cameras {
         }
         let k = &self.k[v];
         let (fx, fy) = (k[(0, 0)], k[(1, 1)]);
-        let pixel = Vector2::new(fx * c.x / c.z + k[(0, 2)], fy * c.y / c.z + k[(1, 2)]);
-        let z2 = c.z * c.z;
-        let jac = Matrix2x3::new(fx / c.z, 0.0, -fx * c.x / z2, 0.0, fy / c.z, -fy * c.y / z2);
-        Some((pixel, jac, c))
+        let (x, y) = (c.x / c.z, c.y / c.z);
+        let bend = 1.0 + self.k1 * (x * x + y * y);
+        let pixel = Vector2::new(fx * x * bend + k[(0, 2)], fy * y * bend + k[(1, 2)]);
+        // d(pixel)/d(x, y) through the lens, times d(x, y)/d(camera point).
+        let lens = Matrix2::new(
+            fx * (bend + 2.0 * self.k1 * x * x),
+            fx * 2.0 * self.k1 * x * y,
+            fy * 2.0 * self.k1 * x * y,
+            fy * (bend + 2.0 * self.k1 * y * y),
+        );
+        let perspective = Matrix2x3::new(1.0 / c.z, 0.0, -x / c.z, 0.0, 1.0 / c.z, -y / c.z);
+        Some((pixel, lens * perspective, c))
     }
 }
 
@@ -198,7 +237,7 @@ impl Cameras {
 fn triangulate(cameras: &Cameras, poses: &[Se3], track: &Track) -> Option<Vector3<f64>> {
     let mut a = DMatrix::<f64>::zeros(2 * track.observations.len(), 4);
     for (i, (v, p)) in track.observations.iter().enumerate() {
-        let x = cameras.k_inv[*v] * Vector3::new(p.x, p.y, 1.0);
+        let x = cameras.normalised(*v, p);
         let (r, t) = (&poses[*v].rotation, &poses[*v].translation);
         for (row, coordinate) in [(2 * i, 0), (2 * i + 1, 1)] {
             for j in 0..3 {
@@ -269,17 +308,66 @@ pub fn scaled_focal(intrinsics: &[Intrinsics], scale: f64) -> Vec<Intrinsics> {
         .collect()
 }
 
+/// The shared lens parameters being adjusted: the logarithm of the focal factor and `k1`
+/// (`None`: held).
+#[derive(Clone, Copy, Debug, Default)]
+struct Lens {
+    log_focal: Option<f64>,
+    k1: Option<f64>,
+}
+
+impl Lens {
+    /// The columns of the adjusted lens parameters after `pose_parameters` pose columns.
+    fn columns(&self, pose_parameters: usize) -> LensColumns {
+        let focal = self.log_focal.map(|_| pose_parameters);
+        let radial = self
+            .k1
+            .map(|_| pose_parameters + usize::from(focal.is_some()));
+        LensColumns { focal, radial }
+    }
+
+    /// The lens moved by the lens entries of a camera step.
+    fn stepped(&self, columns: &LensColumns, step: &[f64]) -> Self {
+        Self {
+            log_focal: self
+                .log_focal
+                .map(|f| f + columns.focal.map_or(0.0, |c| step[c])),
+            k1: self.k1.map(|k| k + columns.radial.map_or(0.0, |c| step[c])),
+        }
+    }
+
+    /// The cameras of the intrinsics `base` seen through this lens.
+    fn cameras(&self, base: &[Intrinsics]) -> Option<Cameras> {
+        let scale = self.log_focal.unwrap_or(0.0).exp();
+        Cameras::with_radial(&scaled_focal(base, scale), self.k1.unwrap_or(0.0))
+    }
+}
+
+/// Where the adjusted lens parameters sit among the camera columns.
+#[derive(Clone, Copy, Debug)]
+struct LensColumns {
+    focal: Option<usize>,
+    radial: Option<usize>,
+}
+
+impl LensColumns {
+    fn count(&self) -> usize {
+        usize::from(self.focal.is_some()) + usize::from(self.radial.is_some())
+    }
+}
+
 /// The weighted normal equations of one track with analytic Jacobians. Camera parameters:
-/// 6 per free view (`6 (view − 1) + k`, twist rotation first), and with `focal_column` the
-/// logarithm of the shared focal factor, which every observation depends on
-/// (`∂pixel/∂log f = (fx x/z, fy y/z)`).
+/// 6 per free view (`6 (view − 1) + k`, twist rotation first), then the adjusted lens
+/// parameters, which every observation depends on: the logarithm of the shared focal factor
+/// (`∂pixel/∂log f = pixel − principal point`) and the radial coefficient
+/// (`∂pixel/∂k1 = (fx x r², fy y r²)` at normalised `(x, y)`, `r² = x² + y²`).
 fn track_system(
     cameras: &Cameras,
     poses: &[Se3],
     track: &Track,
     x: &Vector3<f64>,
     (r, w): (&[f64], &[f64]),
-    focal_column: Option<usize>,
+    lens: LensColumns,
 ) -> BlockSystem {
     let mut v = Matrix3::zeros();
     let mut g = Vector3::zeros();
@@ -311,9 +399,17 @@ fn track_system(
                 jac.push((6 * (view - 1) + k, column));
             }
         }
-        if let Some(f) = focal_column {
-            let k = &cameras.k[*view];
+        let k = &cameras.k[*view];
+        if let Some(f) = lens.focal {
             jac.push((f, Vector2::new(pixel.x - k[(0, 2)], pixel.y - k[(1, 2)])));
+        }
+        if let Some(column) = lens.radial {
+            let (nx, ny) = (c.x / c.z, c.y / c.z);
+            let r2 = nx * nx + ny * ny;
+            jac.push((
+                column,
+                Vector2::new(k[(0, 0)] * nx * r2, k[(1, 1)] * ny * r2),
+            ));
         }
         for (column, j) in &jac {
             columns.push(*column);
@@ -345,19 +441,18 @@ fn track_system(
 }
 
 /// One iteration: residuals and Cauchy weights (at `scale` pixels) at the current estimate
-/// (the intrinsics `base` with their focal lengths times `exp(log_focal)`), the tracks'
-/// systems, then damped steps until one lowers the weighted cost (the damping rising ten-fold
-/// each time it does not) or the damping exceeds 10⁶. `log_focal` `None`: the focal is held.
+/// (the intrinsics `base` seen through `lens`), the tracks' systems, then damped steps until
+/// one lowers the weighted cost (the damping rising ten-fold each time it does not) or the
+/// damping exceeds 10⁶.
 fn iterate(
     base: &[Intrinsics],
-    log_focal: Option<f64>,
+    lens: Lens,
     (tracks, points): (&[Track], &[Vector3<f64>]),
     poses: &[Se3],
     scale: f64,
     lambda: &mut f64,
 ) -> LmStep<Vector3<f64>> {
-    let cameras_at = |log_focal: f64| Cameras::new(&scaled_focal(base, log_focal.exp()));
-    let Some(cameras) = cameras_at(log_focal.unwrap_or(0.0)) else {
+    let Some(cameras) = lens.cameras(base) else {
         return LmStep {
             cost_before: f64::INFINITY,
             cost_after: f64::INFINITY,
@@ -382,14 +477,14 @@ fn iterate(
         .map(|(r, w)| weighted_cost(r, w))
         .sum();
     let pose_parameters = 6 * (poses.len() - 1);
-    let focal_column = log_focal.map(|_| pose_parameters);
+    let columns = lens.columns(pose_parameters);
     let systems: Vec<BlockSystem> = tracks
         .par_iter()
         .zip(points)
         .zip(residuals.par_iter().zip(&weights))
-        .map(|((t, x), (r, w))| track_system(&cameras, poses, t, x, (r, w), focal_column))
+        .map(|((t, x), (r, w))| track_system(&cameras, poses, t, x, (r, w), columns))
         .collect();
-    let free = pose_parameters + usize::from(focal_column.is_some());
+    let free = pose_parameters + columns.count();
     let system = CameraSystem::new(free, &systems);
     damped_step(
         &system,
@@ -399,8 +494,7 @@ fn iterate(
         (lambda, 1e-9),
         |x, step| x + step,
         |new_poses, new_points, step| {
-            let moved = focal_column.map(|f| cameras_at(log_focal.unwrap_or(0.0) + step[f]));
-            let Some(cameras) = moved.unwrap_or_else(|| cameras_at(0.0)) else {
+            let Some(cameras) = lens.stepped(&columns, step.as_slice()).cameras(base) else {
                 return f64::INFINITY;
             };
             // Summed in order after the parallel part, so that a run repeats bit for bit.
@@ -475,7 +569,10 @@ pub fn bundle_adjust(
     }
     report.median_px_before = median_error(&cameras, poses, &tracks, &points);
     let mut current = poses.to_vec();
-    let mut log_focal = options.refine_focal.then_some(0.0);
+    let mut lens = Lens {
+        log_focal: options.refine_focal.then_some(0.0),
+        k1: options.refine_radial.then_some(0.0),
+    };
     let mut lambda = 1e-3;
     // The Cauchy scale is set once, from the residuals at the start: recomputed every
     // iteration it would shrink with the fit and keep re-deciding which tracks count.
@@ -485,11 +582,11 @@ pub fn bundle_adjust(
         .filter_map(|(t, x)| reprojection_errors(&cameras, poses, t, x))
         .flatten();
     let scale = (options.cauchy_sigmas * robust_sigma(start_residuals)).max(1e-9);
-    let focal_column = 6 * (poses.len() - 1);
+    let columns = lens.columns(6 * (poses.len() - 1));
     for iteration in 0..options.max_iterations {
         let step = iterate(
             intrinsics,
-            log_focal,
+            lens,
             (&tracks, &points),
             &current,
             scale,
@@ -507,16 +604,16 @@ pub fn bundle_adjust(
         };
         current = poses_after;
         points = points_after;
-        log_focal = log_focal.map(|f| f + camera_step[focal_column]);
+        lens = lens.stepped(&columns, camera_step.as_slice());
         let decrease =
             (step.cost_before - step.cost_after) / step.cost_before.max(f64::MIN_POSITIVE);
         if decrease < options.tolerance {
             break;
         }
     }
-    report.focal_scale = log_focal.map(f64::exp);
-    let adjusted = scaled_focal(intrinsics, report.focal_scale.unwrap_or(1.0));
-    if let Some(cameras) = Cameras::new(&adjusted) {
+    report.focal_scale = lens.log_focal.map(f64::exp);
+    report.radial_k1 = lens.k1;
+    if let Some(cameras) = lens.cameras(intrinsics) {
         report.median_px_after = median_error(&cameras, &current, &tracks, &points);
     }
     (keep_scale(poses, &current), report)
@@ -531,14 +628,16 @@ pub struct TriangulatedTrack {
     pub errors_px: Vec<f64>,
 }
 
-/// The tracks of `matches` triangulated from `poses` (linear triangulation), with their
-/// reprojection errors; tracks that do not triangulate in front of their cameras are left out.
+/// The tracks of `matches` triangulated from `poses` (linear triangulation) through cameras of
+/// `intrinsics` and the radial coefficient `k1` (0: pinhole), with their reprojection errors;
+/// tracks that do not triangulate in front of their cameras are left out.
 pub fn triangulated_tracks(
     intrinsics: &[Intrinsics],
+    k1: f64,
     poses: &[Se3],
     matches: &[Match],
 ) -> Vec<TriangulatedTrack> {
-    let Some(cameras) = Cameras::new(intrinsics) else {
+    let Some(cameras) = Cameras::with_radial(intrinsics, k1) else {
         return Vec::new();
     };
     tracks_from_matches(matches)
@@ -612,7 +711,15 @@ mod tests {
         poses: &[Se3],
         points: &[Vector3<f64>],
     ) -> Vec<Match> {
-        let cameras = Cameras::new(intrinsics).unwrap();
+        exact_matches_through(&Cameras::new(intrinsics).unwrap(), poses, points)
+    }
+
+    /// [`exact_matches`] of the given cameras (with their lens).
+    fn exact_matches_through(
+        cameras: &Cameras,
+        poses: &[Se3],
+        points: &[Vector3<f64>],
+    ) -> Vec<Match> {
         let pixel = |v: usize, x: &Vector3<f64>| {
             let (p, _, _) = cameras.project(v, &poses[v], x).unwrap();
             [p.x as f32, p.y as f32]
@@ -666,8 +773,15 @@ mod tests {
     /// half the cost's gradient, for the point and for each free camera's twist.
     #[test]
     fn the_normal_equations_match_finite_differences_of_the_cost() {
+        for k1 in [0.0, -0.15] {
+            normal_equations_match_finite_differences(k1);
+        }
+    }
+
+    /// [`the_normal_equations_match_finite_differences_of_the_cost`] through a lens `k1`.
+    fn normal_equations_match_finite_differences(k1: f64) {
         let (intrinsics, poses, points) = rig();
-        let cameras = Cameras::new(&intrinsics).unwrap();
+        let cameras = Cameras::with_radial(&intrinsics, k1).unwrap();
         let track = Track {
             observations: (0..3)
                 .map(|v| {
@@ -679,7 +793,11 @@ mod tests {
         let x = points[5] + Vector3::new(0.01, -0.02, 0.015);
         let r = reprojection_errors(&cameras, &poses, &track, &x).unwrap();
         let w = vec![0.9, 0.5, 0.25];
-        let system = track_system(&cameras, &poses, &track, &x, (&r, &w), None);
+        let pinhole = LensColumns {
+            focal: None,
+            radial: None,
+        };
+        let system = track_system(&cameras, &poses, &track, &x, (&r, &w), pinhole);
         let cost = |poses: &[Se3], x: &Vector3<f64>| {
             weighted_cost(
                 &reprojection_errors(&cameras, poses, &track, x).unwrap(),
@@ -756,12 +874,14 @@ mod tests {
         }
     }
 
-    /// The focal column's gradient against central differences of the cost in the logarithm
-    /// of the shared focal factor (summed over the observations that carry it).
+    /// The lens columns' gradients against central differences of the cost in the logarithm
+    /// of the shared focal factor and in `k1` (summed over the observations that carry them),
+    /// through a bent lens.
     #[test]
-    fn the_focal_column_matches_finite_differences_of_the_cost() {
+    fn the_lens_columns_match_finite_differences_of_the_cost() {
         let (intrinsics, poses, points) = rig();
-        let cameras = Cameras::new(&intrinsics).unwrap();
+        let k1 = -0.1;
+        let cameras = Cameras::with_radial(&intrinsics, k1).unwrap();
         let track = Track {
             observations: (0..3)
                 .map(|v| {
@@ -773,28 +893,58 @@ mod tests {
         let x = points[7] + Vector3::new(-0.01, 0.02, 0.01);
         let r = reprojection_errors(&cameras, &poses, &track, &x).unwrap();
         let w = vec![0.8, 0.6, 0.3];
-        let focal = 12;
-        let system = track_system(&cameras, &poses, &track, &x, (&r, &w), Some(focal));
-        let analytic: f64 = system
-            .columns
-            .iter()
-            .zip(&system.gc)
-            .filter(|(c, _)| **c == focal)
-            .map(|(_, g)| g)
-            .sum();
-        let cost = |log_focal: f64| {
-            let cameras = Cameras::new(&scaled_focal(&intrinsics, log_focal.exp())).unwrap();
+        let (focal, radial) = (12, 13);
+        let columns = LensColumns {
+            focal: Some(focal),
+            radial: Some(radial),
+        };
+        let system = track_system(&cameras, &poses, &track, &x, (&r, &w), columns);
+        let analytic = |column: usize| -> f64 {
+            system
+                .columns
+                .iter()
+                .zip(&system.gc)
+                .filter(|(c, _)| **c == column)
+                .map(|(_, g)| g)
+                .sum()
+        };
+        let cost = |log_focal: f64, k1: f64| {
+            let lens = Lens {
+                log_focal: Some(log_focal),
+                k1: Some(k1),
+            };
+            let cameras = lens.cameras(&intrinsics).unwrap();
             weighted_cost(
                 &reprojection_errors(&cameras, &poses, &track, &x).unwrap(),
                 &w,
             )
         };
         let h = 1e-6;
-        let numeric = (cost(h) - cost(-h)) / (4.0 * h);
-        assert!(
-            (numeric - analytic).abs() < 1e-5 * (1.0 + numeric.abs()),
-            "{numeric} vs {analytic}"
-        );
+        for (column, numeric) in [
+            (focal, (cost(h, k1) - cost(-h, k1)) / (4.0 * h)),
+            (radial, (cost(0.0, k1 + h) - cost(0.0, k1 - h)) / (4.0 * h)),
+        ] {
+            let analytic = analytic(column);
+            assert!(
+                (numeric - analytic).abs() < 1e-5 * (1.0 + numeric.abs()),
+                "column {column}: {numeric} vs {analytic}"
+            );
+        }
+    }
+
+    /// Undistorting a distorted pixel gives back the normalised coordinates it came from.
+    #[test]
+    fn normalised_coordinates_undo_the_lens() {
+        let (intrinsics, poses, points) = rig();
+        for k1 in [-0.2, 0.0, 0.15] {
+            let cameras = Cameras::with_radial(&intrinsics, k1).unwrap();
+            for x in &points[..20] {
+                let (pixel, _, c) = cameras.project(1, &poses[1], x).unwrap();
+                let back = cameras.normalised(1, &pixel);
+                let truth = Vector2::new(c.x / c.z, c.y / c.z);
+                assert!((back - truth).norm() < 1e-12, "k1 {k1}: {back} vs {truth}");
+            }
+        }
     }
 
     /// Exact matches, poses turned and the focal lengths 3 % too long: the shared focal comes
@@ -822,6 +972,42 @@ mod tests {
             let error = rotation_angle_deg(&adjusted[v].rotation, &truth[v].rotation);
             assert!(error < 1e-3, "view {v}: {error}°");
         }
+    }
+
+    /// Matches seen through a lens (`k1` = −0.12) and adjusted from a pinhole start with the
+    /// focal lengths 2 % too long: the coefficient, the focal and the poses come back.
+    #[test]
+    fn a_shared_radial_coefficient_is_recovered() {
+        let (intrinsics, truth, points) = rig();
+        let k1 = -0.12;
+        let cameras = Cameras::with_radial(&intrinsics, k1).unwrap();
+        let matches: Vec<Match> = exact_matches_through(&cameras, &truth, &points);
+        let long = scaled_focal(&intrinsics, 1.02);
+        let options = BundleOptions {
+            refine_focal: true,
+            refine_radial: true,
+            ..BundleOptions::default()
+        };
+        let (adjusted, report) = bundle_adjust(&long, &truth, &matches, &options);
+        let got = report.radial_k1.unwrap();
+        assert!((got - k1).abs() < 1e-3 * k1.abs(), "k1 {got} vs {k1}");
+        let factor = report.focal_scale.unwrap();
+        assert!((factor * 1.02 - 1.0).abs() < 1e-4, "focal factor {factor}");
+        assert!(report.median_px_after < 1e-3, "{report:?}");
+        for v in 1..3 {
+            let error = rotation_angle_deg(&adjusted[v].rotation, &truth[v].rotation);
+            assert!(error < 1e-3, "view {v}: {error}°");
+        }
+        // Without the coefficient the same matches leave a pixel-sized residual.
+        let pinhole = BundleOptions {
+            refine_radial: false,
+            ..options
+        };
+        let (_, held) = bundle_adjust(&long, &truth, &matches, &pinhole);
+        assert!(
+            held.median_px_after > 100.0 * report.median_px_after.max(1e-6),
+            "{held:?}"
+        );
     }
 
     #[test]

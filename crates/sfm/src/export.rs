@@ -28,7 +28,10 @@ pub fn write_model(model: &PoseModel, out: &Path) -> Result<Vec<PathBuf>> {
         Err(e) => Err(SfmError::input(&path, format!("cannot write JSON: {e}"))),
     };
     let files = [
-        (sparse.join("cameras.txt"), cameras_txt(&cameras)),
+        (
+            sparse.join("cameras.txt"),
+            cameras_txt(&cameras, model.report.bundle.radial_k1),
+        ),
         (sparse.join("images.txt"), images_txt(model, &camera_of)),
         (sparse.join("points3D.txt"), points_txt(model)),
         json(out.join("transforms.json"), transforms_json(model))?,
@@ -97,20 +100,26 @@ fn distinct_cameras(model: &PoseModel) -> (Vec<usize>, Vec<Intrinsics>) {
     (ids, cameras)
 }
 
-fn cameras_txt(cameras: &[Intrinsics]) -> String {
+/// `cameras.txt`: `PINHOLE` cameras, or with a radial coefficient `SIMPLE_RADIAL` (one focal
+/// length) or `OPENCV` (two, the other coefficients 0).
+fn cameras_txt(cameras: &[Intrinsics], k1: Option<f64>) -> String {
     let mut s = String::from("# CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]\n");
     for (i, k) in cameras.iter().enumerate() {
-        let _ = writeln!(
-            s,
-            "{} PINHOLE {} {} {:.17} {:.17} {:.17} {:.17}",
-            i + 1,
-            k.width,
-            k.height,
-            k.fx,
-            k.fy,
-            k.cx,
-            k.cy
-        );
+        let params = match k1 {
+            None => format!(
+                "PINHOLE {} {} {:.17} {:.17} {:.17} {:.17}",
+                k.width, k.height, k.fx, k.fy, k.cx, k.cy
+            ),
+            Some(k1) if k.fx == k.fy => format!(
+                "SIMPLE_RADIAL {} {} {:.17} {:.17} {:.17} {:.17}",
+                k.width, k.height, k.fx, k.cx, k.cy, k1
+            ),
+            Some(k1) => format!(
+                "OPENCV {} {} {:.17} {:.17} {:.17} {:.17} {:.17} 0 0 0",
+                k.width, k.height, k.fx, k.fy, k.cx, k.cy, k1
+            ),
+        };
+        let _ = writeln!(s, "{} {params}", i + 1);
     }
     s
 }
@@ -170,8 +179,9 @@ fn points_txt(model: &PoseModel) -> String {
     s
 }
 
-/// nerfstudio's `transforms.json`: per-frame pinhole intrinsics and OpenGL camera-to-world
-/// matrices, with the images expected under `images/`.
+/// nerfstudio's `transforms.json`: per-frame intrinsics (`OPENCV`, with the radial coefficient
+/// when one was adjusted) and OpenGL camera-to-world matrices, with the images expected under
+/// `images/`.
 fn transforms_json(model: &PoseModel) -> Value {
     let frames: Vec<_> = model
         .photos
@@ -185,6 +195,7 @@ fn transforms_json(model: &PoseModel) -> Value {
             json!({
                 "file_path": format!("images/{}", p.name),
                 "fl_x": k.fx, "fl_y": k.fy, "cx": k.cx, "cy": k.cy, "w": k.width, "h": k.height,
+                "k1": model.report.bundle.radial_k1.unwrap_or(0.0), "k2": 0.0, "p1": 0.0, "p2": 0.0,
                 "transform_matrix": rows,
             })
         })
@@ -334,5 +345,48 @@ mod tests {
         };
         assert!(count([0.0, 0.0, 1.0]) > 100, "points drawn");
         assert!(count([0.8, 0.1, 0.1]) > 3 * 40, "cameras drawn");
+    }
+
+    /// A model with a radial coefficient says `SIMPLE_RADIAL` (one focal length) or `OPENCV`
+    /// (two), and the scene crate's COLMAP reader finds the same camera and `k1` in it.
+    #[test]
+    fn a_radial_coefficient_reads_back_through_the_colmap_reader() {
+        use fewview_scene::colmap::text::read_cameras;
+        use fewview_scene::distortion::Distortion;
+        use fewview_scene::distortion::models::camera_from_colmap;
+        let square = Intrinsics::centered(300.0, 400, 300);
+        let wide = Intrinsics {
+            fx: 310.0,
+            ..square
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cameras.txt");
+        std::fs::write(&path, cameras_txt(&[square, wide], Some(-0.07))).unwrap();
+        let cameras = read_cameras(&path).unwrap();
+        let models: Vec<&str> = cameras.values().map(|c| c.model.as_str()).collect();
+        assert_eq!(models, ["SIMPLE_RADIAL", "OPENCV"]);
+        for (c, k) in cameras.values().zip([square, wide]) {
+            let lens = camera_from_colmap(&c.model, &c.params, 400, 300).unwrap();
+            assert_eq!(lens.intrinsics, k);
+            match lens.distortion {
+                Some(Distortion::RadialTangential {
+                    radial,
+                    rational,
+                    tangential,
+                }) => {
+                    assert_eq!(radial, [-0.07, 0.0, 0.0, 0.0]);
+                    assert_eq!((rational, tangential), ([0.0; 3], [0.0; 2]));
+                }
+                other => panic!("{}: {other:?}", c.model),
+            }
+        }
+        let pinhole = cameras_txt(&[square], None);
+        assert!(
+            pinhole
+                .lines()
+                .nth(1)
+                .unwrap()
+                .starts_with("1 PINHOLE 400 300")
+        );
     }
 }

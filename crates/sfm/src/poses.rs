@@ -53,7 +53,8 @@ pub struct PoseOptions {
     /// falls back to SIFT, and says so in the report, without its weights.
     pub matcher: MatcherKind,
     /// The bundle adjustment's options; its focal refinement is switched on when all photos
-    /// share one camera (the same size and starting focal length), off otherwise.
+    /// share one camera (the same size and starting focal length), off otherwise, and so is
+    /// its radial coefficient when [`BundleOptions::refine_radial`] asks for it.
     pub bundle: BundleOptions,
     /// Seed of RANSAC.
     pub seed: u64,
@@ -189,13 +190,17 @@ pub fn estimate_poses_with(
         options.seed,
     )
     .map_err(SfmError::NoModel)?;
+    let one_camera = intrinsics.iter().all(|k| *k == intrinsics[0]);
     let bundle_options = BundleOptions {
-        refine_focal: intrinsics.iter().all(|k| *k == intrinsics[0]),
+        refine_focal: one_camera,
+        refine_radial: one_camera && options.bundle.refine_radial,
         ..options.bundle
     };
     let (poses, bundle) = bundle_adjust(&intrinsics, &start.poses, &matches, &bundle_options);
     let intrinsics = scaled_focal(&intrinsics, bundle.focal_scale.unwrap_or(1.0));
-    let (poses, points) = scaled_model(photos, &group, &intrinsics, &poses, &matches, options);
+    let k1 = bundle.radial_k1.unwrap_or(0.0);
+    let (poses, points) =
+        scaled_model(photos, &group, (&intrinsics, k1), &poses, &matches, options);
     let mut errors: Vec<f64> = points.iter().map(|p| p.error_px).collect();
     errors.sort_by(f64::total_cmp);
     let report = PoseReport {
@@ -497,14 +502,14 @@ fn full_intrinsics(photo: &Photo, k: &Intrinsics) -> Intrinsics {
 fn scaled_model(
     photos: &[Photo],
     group: &[usize],
-    intrinsics: &[Intrinsics],
+    (intrinsics, k1): (&[Intrinsics], f64),
     poses: &[Se3],
     matches: &[Match],
     options: &PoseOptions,
 ) -> (Vec<Se3>, Vec<ModelPoint>) {
     let to_first = poses[0].inverse();
     let poses: Vec<Se3> = poses.iter().map(|p| p.compose(&to_first)).collect();
-    let tracks: Vec<_> = triangulated_tracks(intrinsics, &poses, matches)
+    let tracks: Vec<_> = triangulated_tracks(intrinsics, k1, &poses, matches)
         .into_iter()
         .filter(|t| t.errors_px.iter().all(|e| *e <= options.max_error_px))
         .collect();

@@ -8,7 +8,7 @@ use fewview_sfm::photos::DEFAULT_FOV_DEG;
 use std::sync::Mutex;
 
 use fewview_sfm::{
-    FolderOptions, PoseModel, PoseOptions, PoseProgress, PoseStage, poses_for_folder,
+    BundleOptions, FolderOptions, PoseModel, PoseOptions, PoseProgress, PoseStage, poses_for_folder,
 };
 
 use super::output_paths::check_folder;
@@ -46,6 +46,12 @@ pub struct Args {
     /// `lighterglue` (weights from `scripts/setup.sh`; without them SIFT runs, and says so).
     #[arg(long, value_enum, default_value_t = MatcherKind::Classical)]
     pub matcher: MatcherKind,
+    /// Also fit one radial distortion coefficient shared by the photos (COLMAP's
+    /// `SIMPLE_RADIAL`; only when all photos share one camera). The model then says
+    /// `SIMPLE_RADIAL` in `cameras.txt` and `k1` in `transforms.json`, and `train` undistorts
+    /// the photos on loading.
+    #[arg(long)]
+    pub radial: bool,
     /// Seed of RANSAC.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -66,6 +72,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             min_matches: args.min_matches,
             matcher: args.matcher,
             seed: args.seed,
+            bundle: BundleOptions {
+                refine_radial: args.radial,
+                ..BundleOptions::default()
+            },
             ..PoseOptions::default()
         },
     };
@@ -103,6 +113,9 @@ pub fn print_model(model: &PoseModel, fov_deg: f64) {
         "registered {} of {} photos; {} points, median reprojection error {:.3} px",
         r.registered, r.photos, r.points, r.median_error_px
     );
+    if let Some(k1) = r.bundle.radial_k1 {
+        println!("radial distortion k1 {k1:.5} (SIMPLE_RADIAL)");
+    }
 }
 
 /// Runs `f` with a progress callback that shows a bar per stage of pose estimation.
