@@ -12,7 +12,7 @@ use crate::config::RunConfig;
 use crate::error::Result;
 use crate::field::EncoderKind;
 use crate::pipeline::prepare;
-use crate::train::Trainer;
+use crate::train::trainer::Trainer;
 use fewview_scene::cputime::measure;
 
 /// Iterations per second of one configuration.

@@ -9,7 +9,8 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SurfaceError};
-use crate::train::{TrainConfig, TrainState};
+use crate::train::config::TrainConfig;
+use crate::train::state::TrainState;
 
 /// Header of the current format.
 const MAGIC: &[u8] = b"fewview-surface-checkpoint-v3\0";

@@ -9,7 +9,7 @@ use crate::matching::refine::AffineRefineOptions;
 use crate::matching::sift::SiftOptions;
 use crate::patch_adjustment::PatchAdjustmentOptions;
 use crate::schedule::{PoseTiming, Schedule};
-use crate::train::TrainConfig;
+use crate::train::config::TrainConfig;
 use crate::warmup::{WarmupOptions, WarmupReport};
 use fewview_sfm::bundle::BundleOptions;
 

@@ -12,7 +12,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::train::TrainConfig;
+use crate::train::config::TrainConfig;
 use fewview_optim::ExpSchedule;
 
 /// When the poses start to move (a fraction of the iterations) and their learning rate: the

@@ -48,7 +48,9 @@ use crate::checkpoint;
 use crate::config::RunConfig;
 use crate::error::{Result, SurfaceError};
 use crate::schedule::PoseTiming;
-use crate::train::{StepStats, TrainConfig, Trainer};
+use crate::train::config::TrainConfig;
+use crate::train::state::StepStats;
+use crate::train::trainer::Trainer;
 use fewview_sfm::global_start::PairPose;
 
 /// The angle (degrees) between each pair's relative rotation and the true one, `R_b R_aᵀ` of

@@ -13,7 +13,7 @@ use crate::config::RunConfig;
 use crate::error::{Result, SurfaceError};
 use crate::extract::{MeshOptions, final_mesh, render_view};
 use crate::field::Field;
-use crate::train::TrainView;
+use crate::train::state::TrainView;
 
 /// The cameras of `gt` mapped into the reconstruction's world by the inverse of the Alg. 1
 /// alignment `x_gt = s R x_est + t`.

@@ -15,7 +15,7 @@ use crate::matching::{
 };
 use crate::patch_adjustment::{PatchAdjustmentReport, adjust_patches};
 use crate::pose::perturb_poses;
-use crate::train::TrainView;
+use crate::train::state::TrainView;
 use crate::warmup::{WarmupReport, epipolar_warmup, matches_tie_the_views};
 use fewview_sfm::bundle::{BundleReport, bundle_adjust};
 

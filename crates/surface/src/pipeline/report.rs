@@ -6,7 +6,7 @@ use serde::Serialize;
 use crate::matching::MatchPrecision;
 use crate::patch_adjustment::PatchAdjustmentReport;
 use crate::schedule::PoseTiming;
-use crate::train::StepStats;
+use crate::train::state::StepStats;
 use crate::warmup::WarmupReport;
 use fewview_sfm::bundle::BundleReport;
 
