@@ -33,7 +33,7 @@ pub enum Toggle {
     Off,
 }
 
-/// A loss term `--no-loss` switches off ([`LossSwitches`]; `gc`: geometric consistency).
+/// A loss term `--no-loss` switches off ([`LossSwitches`](fewview_surface::LossSwitches); `gc`: geometric consistency).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum LossTerm {
     Matching,
@@ -44,7 +44,7 @@ pub enum LossTerm {
     Eikonal,
 }
 
-/// The λ that `--lambda NAME=VALUE` sets ([`LossWeights`]).
+/// The λ that `--lambda NAME=VALUE` sets ([`LossWeights`](fewview_surface::LossWeights)).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum WeightName {
     Mc,
@@ -65,7 +65,7 @@ pub(super) fn loss_weight(s: &str) -> std::result::Result<(WeightName, f32), Str
     Ok((name, non_negative_f32(value.trim())?))
 }
 
-/// `--initial-poses` ([`InitialPoses`]; the noise σ is `--pose-noise`).
+/// `--initial-poses` ([`InitialPoses`](fewview_surface::InitialPoses); the noise σ is `--pose-noise`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum InitialPosesArg {
     Noisy,
