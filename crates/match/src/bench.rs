@@ -6,7 +6,8 @@ use fewview_scene::Image;
 use serde::Serialize;
 
 use crate::error::Result;
-use crate::{DetectOptions, GlueOptions, LighterGlue, XFeat};
+use crate::lighterglue::{GlueOptions, LighterGlue};
+use crate::xfeat::{DetectOptions, XFeat};
 
 /// Median wall seconds of each stage for one pair, and the counts they produced.
 #[derive(Clone, Debug, Serialize)]

@@ -60,7 +60,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::refine::{Fit, Plane, WarpModel, Window, refine_one};
-use super::{Match, MatchInput, luminance, mask_admits};
+use crate::correspondence::{Match, MatchInput, luminance, mask_admits};
 
 /// Options of [`dense_matches`]. Sizes are fractions of the long side of image `a` unless
 /// their name says pixels.

@@ -30,7 +30,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::refine::{AffineRefineOptions, Plane, Window, end_a, end_b, local_affine, refine_one};
-use super::{Match, mask_admits};
+use crate::correspondence::{Match, mask_admits};
 
 /// Options of [`densify_matches`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

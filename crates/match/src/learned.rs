@@ -6,11 +6,13 @@
 //! XFeat places the keypoint of pixel `i` at `i` (pixel centres at integers); matches here put
 //! pixel centres at half-integers, so both ends move by half a pixel.
 
-use crate::{DetectOptions, Features, GlueOptions, LighterGlue, MatchError, XFeat};
+use crate::error::MatchError;
+use crate::lighterglue::{GlueOptions, LighterGlue};
+use crate::xfeat::{DetectOptions, Features, XFeat};
 use serde::{Deserialize, Serialize};
 
 use super::sift::{SiftMatcher, SiftOptions};
-use super::{Match, MatchInput, Matcher, mask_admits, ransac_filter};
+use crate::correspondence::{Match, MatchInput, Matcher, mask_admits, ransac_filter};
 
 /// Which matcher finds the correspondences.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]

@@ -17,7 +17,7 @@ use burn::tensor::activation::{gelu, log_sigmoid, log_softmax, sigmoid};
 use burn::tensor::{Device, Int, Tensor, TensorData};
 
 use crate::error::{MatchError, Result};
-use crate::host;
+use crate::tensor::host;
 use crate::weights::StateDict;
 use crate::xfeat::{DIM, Features};
 

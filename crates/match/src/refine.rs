@@ -29,7 +29,7 @@ use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::{Match, luminance};
+use crate::correspondence::{Match, luminance};
 
 /// Options of [`refine_matches`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

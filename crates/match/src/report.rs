@@ -10,7 +10,9 @@ use serde::Serialize;
 use super::learned::{MatcherKind, matcher_for};
 use super::refine::{AffineRefineOptions, refine_matches};
 use super::sift::SiftOptions;
-use super::{Match, MatchInput, MatchPrecision, epipolar_precision, match_pairs, unordered_pairs};
+use crate::correspondence::{
+    Match, MatchInput, MatchPrecision, epipolar_precision, match_pairs, unordered_pairs,
+};
 
 /// One pair of views.
 #[derive(Clone, Debug, Serialize)]
@@ -47,7 +49,7 @@ pub fn match_report(
     dataset: &Dataset,
     kind: MatcherKind,
     use_masks: bool,
-) -> Result<MatchReport, crate::MatchError> {
+) -> Result<MatchReport, crate::error::MatchError> {
     let views: Vec<_> = dataset.train_views().collect();
     let inputs: Vec<MatchInput> = views
         .iter()

@@ -11,7 +11,7 @@ use image::{GrayImage, Luma};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::{Match, MatchInput, Matcher, luminance, ransac_filter};
+use crate::correspondence::{Match, MatchInput, Matcher, luminance, ransac_filter};
 
 /// Options of [`SiftMatcher`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

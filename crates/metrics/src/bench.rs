@@ -6,7 +6,8 @@ use std::time::Instant;
 
 use fewview_scene::Image;
 
-use crate::{SsimOptions, SsimWorkspace, psnr, ssim_with};
+use crate::psnr::psnr;
+use crate::ssim::{SsimOptions, SsimWorkspace, ssim_with};
 
 /// Median wall-clock milliseconds of each measured operation.
 #[derive(Clone, Debug, serde::Serialize)]

@@ -19,7 +19,8 @@
 use fewview_scene::Image;
 
 use crate::error::{MetricsError, Result, check_same_shape};
-use crate::{SsimOptions, psnr, ssim_with};
+use crate::psnr::psnr;
+use crate::ssim::{SsimOptions, ssim_with};
 
 /// A perceptual distance between two images (LPIPS in practice); tLP and per-frame LPIPS are
 /// computed with whatever implementation the caller passes.

@@ -102,8 +102,8 @@ impl AdamState {
 
     /// Keeps the rows whose flag is set.
     pub fn retain(&mut self, keep: &[bool]) {
-        crate::retain_rows(&mut self.m, self.width, keep);
-        crate::retain_rows(&mut self.v, self.width, keep);
+        crate::rows::retain_rows(&mut self.m, self.width, keep);
+        crate::rows::retain_rows(&mut self.v, self.width, keep);
     }
 
     /// Appends `rows` rows of zero moments.

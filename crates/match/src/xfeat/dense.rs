@@ -63,8 +63,8 @@ fn extract(net: &Network, image: Map, top_k: usize) -> Result<DenseFeatures> {
     let out = net.forward(&p.gray, p.width, p.height);
     let (w, h) = (p.width / 8, p.height / 8);
     let cells = w * h;
-    let reliability = crate::host(out.reliability);
-    let descriptors = crate::host(out.descriptors);
+    let reliability = crate::tensor::host(out.reliability);
+    let descriptors = crate::tensor::host(out.descriptors);
     let mut order: Vec<usize> = (0..cells).collect();
     order.sort_by(|&a, &b| reliability[b].total_cmp(&reliability[a]).then(a.cmp(&b)));
     order.truncate(if top_k == 0 { cells } else { top_k.min(cells) });

@@ -21,7 +21,7 @@ use network::Network;
 use sample::Map;
 
 use crate::error::{MatchError, Result};
-use crate::host;
+use crate::tensor::host;
 use crate::weights::StateDict;
 
 /// Detection settings (the reference's defaults).
