@@ -714,6 +714,11 @@ mod tests {
     /// Two narrow cameras (about 15° across) 60° apart on a ring of radius 3 around the point
     /// `(0.2, 0, 4)`, both looking at it: one canvas cannot hold both images side by side.
     fn converged_pair() -> (Camera, Camera) {
+        converged_pair_at(30.0)
+    }
+
+    /// Two cameras 3 units from a point, each turned `degrees` towards it from straight ahead.
+    fn converged_pair_at(degrees: f64) -> (Camera, Camera) {
         let k = Intrinsics {
             fx: 1200.0,
             fy: 1200.0,
@@ -731,7 +736,7 @@ mod tests {
             let r = Matrix3::from_rows(&[x.transpose(), z.cross(&x).transpose(), z.transpose()]);
             Camera::new(k, Se3::new(r, -(r * centre)))
         };
-        (look_at(-30.0), look_at(30.0))
+        (look_at(-degrees), look_at(degrees))
     }
 
     /// A slanted plane `n·X = offset` in front of the pair.
@@ -1062,6 +1067,24 @@ mod tests {
         // The shared canvas of a pair that fits keeps one principal point.
         let (a, b) = pair();
         assert_eq!(Rectification::new(&a, &b).unwrap().offset, 0.0);
+    }
+
+    /// Turned 10° each, the joint box exceeds twice the image width but the clipped canvas
+    /// keeps most of both images: one shared canvas, clipped, and no offset.
+    #[test]
+    fn views_turned_a_little_share_one_clipped_canvas() {
+        let (first, second) = converged_pair_at(10.0);
+        let f = first.intrinsics.fx;
+        let joint = W as f64 + 2.0 * f * 10f64.to_radians().tan();
+        assert!(joint > 2.0 * W as f64, "the pair must clip: {joint}");
+        let rect = Rectification::new(&first, &second).unwrap();
+        assert_eq!(rect.offset, 0.0);
+        assert_eq!(rect.left.intrinsics, rect.right.intrinsics);
+        let width = rect.left.intrinsics.width as f64;
+        assert!(
+            width <= 2.0 * W as f64 + 2.0 * CANVAS_MARGIN + 1.0,
+            "{width}"
+        );
     }
 
     #[test]
