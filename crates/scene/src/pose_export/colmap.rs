@@ -10,7 +10,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use super::Replacement;
+use super::replacement::Replacement;
 use crate::colmap::{PoseFields, binary, find_model_dir, text};
 use crate::error::{Result, SceneError};
 

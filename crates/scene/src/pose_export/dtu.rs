@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Matrix3x4, Matrix4};
 
-use super::{PoseSource, Replacement, refined_name};
+use super::replacement::{PoseSource, Replacement, refined_name};
 use crate::dtu::{cameras_path, decompose_projection};
 use crate::error::{Result, SceneError};
 use crate::numpy::{self, Array};

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{Replacement, refined_name};
+use super::replacement::{Replacement, refined_name};
 use crate::axes::opengl_to_opencv;
 use crate::error::{Result, SceneError};
 use crate::numpy;

@@ -22,6 +22,7 @@
 mod colmap;
 mod dtu;
 mod llff;
+mod replacement;
 #[cfg(test)]
 mod round_trip_tests;
 mod transforms;
@@ -33,15 +34,10 @@ use nalgebra::{Matrix3, Matrix4};
 use crate::camera::Se3;
 use crate::dataset::Dataset;
 use crate::error::{Result, SceneError};
-use crate::load::{DatasetFormat, LoadOptions};
+use crate::load::DatasetFormat;
 
-/// Where a dataset was read from: its folder and the options it was loaded with (the format, the
-/// DTU camera file).
-#[derive(Clone, Copy, Debug)]
-pub struct PoseSource<'a> {
-    pub root: &'a Path,
-    pub options: &'a LoadOptions,
-}
+pub use self::replacement::PoseSource;
+use self::replacement::Replacement;
 
 /// Writes the camera file of `source` into `out_dir` with the views `poses` (indices into
 /// `dataset.views`, world-to-camera poses in the dataset's frame) replaced; returns the files
@@ -86,29 +82,6 @@ pub fn write_refined_poses(
     }
 }
 
-/// One view's new pose, in the source file's world frame.
-#[derive(Clone, Debug)]
-struct Replacement {
-    /// Index into the dataset's views.
-    view: usize,
-    /// The view's entry in the camera file ([`crate::View::source_index`]).
-    entry: usize,
-    world_to_camera: Se3,
-}
-
-/// `out_dir/<file stem>_refined.<extension>` for an input file.
-fn refined_name(input: &Path, out_dir: &Path) -> PathBuf {
-    let stem = input
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let name = match input.extension() {
-        Some(ext) => format!("{stem}_refined.{}", ext.to_string_lossy()),
-        None => format!("{stem}_refined"),
-    };
-    out_dir.join(name)
-}
-
 /// A world-to-camera pose of the dataset's frame in the source's frame, where
 /// `x_source = M · x` for a similarity `M` (scale times rotation, plus translation): the camera
 /// centre maps by `M`, its axes rotate by `M`'s rotation.
@@ -145,6 +118,7 @@ fn pose_in_source_world(
 
 #[cfg(test)]
 mod tests {
+    use super::replacement::refined_name;
     use super::*;
     use nalgebra::{Rotation3, Vector3};
 

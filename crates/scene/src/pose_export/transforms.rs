@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
-use super::{Replacement, refined_name};
+use super::replacement::{Replacement, refined_name};
 use crate::axes::opengl_to_opencv;
 use crate::dataset::Dataset;
 use crate::error::{Result, SceneError};
