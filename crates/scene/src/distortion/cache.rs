@@ -12,8 +12,8 @@
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
+use super::lens::{Distortion, LensCamera};
 use super::remap::{Resample, UndistortFit, undistort_image, undistorted_intrinsics, valid_mask};
-use super::{Distortion, LensCamera};
 use crate::camera::Intrinsics;
 use crate::error::{Result, SceneError};
 use crate::image::Image;

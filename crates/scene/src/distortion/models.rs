@@ -2,7 +2,7 @@
 //! `camera_model` + `k1 k2 k3 k4 p1 p2` fields of nerfstudio / instant-ngp `transforms.json`,
 //! turned into a [`LensCamera`].
 
-use super::{Distortion, LensCamera};
+use super::lens::{Distortion, LensCamera};
 use crate::camera::Intrinsics;
 
 /// The COLMAP models this crate reads, with what their parameters are.

@@ -5,7 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::LensCamera;
+use super::lens::LensCamera;
 use crate::camera::Intrinsics;
 use crate::image::Image;
 
