@@ -79,17 +79,22 @@ pub enum Photometry {
 /// at the disparity `shift` (left `(x, y)` against right `(x − shift, y)`, both inside their
 /// originals: the middle of the search range lines up roughly the same surfaces); values are
 /// clipped to `[0, 1]`. Returns the gains; a channel without signal keeps gain 1.
-pub fn match_gains(left: &RectifiedImage, right: &mut RectifiedImage, shift: usize) -> Vec<f64> {
+pub fn match_gains(left: &RectifiedImage, right: &mut RectifiedImage, shift: i32) -> Vec<f64> {
     let (w, c) = (left.image.width, left.image.channels);
     let (mut l_sum, mut r_sum) = (vec![0.0f64; c], vec![0.0f64; c]);
     for (p, _) in left.inside.iter().enumerate().filter(|(_, i)| **i) {
-        let x = p % w;
-        if x < shift || !right.inside[p - shift] {
+        // The right pixel `(x − shift, y)`; a negative shift (per-image canvases) looks right.
+        let xr = (p % w) as i64 - shift as i64;
+        if !(0..w as i64).contains(&xr) {
+            continue;
+        }
+        let q = p - p % w + xr as usize;
+        if !right.inside[q] {
             continue;
         }
         for k in 0..c {
             l_sum[k] += left.image.data[p * c + k] as f64;
-            r_sum[k] += right.image.data[(p - shift) * c + k] as f64;
+            r_sum[k] += right.image.data[q * c + k] as f64;
         }
     }
     let gains: Vec<f64> = l_sum
@@ -191,7 +196,7 @@ pub fn match_pair(
         || rect.rectify_image(Side::Right, r.image),
     );
     if photometry == Photometry::GainMatched {
-        let middle = (params.min_disparity + params.num_disparities as i32 / 2).max(0) as usize;
+        let middle = params.min_disparity + params.num_disparities as i32 / 2;
         match_gains(&left, &mut right, middle);
     }
     let (lu8, ru8) = (eight_bit_rgb(&left.image), eight_bit_rgb(&right.image));
@@ -372,5 +377,43 @@ impl DepthSource for DepthMapSource {
             first: ViewDepth::trusted(self.maps[first].clone()),
             second: ViewDepth::trusted(self.maps[second].clone()),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A rectified image of `f(x, y)` per channel, all inside.
+    fn rectified(w: usize, h: usize, f: impl Fn(usize, usize, usize) -> f32) -> RectifiedImage {
+        let data = (0..w * h * 3)
+            .map(|i| f(i / 3 % w, i / 3 / w, i % 3))
+            .collect();
+        RectifiedImage {
+            image: Image::from_vec(w, h, 3, data),
+            inside: vec![true; w * h],
+        }
+    }
+
+    /// The right view sees the left one's content `shift` pixels to the left (positive) or to
+    /// the right (negative, per-image canvases) at half brightness in channel 0: the gains
+    /// compare the same surfaces and come out as 2, 1, 1.
+    #[test]
+    fn gains_compare_the_columns_the_shift_lines_up_either_way() {
+        let (w, h) = (40, 6);
+        // A ramp, so that sums over misaligned columns differ.
+        let texture =
+            |x: i64, c: usize| 0.05 + 0.015 * x as f32 + 0.01 * ((x * 7 + c as i64) % 5) as f32;
+        for shift in [5i32, -5] {
+            let left = rectified(w, h, |x, _, c| texture(x as i64, c));
+            let mut right = rectified(w, h, |x, _, c| {
+                let v = texture(x as i64 + shift as i64, c);
+                if c == 0 { 0.5 * v } else { v }
+            });
+            let gains = match_gains(&left, &mut right, shift);
+            for (c, want) in [2.0, 1.0, 1.0].iter().enumerate() {
+                assert!((gains[c] - want).abs() < 1e-5, "shift {shift}: {gains:?}");
+            }
+        }
     }
 }
