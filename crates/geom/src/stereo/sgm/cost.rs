@@ -10,7 +10,8 @@
 
 use rayon::prelude::*;
 
-use super::{Border, GrayOrRgb, Resolved};
+use super::images::GrayOrRgb;
+use super::params::{Border, Resolved};
 
 /// Which columns of the left image are matched and how the cost volume is laid out.
 #[derive(Clone, Copy, Debug)]

@@ -11,7 +11,7 @@
 use rayon::prelude::*;
 
 use super::cost::Layout;
-use super::{Paths, Resolved};
+use super::params::{Paths, Resolved};
 
 /// Sentinel of the padded path rows: no disparity below 0 or above `d − 1`.
 const OUTSIDE: i16 = i16::MAX;

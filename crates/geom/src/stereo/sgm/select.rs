@@ -4,7 +4,7 @@
 use rayon::prelude::*;
 
 use super::cost::Layout;
-use super::{Border, DISP_SCALE, Resolved};
+use super::params::{Border, DISP_SCALE, Resolved};
 
 /// Writes the fixed-point disparity of every matched pixel into `out` (`width × height`, filled
 /// with the invalid value beforehand).
