@@ -24,6 +24,7 @@
 
 use std::collections::HashMap;
 
+use fewview_scene::distortion::Distortion;
 use fewview_scene::{Intrinsics, Se3};
 use nalgebra::{DMatrix, Matrix2, Matrix2x3, Matrix3, Vector2, Vector3};
 use rayon::prelude::*;
@@ -148,11 +149,11 @@ pub fn tracks_from_matches(matches: &[Match]) -> Vec<Track> {
         .collect()
 }
 
-/// The cameras' intrinsic matrices, their inverses and the shared radial coefficient.
+/// The cameras' intrinsic matrices, their inverses and the lens they share (`None`: pinhole).
 struct Cameras {
     k: Vec<Matrix3<f64>>,
     k_inv: Vec<Matrix3<f64>>,
-    k1: f64,
+    lens: Option<Distortion>,
 }
 
 impl Cameras {
@@ -184,23 +185,19 @@ impl Cameras {
                 )
             })
             .collect();
-        Some(Self { k, k_inv, k1 })
+        // COLMAP's SIMPLE_RADIAL is OpenCV's radial–tangential model with k1 alone.
+        let lens = (k1 != 0.0).then(|| Distortion::opencv(&[k1]));
+        Some(Self { k, k_inv, lens })
     }
 
-    /// The normalised coordinates of pixel `p` of view `v`: `K⁻¹ p`, with the lens's bend
-    /// undone by fixed-point iteration (`x = x_d / (1 + k1 |x|²)`, which converges for the
-    /// moderate coefficients of photo lenses).
-    fn normalised(&self, v: usize, p: &Vector2<f64>) -> Vector2<f64> {
+    /// The normalised coordinates of pixel `p` of view `v`: `K⁻¹ p` with the lens undone
+    /// ([`Distortion::undistort`]); `None` where the lens does not invert.
+    fn normalised(&self, v: usize, p: &Vector2<f64>) -> Option<Vector2<f64>> {
         let d = self.k_inv[v] * Vector3::new(p.x, p.y, 1.0);
-        let distorted = Vector2::new(d.x, d.y);
-        if self.k1 == 0.0 {
-            return distorted;
+        match &self.lens {
+            None => Some(Vector2::new(d.x, d.y)),
+            Some(lens) => lens.undistort(d.x, d.y).map(|(x, y)| Vector2::new(x, y)),
         }
-        let mut x = distorted;
-        for _ in 0..20 {
-            x = distorted / (1.0 + self.k1 * x.norm_squared());
-        }
-        x
     }
 
     /// The pixel of world point `x` in view `v`, and the 2 × 3 Jacobian of that pixel with
@@ -218,17 +215,15 @@ impl Cameras {
         let k = &self.k[v];
         let (fx, fy) = (k[(0, 0)], k[(1, 1)]);
         let (x, y) = (c.x / c.z, c.y / c.z);
-        let bend = 1.0 + self.k1 * (x * x + y * y);
-        let pixel = Vector2::new(fx * x * bend + k[(0, 2)], fy * y * bend + k[(1, 2)]);
+        let ((xd, yd), j) = match &self.lens {
+            None => ((x, y), [1.0, 0.0, 0.0, 1.0]),
+            Some(lens) => lens.distort_with_jacobian(x, y),
+        };
+        let pixel = Vector2::new(fx * xd + k[(0, 2)], fy * yd + k[(1, 2)]);
         // d(pixel)/d(x, y) through the lens, times d(x, y)/d(camera point).
-        let lens = Matrix2::new(
-            fx * (bend + 2.0 * self.k1 * x * x),
-            fx * 2.0 * self.k1 * x * y,
-            fy * 2.0 * self.k1 * x * y,
-            fy * (bend + 2.0 * self.k1 * y * y),
-        );
+        let through_lens = Matrix2::new(fx * j[0], fx * j[1], fy * j[2], fy * j[3]);
         let perspective = Matrix2x3::new(1.0 / c.z, 0.0, -x / c.z, 0.0, 1.0 / c.z, -y / c.z);
-        Some((pixel, lens * perspective, c))
+        Some((pixel, through_lens * perspective, c))
     }
 }
 
@@ -237,7 +232,7 @@ impl Cameras {
 fn triangulate(cameras: &Cameras, poses: &[Se3], track: &Track) -> Option<Vector3<f64>> {
     let mut a = DMatrix::<f64>::zeros(2 * track.observations.len(), 4);
     for (i, (v, p)) in track.observations.iter().enumerate() {
-        let x = cameras.normalised(*v, p);
+        let x = cameras.normalised(*v, p)?;
         let (r, t) = (&poses[*v].rotation, &poses[*v].translation);
         for (row, coordinate) in [(2 * i, 0), (2 * i + 1, 1)] {
             for j in 0..3 {
@@ -940,7 +935,7 @@ mod tests {
             let cameras = Cameras::with_radial(&intrinsics, k1).unwrap();
             for x in &points[..20] {
                 let (pixel, _, c) = cameras.project(1, &poses[1], x).unwrap();
-                let back = cameras.normalised(1, &pixel);
+                let back = cameras.normalised(1, &pixel).unwrap();
                 let truth = Vector2::new(c.x / c.z, c.y / c.z);
                 assert!((back - truth).norm() < 1e-12, "k1 {k1}: {back} vs {truth}");
             }
