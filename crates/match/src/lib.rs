@@ -11,6 +11,7 @@ pub mod learned;
 pub mod lighterglue;
 pub mod refine;
 pub mod report;
+pub mod retrieval;
 pub mod sift;
 mod tensor;
 pub mod weights;

@@ -65,6 +65,11 @@ impl SiftFeatures {
     pub fn is_empty(&self) -> bool {
         self.points.is_empty()
     }
+
+    /// The keypoints' 128-dimensional descriptors.
+    pub fn descriptors(&self) -> &[[f32; 128]] {
+        &self.descriptors
+    }
 }
 
 fn to_gray(image: &Image) -> GrayImage {

@@ -53,6 +53,12 @@ pub struct BundleOptions {
     /// (photos of one camera whose lens bends straight lines; started at 0).
     #[serde(default)]
     pub refine_radial: bool,
+    /// Also adjust one shift of the principal point shared by all views (photos of one camera
+    /// whose principal point is not the image centre; COLMAP's
+    /// `refine_principal_point`, off by default there too: with few views or a narrow field of
+    /// view it trades off against the rotations).
+    #[serde(default)]
+    pub refine_principal_point: bool,
 }
 
 impl Default for BundleOptions {
@@ -64,6 +70,7 @@ impl Default for BundleOptions {
             min_tracks: 30,
             refine_focal: false,
             refine_radial: false,
+            refine_principal_point: false,
         }
     }
 }
@@ -90,6 +97,10 @@ pub struct BundleReport {
     /// With [`BundleOptions::refine_radial`]: the radial coefficient `k1`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub radial_k1: Option<f64>,
+    /// With [`BundleOptions::refine_principal_point`]: the shift (pixels) added to every
+    /// principal point.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub principal_shift_px: Option<[f64; 2]>,
 }
 
 /// A point seen in several views: (view, pixel) pairs, one per view.
@@ -303,51 +314,90 @@ pub fn scaled_focal(intrinsics: &[Intrinsics], scale: f64) -> Vec<Intrinsics> {
         .collect()
 }
 
-/// The shared lens parameters being adjusted: the logarithm of the focal factor and `k1`
-/// (`None`: held).
+/// The intrinsics a bundle adjustment started from, with the focal factor and principal point
+/// shift its report found applied.
+pub fn adjusted_intrinsics(intrinsics: &[Intrinsics], report: &BundleReport) -> Vec<Intrinsics> {
+    let [dx, dy] = report.principal_shift_px.unwrap_or([0.0; 2]);
+    scaled_focal(intrinsics, report.focal_scale.unwrap_or(1.0))
+        .into_iter()
+        .map(|k| Intrinsics {
+            cx: k.cx + dx,
+            cy: k.cy + dy,
+            ..k
+        })
+        .collect()
+}
+
+/// The shared lens parameters being adjusted: the logarithm of the focal factor, `k1` and the
+/// principal point's shift (`None`: held).
 #[derive(Clone, Copy, Debug, Default)]
 struct Lens {
     log_focal: Option<f64>,
     k1: Option<f64>,
+    principal: Option<[f64; 2]>,
 }
 
 impl Lens {
     /// The columns of the adjusted lens parameters after `pose_parameters` pose columns.
     fn columns(&self, pose_parameters: usize) -> LensColumns {
-        let focal = self.log_focal.map(|_| pose_parameters);
-        let radial = self
-            .k1
-            .map(|_| pose_parameters + usize::from(focal.is_some()));
-        LensColumns { focal, radial }
+        let mut next = pose_parameters;
+        let mut take = |held: bool, width: usize| {
+            (!held).then(|| {
+                next += width;
+                next - width
+            })
+        };
+        LensColumns {
+            focal: take(self.log_focal.is_none(), 1),
+            radial: take(self.k1.is_none(), 1),
+            principal: take(self.principal.is_none(), 2),
+        }
     }
 
     /// The lens moved by the lens entries of a camera step.
     fn stepped(&self, columns: &LensColumns, step: &[f64]) -> Self {
+        let entry = |column: Option<usize>, offset: usize| column.map_or(0.0, |c| step[c + offset]);
         Self {
-            log_focal: self
-                .log_focal
-                .map(|f| f + columns.focal.map_or(0.0, |c| step[c])),
-            k1: self.k1.map(|k| k + columns.radial.map_or(0.0, |c| step[c])),
+            log_focal: self.log_focal.map(|f| f + entry(columns.focal, 0)),
+            k1: self.k1.map(|k| k + entry(columns.radial, 0)),
+            principal: self.principal.map(|[x, y]| {
+                [
+                    x + entry(columns.principal, 0),
+                    y + entry(columns.principal, 1),
+                ]
+            }),
         }
+    }
+
+    /// What this lens adds to a report: the adjusted parameters.
+    fn report_into(&self, report: &mut BundleReport) {
+        report.focal_scale = self.log_focal.map(f64::exp);
+        report.radial_k1 = self.k1;
+        report.principal_shift_px = self.principal;
     }
 
     /// The cameras of the intrinsics `base` seen through this lens.
     fn cameras(&self, base: &[Intrinsics]) -> Option<Cameras> {
-        let scale = self.log_focal.unwrap_or(0.0).exp();
-        Cameras::with_radial(&scaled_focal(base, scale), self.k1.unwrap_or(0.0))
+        let mut report = BundleReport::default();
+        self.report_into(&mut report);
+        Cameras::with_radial(&adjusted_intrinsics(base, &report), self.k1.unwrap_or(0.0))
     }
 }
 
-/// Where the adjusted lens parameters sit among the camera columns.
+/// Where the adjusted lens parameters sit among the camera columns (the principal point's
+/// shift takes two: x, then y).
 #[derive(Clone, Copy, Debug)]
 struct LensColumns {
     focal: Option<usize>,
     radial: Option<usize>,
+    principal: Option<usize>,
 }
 
 impl LensColumns {
     fn count(&self) -> usize {
-        usize::from(self.focal.is_some()) + usize::from(self.radial.is_some())
+        usize::from(self.focal.is_some())
+            + usize::from(self.radial.is_some())
+            + 2 * usize::from(self.principal.is_some())
     }
 }
 
@@ -355,7 +405,8 @@ impl LensColumns {
 /// 6 per free view (`6 (view − 1) + k`, twist rotation first), then the adjusted lens
 /// parameters, which every observation depends on: the logarithm of the shared focal factor
 /// (`∂pixel/∂log f = pixel − principal point`) and the radial coefficient
-/// (`∂pixel/∂k1 = (fx x r², fy y r²)` at normalised `(x, y)`, `r² = x² + y²`).
+/// (`∂pixel/∂k1 = (fx x r², fy y r²)` at normalised `(x, y)`, `r² = x² + y²`) and the
+/// principal point's shift (`∂pixel/∂(cx, cy)` = identity).
 fn track_system(
     cameras: &Cameras,
     poses: &[Se3],
@@ -405,6 +456,10 @@ fn track_system(
                 column,
                 Vector2::new(k[(0, 0)] * nx * r2, k[(1, 1)] * ny * r2),
             ));
+        }
+        if let Some(column) = lens.principal {
+            jac.push((column, Vector2::new(1.0, 0.0)));
+            jac.push((column + 1, Vector2::new(0.0, 1.0)));
         }
         for (column, j) in &jac {
             columns.push(*column);
@@ -567,6 +622,7 @@ pub fn bundle_adjust(
     let mut lens = Lens {
         log_focal: options.refine_focal.then_some(0.0),
         k1: options.refine_radial.then_some(0.0),
+        principal: options.refine_principal_point.then_some([0.0; 2]),
     };
     let mut lambda = 1e-3;
     // The Cauchy scale is set once, from the residuals at the start: recomputed every
@@ -606,8 +662,7 @@ pub fn bundle_adjust(
             break;
         }
     }
-    report.focal_scale = lens.log_focal.map(f64::exp);
-    report.radial_k1 = lens.k1;
+    lens.report_into(&mut report);
     if let Some(cameras) = lens.cameras(intrinsics) {
         report.median_px_after = median_error(&cameras, &current, &tracks, &points);
     }
@@ -678,13 +733,7 @@ mod tests {
         let poses = (0..3)
             .map(|i| {
                 let angle = (i as f64 - 1.0) * 20f64.to_radians();
-                let centre = Vector3::new(2.5 * angle.sin(), -0.3, -2.5 * angle.cos());
-                let forward = (-centre).normalize();
-                let right = Vector3::y().cross(&forward).normalize();
-                let down = forward.cross(&right);
-                let r =
-                    Matrix3::from_rows(&[right.transpose(), down.transpose(), forward.transpose()]);
-                Se3::new(r, -(r * centre))
+                looking_at_origin(Vector3::new(2.5 * angle.sin(), -0.3, -2.5 * angle.cos()))
             })
             .collect();
         let points = (0..150)
@@ -701,6 +750,15 @@ mod tests {
     }
 
     /// Matches of every pair of views at the points' exact projections.
+    /// A camera at `centre` looking at the origin, image rows along the world's y.
+    fn looking_at_origin(centre: Vector3<f64>) -> Se3 {
+        let forward = (-centre).normalize();
+        let right = Vector3::y().cross(&forward).normalize();
+        let down = forward.cross(&right);
+        let r = Matrix3::from_rows(&[right.transpose(), down.transpose(), forward.transpose()]);
+        Se3::new(r, -(r * centre))
+    }
+
     fn exact_matches(
         intrinsics: &[Intrinsics],
         poses: &[Se3],
@@ -720,8 +778,12 @@ mod tests {
             [p.x as f32, p.y as f32]
         };
         let mut matches = Vec::new();
+        let n = poses.len();
+        let pairs: Vec<(usize, usize)> = (0..n)
+            .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
+            .collect();
         for x in points {
-            for (a, b) in [(0, 1), (0, 2), (1, 2)] {
+            for &(a, b) in &pairs {
                 matches.push(Match {
                     view_a: a,
                     view_b: b,
@@ -791,6 +853,7 @@ mod tests {
         let pinhole = LensColumns {
             focal: None,
             radial: None,
+            principal: None,
         };
         let system = track_system(&cameras, &poses, &track, &x, (&r, &w), pinhole);
         let cost = |poses: &[Se3], x: &Vector3<f64>| {
@@ -888,10 +951,11 @@ mod tests {
         let x = points[7] + Vector3::new(-0.01, 0.02, 0.01);
         let r = reprojection_errors(&cameras, &poses, &track, &x).unwrap();
         let w = vec![0.8, 0.6, 0.3];
-        let (focal, radial) = (12, 13);
+        let (focal, radial, principal) = (12, 13, 14);
         let columns = LensColumns {
             focal: Some(focal),
             radial: Some(radial),
+            principal: Some(principal),
         };
         let system = track_system(&cameras, &poses, &track, &x, (&r, &w), columns);
         let analytic = |column: usize| -> f64 {
@@ -903,10 +967,11 @@ mod tests {
                 .map(|(_, g)| g)
                 .sum()
         };
-        let cost = |log_focal: f64, k1: f64| {
+        let cost = |log_focal: f64, k1: f64, shift: [f64; 2]| {
             let lens = Lens {
                 log_focal: Some(log_focal),
                 k1: Some(k1),
+                principal: Some(shift),
             };
             let cameras = lens.cameras(&intrinsics).unwrap();
             weighted_cost(
@@ -916,8 +981,22 @@ mod tests {
         };
         let h = 1e-6;
         for (column, numeric) in [
-            (focal, (cost(h, k1) - cost(-h, k1)) / (4.0 * h)),
-            (radial, (cost(0.0, k1 + h) - cost(0.0, k1 - h)) / (4.0 * h)),
+            (
+                focal,
+                (cost(h, k1, [0.0; 2]) - cost(-h, k1, [0.0; 2])) / (4.0 * h),
+            ),
+            (
+                radial,
+                (cost(0.0, k1 + h, [0.0; 2]) - cost(0.0, k1 - h, [0.0; 2])) / (4.0 * h),
+            ),
+            (
+                principal,
+                (cost(0.0, k1, [h, 0.0]) - cost(0.0, k1, [-h, 0.0])) / (4.0 * h),
+            ),
+            (
+                principal + 1,
+                (cost(0.0, k1, [0.0, h]) - cost(0.0, k1, [0.0, -h])) / (4.0 * h),
+            ),
         ] {
             let analytic = analytic(column);
             assert!(
@@ -1003,6 +1082,56 @@ mod tests {
             held.median_px_after > 100.0 * report.median_px_after.max(1e-6),
             "{held:?}"
         );
+    }
+
+    /// Matches of cameras whose principal point sits 6 px right and 4 px below the centre the
+    /// adjustment assumes: the shift comes back with the poses; held, it turns the cameras. The rig's arc gains a camera above and one below, as a capture moves the camera
+    /// both ways; on one horizontal arc the vertical shift trades off against the pitch.
+    #[test]
+    fn a_shared_principal_point_shift_is_recovered() {
+        let (mut intrinsics, mut truth, points) = rig();
+        truth.push(looking_at_origin(Vector3::new(0.3, -1.4, -2.2)));
+        truth.push(looking_at_origin(Vector3::new(-0.3, 0.9, -2.4)));
+        intrinsics.resize(truth.len(), intrinsics[0]);
+        let shifted: Vec<Intrinsics> = intrinsics
+            .iter()
+            .map(|k| Intrinsics {
+                cx: k.cx + 6.0,
+                cy: k.cy + 4.0,
+                ..*k
+            })
+            .collect();
+        let matches = exact_matches(&shifted, &truth, &points);
+        let options = BundleOptions {
+            refine_focal: true,
+            refine_principal_point: true,
+            ..BundleOptions::default()
+        };
+        let (adjusted, report) = bundle_adjust(&intrinsics, &truth, &matches, &options);
+        let [dx, dy] = report.principal_shift_px.unwrap();
+        assert!(
+            (dx - 6.0).abs() < 1e-3 && (dy - 4.0).abs() < 1e-3,
+            "{dx}, {dy}"
+        );
+        assert!(report.median_px_after < 1e-3, "{report:?}");
+        for v in 1..truth.len() {
+            let error = rotation_angle_deg(&adjusted[v].rotation, &truth[v].rotation);
+            assert!(error < 1e-3, "view {v}: {error}°");
+        }
+        let k = &adjusted_intrinsics(&intrinsics, &report)[1];
+        assert!((k.cx - shifted[1].cx).abs() < 1e-3, "{k:?}");
+        let held = BundleOptions {
+            refine_principal_point: false,
+            ..options
+        };
+        // Held, the shift is mostly absorbed by turning the cameras: a small residual and
+        // rotations off by a tenth of a degree.
+        let (turned, without) = bundle_adjust(&intrinsics, &truth, &matches, &held);
+        assert!(without.median_px_after > 1e-3, "{without:?}");
+        let worst = (1..truth.len())
+            .map(|v| rotation_angle_deg(&turned[v].rotation, &truth[v].rotation))
+            .fold(0.0, f64::max);
+        assert!(worst > 0.1, "{worst}°");
     }
 
     #[test]

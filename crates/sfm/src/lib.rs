@@ -17,5 +17,6 @@ pub use folder::{FolderOptions, poses_for_folder};
 pub use global_start::{GlobalStart, PairPose, global_start};
 pub use photos::{Photo, load_folder, load_photo, photo_files};
 pub use poses::{
-    PoseModel, PoseOptions, PoseProgress, PoseStage, estimate_poses, estimate_poses_with,
+    MatchedPairs, PoseModel, PoseOptions, PoseProgress, PoseStage, estimate_poses,
+    estimate_poses_with,
 };

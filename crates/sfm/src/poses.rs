@@ -18,6 +18,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use fewview_match::dense::{DenseOptions, dense_matches};
 use fewview_match::learned::{MatcherKind, matcher_for};
 use fewview_match::refine::{AffineRefineOptions, refine_matches};
+use fewview_match::retrieval::{RetrievalOptions, retrieval_pairs};
 use fewview_match::sift::{SiftFeatures, SiftMatcher, SiftOptions};
 use fewview_match::{Match, MatchInput, Matcher};
 use fewview_scene::{Camera, Image, Intrinsics, Se3};
@@ -25,7 +26,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::bundle::{
-    BundleOptions, BundleReport, bundle_adjust, scaled_focal, triangulated_tracks,
+    BundleOptions, BundleReport, adjusted_intrinsics, bundle_adjust, triangulated_tracks,
 };
 use crate::error::{Result, SfmError};
 use crate::global_start::{PairPose, relative_start};
@@ -56,7 +57,13 @@ pub struct PoseOptions {
     /// share one camera (the same size and starting focal length), off otherwise, and so is
     /// its radial coefficient when [`BundleOptions::refine_radial`] asks for it.
     pub bundle: BundleOptions,
-    /// Seed of RANSAC.
+    /// With more photos than this, each is matched only with the photos most like it
+    /// ([`fewview_match::retrieval`]); up to this many, or with
+    /// [`RetrievalOptions::neighbours`] 0, every pair is matched.
+    pub retrieval_above: usize,
+    /// How the photos most like each other are found (its seed is [`PoseOptions::seed`]).
+    pub retrieval: RetrievalOptions,
+    /// Seed of RANSAC and of the retrieval's vocabulary.
     pub seed: u64,
 }
 
@@ -71,6 +78,8 @@ impl Default for PoseOptions {
             sift: SiftOptions::default(),
             matcher: MatcherKind::Classical,
             bundle: BundleOptions::default(),
+            retrieval_above: 20,
+            retrieval: RetrievalOptions::default(),
             seed: 0,
         }
     }
@@ -111,6 +120,8 @@ pub struct PoseReport {
     /// Pairs of photos with at least `min_matches` matches, and those that gave a relative pose.
     pub overlapping_pairs: usize,
     pub pairs: Vec<PairPose>,
+    /// The pairs of photos that were matched.
+    pub matched_pairs: MatchedPairs,
     pub matches: usize,
     /// The matcher that ran, and why it is not the one asked for when it is not.
     pub matcher: String,
@@ -120,6 +131,14 @@ pub struct PoseReport {
     pub points: usize,
     /// Median reprojection error of the model's points (pixels of the working images).
     pub median_error_px: f64,
+}
+
+/// How many pairs of photos were matched, and whether they were chosen by retrieval
+/// ([`PoseOptions::retrieval_above`]) or were every pair.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct MatchedPairs {
+    pub pairs: usize,
+    pub chosen_by_retrieval: bool,
 }
 
 /// The estimated model.
@@ -172,7 +191,8 @@ pub fn estimate_poses_with(
             (fallback.is_none().then_some(matcher), fallback)
         }
     };
-    let matches = correspondences(&inputs, (&sift, learned.as_deref()), options, &on_progress);
+    let (matches, matched_pairs) =
+        correspondences(&inputs, (&sift, learned.as_deref()), options, &on_progress);
     let (group, unregistered) = largest_group(photos, &matches, options.min_matches);
     if group.len() < 2 {
         return Err(SfmError::NoModel(format!(
@@ -194,10 +214,11 @@ pub fn estimate_poses_with(
     let bundle_options = BundleOptions {
         refine_focal: one_camera,
         refine_radial: one_camera && options.bundle.refine_radial,
+        refine_principal_point: one_camera && options.bundle.refine_principal_point,
         ..options.bundle
     };
     let (poses, bundle) = bundle_adjust(&intrinsics, &start.poses, &matches, &bundle_options);
-    let intrinsics = scaled_focal(&intrinsics, bundle.focal_scale.unwrap_or(1.0));
+    let intrinsics = adjusted_intrinsics(&intrinsics, &bundle);
     let k1 = bundle.radial_k1.unwrap_or(0.0);
     let (poses, points) =
         scaled_model(photos, &group, (&intrinsics, k1), &poses, &matches, options);
@@ -208,6 +229,7 @@ pub fn estimate_poses_with(
         registered: group.len(),
         overlapping_pairs: overlapping_pairs(&matches, group.len(), options.min_matches),
         pairs: start.pairs,
+        matched_pairs,
         matches: matches.len(),
         matcher: match (&learned, &fallback) {
             (Some(_), _) => options.matcher.name().to_string(),
@@ -265,24 +287,55 @@ impl PoseStage {
     }
 }
 
-/// SIFT matches of every pair (each photo's features computed once), dense ones added to
-/// pairs with few, all refined by affine Lucas–Kanade (the refinement drops the matches whose
+/// SIFT matches of every pair (each photo's features computed once; with more than
+/// [`PoseOptions::retrieval_above`] photos, of the pairs [`retrieval_pairs`] chooses), dense ones
+/// added to pairs with few, all refined by affine Lucas–Kanade (the refinement drops the matches whose
 /// windows do not agree).
 fn correspondences(
     inputs: &[MatchInput],
     (sift, learned): (&SiftMatcher, Option<&dyn Matcher>),
     options: &PoseOptions,
     on_progress: &(impl Fn(&PoseProgress) + Sync),
-) -> Vec<Match> {
+) -> (Vec<Match>, MatchedPairs) {
     let n = inputs.len();
     let counter = AtomicUsize::new(0);
     let step = |stage: PoseStage, total: usize| {
         let done = counter.fetch_add(1, Ordering::Relaxed) + 1;
         on_progress(&PoseProgress { stage, done, total });
     };
-    let pairs: Vec<(usize, usize)> = (0..n)
-        .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
-        .collect();
+    // SIFT features: the classical matcher's, and the global descriptors' when there are too
+    // many photos to match every pair.
+    let retrieve = n > options.retrieval_above && options.retrieval.neighbours > 0;
+    let features: Vec<SiftFeatures> = if learned.is_none() || retrieve {
+        let features = inputs
+            .par_iter()
+            .map(|input| {
+                let f = sift.features(input);
+                step(PoseStage::Features, n);
+                f
+            })
+            .collect();
+        counter.store(0, Ordering::Relaxed);
+        features
+    } else {
+        Vec::new()
+    };
+    let pairs = if retrieve {
+        let descriptors: Vec<&[[f32; 128]]> = features.iter().map(|f| f.descriptors()).collect();
+        let retrieval = RetrievalOptions {
+            seed: options.seed,
+            ..options.retrieval
+        };
+        retrieval_pairs(&descriptors, &retrieval)
+    } else {
+        (0..n)
+            .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
+            .collect()
+    };
+    let matched = MatchedPairs {
+        pairs: pairs.len(),
+        chosen_by_retrieval: retrieve,
+    };
     let with_views = |(a, b): (usize, usize), found: Vec<Match>| {
         found.into_iter().map(move |m| Match {
             view_a: a,
@@ -300,25 +353,14 @@ fn correspondences(
                 with_views((a, b), found)
             })
             .collect(),
-        None => {
-            let features: Vec<SiftFeatures> = inputs
-                .par_iter()
-                .map(|input| {
-                    let f = sift.features(input);
-                    step(PoseStage::Features, n);
-                    f
-                })
-                .collect();
-            counter.store(0, Ordering::Relaxed);
-            pairs
-                .par_iter()
-                .flat_map_iter(|&(a, b)| {
-                    let found = sift.match_features(&features[a], &features[b]);
-                    step(PoseStage::Matching, pairs.len());
-                    with_views((a, b), found)
-                })
-                .collect()
-        }
+        None => pairs
+            .par_iter()
+            .flat_map_iter(|&(a, b)| {
+                let found = sift.match_features(&features[a], &features[b]);
+                step(PoseStage::Matching, pairs.len());
+                with_views((a, b), found)
+            })
+            .collect(),
     };
     let counts = match_counts(&matches, n);
     let long_side = inputs
@@ -342,7 +384,7 @@ fn correspondences(
     }
     let images: Vec<&Image> = inputs.iter().map(|i| i.image).collect();
     let refined = refine_matches(&images, &matches, &AffineRefineOptions::default());
-    shared_ends(&matches, refined)
+    (shared_ends(&matches, refined), matched)
 }
 
 /// The refined matches with every end that was one pixel before the refinement one pixel

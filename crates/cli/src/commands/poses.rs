@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use clap::Args as ClapArgs;
 use fewview_match::learned::MatcherKind;
+use fewview_match::retrieval::RetrievalOptions;
 use fewview_sfm::photos::DEFAULT_FOV_DEG;
 use std::sync::Mutex;
 
@@ -15,7 +16,8 @@ use super::output_paths::check_folder;
 use super::progress;
 
 /// Estimate camera poses from a few photos, without COLMAP: SIFT matches between every pair
-/// (dense matches where SIFT finds few), relative poses by the five-point algorithm, rotation
+/// (with more than 20 photos, between each and the photos most like it; dense matches where
+/// SIFT finds few), relative poses by the five-point algorithm, rotation
 /// averaging, camera centres from the baselines, and a bundle adjustment of poses and points.
 ///
 /// Writes `OUT/sparse/0/{cameras,images,points3D}.txt` (a COLMAP text model), `OUT/transforms.json`
@@ -52,7 +54,17 @@ pub struct Args {
     /// the photos on loading.
     #[arg(long)]
     pub radial: bool,
-    /// Seed of RANSAC.
+    /// Also fit one principal point shared by the photos (only when all photos share one
+    /// camera), for cameras whose principal point is not the image centre. Off by default, as
+    /// in COLMAP: with few photos it trades off against their rotations.
+    #[arg(long)]
+    pub refine_principal_point: bool,
+    /// With more than 20 photos, each is matched only with the K photos most like it (VLAD
+    /// global descriptors of their SIFT features) and along their maximum spanning tree; 0
+    /// matches every pair.
+    #[arg(long, value_name = "K", default_value_t = RetrievalOptions::default().neighbours)]
+    pub neighbours: usize,
+    /// Seed of RANSAC and of the retrieval's vocabulary.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
 }
@@ -74,7 +86,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             seed: args.seed,
             bundle: BundleOptions {
                 refine_radial: args.radial,
+                refine_principal_point: args.refine_principal_point,
                 ..BundleOptions::default()
+            },
+            retrieval: RetrievalOptions {
+                neighbours: args.neighbours,
+                ..RetrievalOptions::default()
             },
             ..PoseOptions::default()
         },
@@ -109,6 +126,13 @@ pub fn print_model(model: &PoseModel, fov_deg: f64) {
         println!("not registered: {}: {}", u.name, u.reason);
     }
     let r = &model.report;
+    if r.matched_pairs.chosen_by_retrieval {
+        println!(
+            "matched {} of the {} pairs of photos, chosen by retrieval (--neighbours)",
+            r.matched_pairs.pairs,
+            r.photos * (r.photos - 1) / 2
+        );
+    }
     println!(
         "registered {} of {} photos; {} points, median reprojection error {:.3} px",
         r.registered, r.photos, r.points, r.median_error_px
