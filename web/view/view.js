@@ -8,6 +8,7 @@ import { SplatData, SplatRenderer, streamPly, floatOffsets, compile } from "/spl
 const $ = (id) => document.getElementById(id);
 const GROUP_COLORS = {
   train: [1.0, 0.6, 0.1], test: [0.3, 0.6, 1.0], initial: [0.95, 0.25, 0.25], refined: [0.2, 0.9, 0.35],
+  estimated: [1.0, 0.6, 0.1],
 };
 
 function showError(message) {
@@ -96,7 +97,7 @@ function currentView() {
     R: new Float32Array(R), t: new Float32Array(scale(mulVec(R, S.c), -1)), center: new Float32Array(S.c),
     fx: k.fx * s, fy: k.fy * s, cx: w / 2 + (k.cx - k.w / 2) * s, cy: k.cy * s, width: w, height: h,
     near: S.manifest ? S.manifest.near_plane : 0.2,
-    background: new Float32Array(S.manifest && S.manifest.kind !== "surface" ? S.manifest.background : [0.12, 0.12, 0.14]),
+    background: new Float32Array(S.manifest && !["surface", "poses"].includes(S.manifest.kind) ? S.manifest.background : [0.12, 0.12, 0.14]),
   };
 }
 
@@ -250,6 +251,7 @@ void main() {
   float k = 1.0;
   if (u_shade == 1) k = 0.25 + 0.75 * abs(dot(normalize(a_normal), normalize(u_center - a_pos)));
   v_color = a_color * k;
+  gl_PointSize = 3.0;
 }`;
 const GEOM_FS = `#version 300 es
 precision highp float;
@@ -314,13 +316,14 @@ async function loadMesh() {
   gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, ib);
   gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, faces, gl.STATIC_DRAW);
   gl.bindVertexArray(null);
-  S.mesh = { vao, count: 3 * nf };
+  // A mesh without faces is a point cloud (the points of a `fewview poses` model).
+  S.mesh = nf === 0 ? { vao, count: nv, points: true } : { vao, count: 3 * nf };
   if (S.manifest.cameras.length === 0 && nv > 0) {
     let m = [0, 0, 0];
     for (let i = 0; i < nv; i++) m = add(m, [pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]]);
     placeAround(scale(m, 1 / nv), pos, nv);
   }
-  $("status").textContent = `mesh: ${nv} vertices, ${nf} triangles`;
+  $("status").textContent = nf === 0 ? `${nv} points` : `mesh: ${nv} vertices, ${nf} triangles`;
   S.loadedAll = true;
   stats.loadedAt = performance.now();
   redraw();
@@ -372,7 +375,8 @@ function drawOverlays(v) {
   if (S.mesh) {
     gl.enable(gl.DEPTH_TEST);
     gl.clear(gl.DEPTH_BUFFER_BIT);
-    drawGeometry(v, S.mesh, gl.TRIANGLES, true);
+    if (S.mesh.points) drawGeometry(v, S.mesh, gl.POINTS, false);
+    else drawGeometry(v, S.mesh, gl.TRIANGLES, true);
     gl.disable(gl.DEPTH_TEST);
   }
   if (S.overlays && S.lines) drawGeometry(v, S.lines, gl.LINES, false);
@@ -607,7 +611,10 @@ function flatten(obj, prefix, out, depth) {
 
 function fillPanels(m) {
   $("title").textContent = m.title;
-  $("kind").textContent = { splat: "Gaussian splats", surface: "surface (mesh and poses)", ply: "Gaussian PLY" }[m.kind];
+  $("kind").textContent = {
+    splat: "Gaussian splats", surface: "surface (mesh and poses)", poses: "camera poses (estimated cameras and points)",
+    ply: "Gaussian PLY",
+  }[m.kind];
   const list = $("cameras");
   m.cameras.forEach((cam, i) => {
     const li = document.createElement("li");
@@ -650,6 +657,7 @@ function fillPanels(m) {
     images.append(fig);
   }
   $("images-section").hidden = m.images.length === 0;
+  if (m.kind === "poses") $("images-title").textContent = "The model";
   const videos = $("videos");
   for (const v of m.videos) {
     const fig = document.createElement("figure");

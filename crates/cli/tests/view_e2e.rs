@@ -1,7 +1,8 @@
 //! `fewview view` end to end in headless Chromium (WebGL2 on SwiftShader here):
 //! - a small trained demo run in the page is not blank, its picture of a training camera matches
 //!   `fewview render` of that camera (PSNR ≥ 30 dB), a drag orbits and changes the picture;
-//! - a hand-written surface run shows its mesh and its initial and refined cameras;
+//! - a hand-written surface run shows its mesh and its initial and refined cameras, and a
+//!   `fewview poses` folder its estimated cameras and points;
 //! - a run without `cameras.json` reads them from its dataset with `--data` (no browser);
 //! - a PLY or run folder the viewer cannot read is a one-line error before serving, and a model
 //!   stream that breaks is a one-line error in the page;
@@ -541,4 +542,74 @@ fn a_surface_run_shows_its_mesh_and_both_camera_sets_in_the_browser() {
         "the mesh is not in front of the camera: {through}"
     );
     assert!(out.join("page.png").is_file());
+}
+
+/// A `fewview poses` output as it writes it: three named cameras on a ring (`cameras.json`),
+/// 600 coloured points on a sphere of radius 0.5 (`sparse/0/points3D.txt`) and its report.
+fn write_poses_folder(dir: &Path) {
+    let model = dir.join("sparse").join("0");
+    std::fs::create_dir_all(&model).unwrap();
+    let cameras: Vec<serde_json::Value> = (0..3)
+        .map(|i| {
+            let a = i as f64 * 0.5;
+            let mut c = camera_json([3.0 * a.cos(), 3.0 * a.sin(), 1.0], [0.0; 3]);
+            c["name"] = format!("photo_{i}.jpg").into();
+            c
+        })
+        .collect();
+    std::fs::write(
+        dir.join("cameras.json"),
+        serde_json::Value::from(cameras).to_string(),
+    )
+    .unwrap();
+    let mut points = String::from("# POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[]\n");
+    for i in 0..600 {
+        // A Fibonacci sphere.
+        let z = 1.0 - 2.0 * (i as f64 + 0.5) / 600.0;
+        let (r, phi) = ((1.0 - z * z).sqrt(), i as f64 * 2.399_963);
+        let p = [0.5 * r * phi.cos(), 0.5 * r * phi.sin(), 0.5 * z];
+        points += &format!(
+            "{} {} {} {} 230 {} 40 0.3 1 {i} 2 {i}\n",
+            i + 1,
+            p[0],
+            p[1],
+            p[2],
+            (i * 7) % 256
+        );
+    }
+    std::fs::write(model.join("points3D.txt"), points).unwrap();
+    std::fs::write(
+        dir.join("poses_report.json"),
+        r#"{"registered": 3, "points": 600, "median_error_px": 0.3}"#,
+    )
+    .unwrap();
+}
+
+#[test]
+fn a_poses_folder_shows_its_cameras_and_points_in_the_browser() {
+    browser();
+    let dir = tempfile::tempdir().unwrap();
+    let folder = dir.path().join("poses");
+    write_poses_folder(&folder);
+    let viewer = serve(&[s(&folder)]);
+    let out = artefacts("poses");
+    let result = page_with(&viewer.1, &out, "surface", &[("CAMERA", "1")]);
+    println!("page result: {result}");
+    let groups: Vec<&str> = result["groups"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|g| g.as_str().unwrap())
+        .collect();
+    assert_eq!(groups, ["estimated"; 3]);
+    assert_eq!(result["cameras"], 3);
+    assert!(result["metricsRows"].as_u64().unwrap() >= 3);
+    let lit = result["interactive"]["litFraction"].as_f64().unwrap();
+    assert!(lit > 0.005, "the points and frusta are not drawn: {lit}");
+    // Through a camera that looks at the sphere of points: its dots are in the picture.
+    let through = result["cameraStats"]["litFraction"].as_f64().unwrap();
+    assert!(
+        through > 0.01,
+        "the points are not in front of the camera: {through}"
+    );
 }

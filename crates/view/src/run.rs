@@ -8,6 +8,8 @@
 //!   (`*.mp4`, `*.gif`, `*.webm` in the run folder);
 //! - **surface** (`fewview surface`): `mesh.ply`, `poses_initial.json`, `poses_refined.json`,
 //!   `metrics.json` and `renders/*.png`;
+//! - **poses** (`fewview poses`): `poses_report.json`, the estimated `cameras.json`, the
+//!   model's points (`sparse/0/points3D.txt`, drawn as dots) and `cameras.png`;
 //! - a lone Gaussian PLY (`fewview view --ply FILE`).
 //!
 //! Only the files listed here are served (by index, never by a path from the request).
@@ -27,6 +29,7 @@ use crate::ply::{GaussianPly, check_gaussian_ply};
 pub enum RunKind {
     Splat,
     Surface,
+    Poses,
     Ply,
 }
 
@@ -35,7 +38,7 @@ pub enum RunKind {
 #[derive(Clone, Debug, Serialize)]
 pub struct PageCamera {
     pub name: String,
-    /// `train`, `test`, `initial` or `refined`.
+    /// `train`, `test`, `initial`, `refined` or `estimated`.
     pub group: &'static str,
     pub fx: f64,
     pub fy: f64,
@@ -180,10 +183,13 @@ impl Run {
             ))
         } else if dir.join("mesh.ply").is_file() {
             Self::open_surface(dir)
+        } else if dir.join("poses_report.json").is_file() {
+            Self::open_poses(dir)
         } else {
             Err(ViewError::format(
                 dir,
-                "not a run directory: no point_cloud.ply (train, demo, fusion) or mesh.ply (surface)",
+                "not a run directory: no point_cloud.ply (train, demo, fusion), mesh.ply \
+                 (surface) or poses_report.json (poses)",
             ))
         }
     }
@@ -337,6 +343,53 @@ impl Run {
             });
         }
         run.add_videos(dir)?;
+        Ok(run)
+    }
+
+    /// The output of `fewview poses`: its cameras, its points as a mesh without faces, its
+    /// report as the metrics and its picture of the cameras from above.
+    fn open_poses(dir: &Path) -> Result<Self> {
+        let mut run = Run::empty(RunKind::Poses, display_name(dir));
+        let cams_path = dir.join("cameras.json");
+        let cams = fewview_geom::io::cameras::read_cameras(&cams_path)?;
+        let names = read_json(&cams_path)?.unwrap_or_default();
+        for (i, c) in cams.iter().enumerate() {
+            let name = names[i]["name"]
+                .as_str()
+                .map_or_else(|| format!("camera {i}"), str::to_string);
+            run.manifest
+                .cameras
+                .push(PageCamera::new(name, "estimated", c));
+        }
+        let model = dir.join("sparse").join("0");
+        match fewview_scene::colmap::read_points_in(&model)? {
+            Some(points) => {
+                let cloud = fewview_geom::Mesh {
+                    vertices: points.iter().map(|p| p.xyz.map(|v| v as f32)).collect(),
+                    faces: Vec::new(),
+                    colors: Some(
+                        points
+                            .iter()
+                            .map(|p| p.rgb.map(|c| f32::from(c) / 255.0))
+                            .collect(),
+                    ),
+                    normals: None,
+                };
+                run.mesh = Some(mesh_buffers(&cloud));
+                run.manifest.has_mesh = true;
+            }
+            None => run.manifest.notes.push("no sparse/0/points3D".into()),
+        }
+        run.manifest.metrics = read_json(&dir.join("poses_report.json"))?;
+        let picture = dir.join("cameras.png");
+        if picture.is_file() {
+            let render = run.add_file(picture);
+            run.manifest.images.push(PageImage {
+                name: "cameras and points from above".into(),
+                render,
+                truth: None,
+            });
+        }
         Ok(run)
     }
 
@@ -526,5 +579,52 @@ mod tests {
         assert_eq!(groups, ["initial", "refined"]);
         let b = &run.mesh.unwrap().0;
         assert_eq!(b.len(), 12 + 9 * 4 + 3 * 4);
+    }
+
+    #[test]
+    fn a_poses_folder_serves_its_named_cameras_and_points() {
+        let dir = tempfile::tempdir().unwrap();
+        let cam = Camera::look_at(
+            fewview_scene::Intrinsics::centered(50.0, 64, 48),
+            nalgebra::Vector3::new(0.0, -3.0, 1.0),
+            nalgebra::Vector3::zeros(),
+            nalgebra::Vector3::z(),
+        );
+        let path = dir.path().join("cameras.json");
+        fewview_geom::io::cameras::write_cameras(&path, &[cam.clone(), cam]).unwrap();
+        let mut named: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        named[0]["name"] = "a.jpg".into();
+        std::fs::write(&path, named.to_string()).unwrap();
+        let model = dir.path().join("sparse").join("0");
+        std::fs::create_dir_all(&model).unwrap();
+        std::fs::write(
+            model.join("points3D.txt"),
+            "# one point\n1 0.5 -0.25 2 255 0 51 0.3 1 3 2 7\n",
+        )
+        .unwrap();
+        std::fs::write(dir.path().join("poses_report.json"), r#"{"registered": 2}"#).unwrap();
+        let run = Run::open(dir.path()).unwrap();
+        assert_eq!(run.manifest.kind, RunKind::Poses);
+        let cameras: Vec<_> = run
+            .manifest
+            .cameras
+            .iter()
+            .map(|c| (c.name.as_str(), c.group))
+            .collect();
+        assert_eq!(cameras, [("a.jpg", "estimated"), ("camera 1", "estimated")]);
+        assert_eq!(run.manifest.metrics.unwrap()["registered"], 2);
+        // One vertex, no faces, colours: the header, its position and its colour.
+        let b = &run.mesh.unwrap().0;
+        let words: Vec<u32> = b[..12]
+            .chunks(4)
+            .map(|w| u32::from_le_bytes(w.try_into().unwrap()))
+            .collect();
+        assert_eq!(words, [1, 0, 1]);
+        let floats: Vec<f32> = b[12..]
+            .chunks(4)
+            .map(|w| f32::from_le_bytes(w.try_into().unwrap()))
+            .collect();
+        assert_eq!(floats, [0.5, -0.25, 2.0, 1.0, 0.0, 0.2]);
     }
 }

@@ -13,9 +13,10 @@ use fewview_view::{OpenOptions, Run, RunKind, server};
 ///
 /// Serves a page (nothing is fetched from the internet) with the run drawn in 3D: the trained
 /// Gaussians of a `train`, `demo` or `fusion` run, streamed to the page and drawn with the same
-/// projection, colours and compositing as `fewview render`; or the mesh of a `surface` run with
-/// its initial and refined cameras. The cameras are drawn as frusta (training orange, held-out
-/// blue; surface: initial red, refined green); click one, or its name in the list, to look
+/// projection, colours and compositing as `fewview render`; the mesh of a `surface` run with
+/// its initial and refined cameras; or the estimated cameras and points of a `poses` folder.
+/// The cameras are drawn as frusta (training and estimated orange, held-out blue; surface:
+/// initial red, refined green); click one, or its name in the list, to look
 /// through it. Beside the view: `metrics.json`, the held-out renders next to their ground truth
 /// and the run's videos.
 ///
@@ -23,7 +24,7 @@ use fewview_view::{OpenOptions, Run, RunKind, server};
 /// (W/A/S/D/Q/E move, drag looks around). Stop the server with Ctrl-C.
 #[derive(Debug, ClapArgs)]
 pub struct Args {
-    /// Run directory: the `--out` of `train`, `demo`, `fusion` or `surface`.
+    /// Run directory: the `--out` of `train`, `demo`, `fusion`, `surface` or `poses`.
     #[arg(
         value_name = "RUN_DIR",
         required_unless_present = "ply",
