@@ -10,7 +10,10 @@
    library's enum behind its `cli` feature instead), and a command module in
    `crates/cli/src/commands` over MAX_COMMAND_LINES lines composes what a library should.
    Both have one list of known exceptions, CLI_EXCEPTIONS, to be emptied; an exception that no
-   longer applies is a finding too, so that the list only shrinks.
+   longer applies is a finding too, so that the list only shrinks. In the method commands
+   (METHOD_COMMANDS), a flag's default written as a number literal repeats what the library's
+   `Default` says (take it from there: `default_value_t = Overrides::default().iterations`);
+   flags the library has no setting for are listed in OWN_DEFAULTS.
 4. Upward imports: a file that names a module above it (its parent `mod.rs`, an ancestor, or
    the crate root, whose re-exports are for users) depends on what is built from it; shared
    items belong in a sibling module that both use. Known files in UPWARD_EXCEPTIONS (none in
@@ -32,6 +35,19 @@ MAX_COMMAND_LINES = 400
 # Known findings of check 3 (the structure issue's second pass moves them into the libraries):
 # `enum:<file>:<Name>` for a mirrored ValueEnum, `lines:<file>` for a long command module.
 CLI_EXCEPTIONS: set[str] = set()
+
+# The method commands, whose flags set a library's configuration (files or folders under
+# crates/cli/src/commands), and their flags with a number default of the command's own (the
+# demo scene's size, a dataset's downscale, a checkpoint interval the library does not keep).
+METHOD_COMMANDS = ["surface/", "fusion.rs", "human/train.rs", "poses.rs", "study.rs"]
+OWN_DEFAULTS = {
+    "surface/args.rs:match_downscale",
+    "fusion.rs:width",
+    "fusion.rs:downscale",
+    "human/train.rs:checkpoint_every",
+}
+LITERAL_DEFAULT_RE = re.compile(r"default_value_t\s*=\s*-?[0-9][0-9_.eE+-]*\s*[,)\]]")
+FIELD_RE = re.compile(r"\n\s*(?:pub(?:\([^)]*\))?\s+)?([a-z_][a-z0-9_]*)\s*:")
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -401,6 +417,17 @@ def enums(path, value_enum_only):
     return found
 
 
+def literal_defaults(path):
+    """The fields whose clap default is a number literal, test code left out."""
+    code = without_test_items(path.read_text())
+    fields = []
+    for m in LITERAL_DEFAULT_RE.finditer(code):
+        field = FIELD_RE.search(code, m.end())
+        if field:
+            fields.append(field.group(1))
+    return fields
+
+
 def cli_findings(crates):
     """Check 3's findings, as `CLI_EXCEPTIONS` keys with a message each."""
     library = {}
@@ -414,6 +441,7 @@ def cli_findings(crates):
                     library.setdefault(variants, f"{path.relative_to(ROOT)}: {name}")
     commands = ROOT / "crates" / "cli" / "src" / "commands"
     findings = {}
+    own_seen = set()
     for path in sorted(commands.rglob("*.rs")):
         rel = path.relative_to(commands).as_posix()
         for name, variants in enums(path, True):
@@ -421,11 +449,22 @@ def cli_findings(crates):
                 findings[f"enum:{rel}:{name}"] = (
                     f"crates/cli/src/commands/{rel}: ValueEnum {name} mirrors {library[variants]}"
                 )
+        if any(rel == m or rel.startswith(m) for m in METHOD_COMMANDS if m.endswith("/")) or rel in METHOD_COMMANDS:
+            for field in literal_defaults(path):
+                key = f"{rel}:{field}"
+                own_seen.add(key)
+                if key not in OWN_DEFAULTS:
+                    findings[f"default:{key}"] = (
+                        f"crates/cli/src/commands/{rel}: --{field.replace('_', '-')} repeats a "
+                        "number default; take it from the library's Default"
+                    )
         lines = path.read_text().count("\n")
         if lines > MAX_COMMAND_LINES:
             findings[f"lines:{rel}"] = (
                 f"crates/cli/src/commands/{rel} is {lines} lines (limit {MAX_COMMAND_LINES})"
             )
+    for key in sorted(OWN_DEFAULTS - own_seen):
+        findings[f"own:{key}"] = f"OWN_DEFAULTS lists `{key}`, which has no number default: remove it"
     return findings
 
 

@@ -55,6 +55,6 @@ pub mod warmup;
 pub use config::{InitialPoses, RunConfig};
 pub use error::{Result, SurfaceError};
 pub use inputs::{LoadedInputs, Scene};
-pub use overrides::{Densify, LossSwitches, LossWeights, Overrides};
+pub use overrides::{DEFAULT_POSE_NOISE, Densify, LossSwitches, LossWeights, Overrides};
 pub use pipeline::{Event, RunInputs, RunReport, run};
 pub use schedule::Schedule;

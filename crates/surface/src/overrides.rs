@@ -95,6 +95,10 @@ pub struct LossWeights {
     pub psdf: Option<f32>,
 }
 
+/// σ of the se(3) noise on the ground-truth poses a run starts from by default (the surface
+/// paper's noisy-pose setting).
+pub const DEFAULT_POSE_NOISE: f64 = 0.15;
+
 /// A run's settings as the user gives them. `None` and [`Densify::Auto`] leave the choice to
 /// the [`Schedule`]; an explicit value wins over it. The defaults are `fewview surface`'s.
 #[derive(Clone, Debug, PartialEq)]
@@ -153,7 +157,9 @@ impl Default for Overrides {
             rays_per_batch: 512,
             matches_per_batch: 128,
             seed: 0,
-            initial_poses: InitialPoses::NoisyGroundTruth { sigma: 0.15 },
+            initial_poses: InitialPoses::NoisyGroundTruth {
+                sigma: DEFAULT_POSE_NOISE,
+            },
             pose_lr: None,
             pose_start: None,
             refine_poses: true,

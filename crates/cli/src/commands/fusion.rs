@@ -80,13 +80,16 @@ pub struct Args {
     #[arg(long, default_value = "gf", value_parser = parse_variant)]
     pub variant: Variant,
     /// Weight λ of the virtual-view loss of gf, l1-virtual and poisson.
-    #[arg(long, default_value_t = 0.3, value_parser = super::number_args::non_negative_f32)]
+    #[arg(long, default_value_t = FusionConfig::default().weight,
+          value_parser = super::number_args::non_negative_f32)]
     pub weight: f32,
     /// Take the virtual-view loss every N iterations (from 20 % of the run).
-    #[arg(long, default_value_t = 3, value_parser = super::number_args::positive_count)]
+    #[arg(long, default_value_t = FusionConfig::default().every,
+          value_parser = super::number_args::positive_count)]
     pub every: usize,
     /// Re-render and re-mesh the training views' depth every N iterations.
-    #[arg(long, default_value_t = 500, value_parser = super::number_args::positive_count)]
+    #[arg(long, default_value_t = FusionConfig::default().refresh_interval,
+          value_parser = super::number_args::positive_count)]
     pub refresh: usize,
     /// Bring the two photos reprojected into a virtual view to one exposure (their gain ratio
     /// where both see the surface, interpolated log-linearly) before the guidance field (or the
@@ -182,18 +185,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         print_transition(&report);
         return Ok(());
     }
-    let fusion = FusionConfig {
-        variant: args.variant,
-        weight: args.weight,
-        every: args.every,
-        refresh_interval: args.refresh,
-        match_exposure: args.match_exposure,
-        reproject: ReprojectOptions {
-            occlusion: args.occlusion,
-            ..ReprojectOptions::default()
-        },
-        ..FusionConfig::default()
-    };
+    let fusion = fusion_config(&args);
     if let Err(m) = fusion.validate() {
         bail!("invalid fusion options: {m}");
     }
@@ -369,4 +361,39 @@ fn print_table(runs: &[PathBuf]) -> anyhow::Result<()> {
         .collect::<Result<Vec<_>, _>>()?;
     print!("{}", fewview_fusion::table::markdown(&rows));
     Ok(())
+}
+
+/// The regulariser's flags as the library's configuration.
+fn fusion_config(args: &Args) -> FusionConfig {
+    FusionConfig {
+        variant: args.variant,
+        weight: args.weight,
+        every: args.every,
+        refresh_interval: args.refresh,
+        match_exposure: args.match_exposure,
+        reproject: ReprojectOptions {
+            occlusion: args.occlusion,
+            ..ReprojectOptions::default()
+        },
+        ..FusionConfig::default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: super::Args,
+    }
+
+    /// Every regulariser flag's default is the library's.
+    #[test]
+    fn an_empty_command_line_gives_the_librarys_defaults() {
+        let cli = Cli::try_parse_from(["fusion", "--demo", "--out", "o"]).unwrap();
+        let config = super::fusion_config(&cli.args);
+        assert_eq!(config, super::FusionConfig::default());
+    }
 }

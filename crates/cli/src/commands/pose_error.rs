@@ -88,15 +88,16 @@ fn truth_poses(path: &Path, names: Option<&[String]>) -> Result<Vec<Se3>> {
     if !path.is_dir() {
         return Ok(read_poses(path)?);
     }
-    let options = fewview_scene::load::LoadOptions::default();
-    let dataset = fewview_scene::load::load_dataset(path, &options)?;
     let Some(names) = names else {
+        let options = fewview_scene::load::LoadOptions::default();
+        let dataset = fewview_scene::load::load_dataset(path, &options)?;
         return Ok(dataset
             .views
             .iter()
             .map(|v| v.camera.world_to_camera)
             .collect());
     };
+    let dataset = fewview_scene::load::load_dataset(path, &every_view(path)?)?;
     names
         .iter()
         .map(|name| {
@@ -109,6 +110,21 @@ fn truth_poses(path: &Path, names: Option<&[String]>) -> Result<Vec<Se3>> {
                 .with_context(|| format!("{}: no view named {name}", path.display()))
         })
         .collect()
+}
+
+/// Options that load every view of a dataset folder: NeRF-synthetic's loader otherwise keeps
+/// the sparse split's 8 training views (and every test view, whose names repeat the training
+/// views'), so there every training frame is asked for, before one test frame (the loader
+/// refuses an empty split; names are looked up among the training views first).
+fn every_view(path: &Path) -> Result<fewview_scene::load::LoadOptions> {
+    let train = path.join("transforms_train.json");
+    let mut options = fewview_scene::load::LoadOptions::default();
+    if train.is_file() {
+        let frames = fewview_scene::transforms::read_transforms(&train)?.len();
+        options.train_views = Some((0..frames).collect());
+        options.test_views = Some(vec![0]);
+    }
+    Ok(options)
 }
 
 /// The `name` of every camera in a camera JSON list, when each has one (`fewview poses`

@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use clap::Args as ClapArgs;
 use fewview_match::learned::MatcherKind;
 use fewview_match::retrieval::RetrievalOptions;
-use fewview_sfm::photos::DEFAULT_FOV_DEG;
 use std::sync::Mutex;
 
 use fewview_sfm::{
@@ -36,17 +35,17 @@ pub struct Args {
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
     /// Horizontal field of view (degrees) of photos without an EXIF focal length.
-    #[arg(long, value_name = "DEG", default_value_t = DEFAULT_FOV_DEG)]
+    #[arg(long, value_name = "DEG", default_value_t = FolderOptions::default().fov_deg)]
     pub fov: f64,
     /// Photos are matched with their longer side scaled down to at most this many pixels.
-    #[arg(long, value_name = "PX", default_value_t = 1024)]
+    #[arg(long, value_name = "PX", default_value_t = FolderOptions::default().max_side)]
     pub max_side: usize,
     /// Fewest matches for two photos to count as overlapping.
     #[arg(long, value_name = "N", default_value_t = PoseOptions::default().min_matches)]
     pub min_matches: usize,
     /// Matcher of the sparse correspondences: `classical` (SIFT), `xfeat`, `xfeat-star` or
     /// `lighterglue` (weights from `scripts/setup.sh`; without them SIFT runs, and says so).
-    #[arg(long, value_enum, default_value_t = MatcherKind::Classical)]
+    #[arg(long, value_enum, default_value_t = PoseOptions::default().matcher)]
     pub matcher: MatcherKind,
     /// Also fit one radial distortion coefficient shared by the photos (COLMAP's
     /// `SIMPLE_RADIAL`; only when all photos share one camera). The model then says
@@ -65,7 +64,7 @@ pub struct Args {
     #[arg(long, value_name = "K", default_value_t = RetrievalOptions::default().neighbours)]
     pub neighbours: usize,
     /// Seed of RANSAC and of the retrieval's vocabulary.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = PoseOptions::default().seed)]
     pub seed: u64,
 }
 
@@ -77,7 +76,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::bail!("--max-side {}: expected at least 64 pixels", args.max_side);
     }
     check_folder(&args.out, "--out")?;
-    let options = FolderOptions {
+    let options = folder_options(&args);
+    let model = with_progress(|on| poses_for_folder(&args.images, &args.out, &options, on))?;
+    print_model(&model, args.fov);
+    println!(
+        "wrote {} (COLMAP text), transforms.json, cameras.json, cameras.png, poses_report.json and images/ in {}",
+        args.out.join("sparse/0").display(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// The flags as the library's options.
+fn folder_options(args: &Args) -> FolderOptions {
+    FolderOptions {
         max_side: args.max_side,
         fov_deg: args.fov,
         poses: PoseOptions {
@@ -95,15 +107,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             },
             ..PoseOptions::default()
         },
-    };
-    let model = with_progress(|on| poses_for_folder(&args.images, &args.out, &options, on))?;
-    print_model(&model, args.fov);
-    println!(
-        "wrote {} (COLMAP text), transforms.json, cameras.json, cameras.png, poses_report.json and images/ in {}",
-        args.out.join("sparse/0").display(),
-        args.out.display()
-    );
-    Ok(())
+    }
 }
 
 /// What a person wants to know of a model: assumed focal lengths, photos left out, the fit.
@@ -165,4 +169,25 @@ pub fn with_progress<T>(f: impl FnOnce(&(dyn Fn(&PoseProgress) + Sync)) -> T) ->
         bar.finish_and_clear();
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    /// Every flag's default is the library's: an empty command line gives `FolderOptions`'s
+    /// defaults.
+    #[test]
+    fn an_empty_command_line_gives_the_librarys_defaults() {
+        let cli = Cli::try_parse_from(["poses", "--images", "i", "--out", "o"]).unwrap();
+        assert_eq!(folder_options(&cli.args), FolderOptions::default());
+    }
 }

@@ -40,21 +40,21 @@ enum StudyCommand {
         #[arg(long)]
         out: PathBuf,
         /// Seed of the NUTS chains.
-        #[arg(long, default_value_t = 0)]
+        #[arg(long, default_value_t = BtSettings::default().seed)]
         seed: u64,
-        #[arg(long, default_value_t = 4)]
+        #[arg(long, default_value_t = BtSettings::default().chains)]
         chains: usize,
-        #[arg(long, default_value_t = 4000)]
+        #[arg(long, default_value_t = BtSettings::default().tune)]
         tune: u64,
         /// Post-tuning draws per chain: at least 10 (R̂ and the ESS split each chain in halves
         /// of at least 5 draws), at most 1,000,000 (every draw is kept in memory).
-        #[arg(long, default_value_t = 4000,
+        #[arg(long, default_value_t = BtSettings::default().draws,
               value_parser = clap::value_parser!(u64).range(MIN_DRAWS..=MAX_DRAWS))]
         draws: u64,
-        #[arg(long, default_value_t = 0.95)]
+        #[arg(long, default_value_t = BtSettings::default().target_accept)]
         target_accept: f64,
         /// Standard deviation of the Normal(0, σ) skill prior.
-        #[arg(long, default_value_t = 2.0)]
+        #[arg(long, default_value_t = BtSettings::default().prior_sigma)]
         prior_sigma: f64,
     },
     /// Export the stored answers as CSV.

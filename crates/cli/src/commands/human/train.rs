@@ -17,28 +17,34 @@ use crate::commands::progress;
 
 /// Train the network; writes checkpoints (`network.fvh`, `optimizer.bin`, `state.bin`) and
 /// `train_log.jsonl` to `--out`.
+/// The library's defaults, the one source of the flags' defaults below.
+fn defaults() -> TrainConfig {
+    TrainConfig::default()
+}
+
 #[derive(Debug, ClapArgs)]
 pub struct TrainArgs {
     #[command(flatten)]
     pub capture: CaptureArgs,
     /// Network widths and input size.
-    #[arg(long, value_enum, default_value_t = TrainConfig::default().preset)]
+    #[arg(long, value_enum, default_value_t = defaults().preset)]
     pub preset: Preset,
     /// Network configuration of the paper's appendix (1 simplified, 2 deep residual,
     /// 3 with batch norm, 4 without downsampling).
-    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=4))]
+    #[arg(long, default_value_t = defaults().variant.number(),
+          value_parser = clap::value_parser!(u8).range(1..=4))]
     pub variant: u8,
     /// Training steps, one target view of one frame each.
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, default_value_t = defaults().iterations)]
     pub iterations: usize,
     /// Adam's step size.
-    #[arg(long, default_value_t = 2e-4)]
+    #[arg(long, default_value_t = defaults().learning_rate)]
     pub lr: f64,
     /// Seeds the initial weights and the order of the targets.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = defaults().seed)]
     pub seed: u64,
     /// Source views per target.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = defaults().source_views)]
     pub source_views: usize,
     /// Feed the pose encoder zeros (the per-frame baseline of PoseGaussian's comparison).
     #[arg(long)]
@@ -169,4 +175,24 @@ pub(super) fn train(args: TrainArgs) -> anyhow::Result<()> {
         out.display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: TrainArgs,
+    }
+
+    /// Every flag's default is the library's: an empty command line gives `TrainConfig::default()`.
+    #[test]
+    fn an_empty_command_line_gives_the_librarys_defaults() {
+        let cli = Cli::try_parse_from(["train", "--data", "d", "--out", "o"]).unwrap();
+        assert_eq!(config(&cli.args).unwrap(), TrainConfig::default());
+    }
 }

@@ -8,7 +8,8 @@ use fewview_surface::field::{EncoderKind, FdScheme};
 use fewview_surface::matching::learned::MatcherKind;
 use fewview_surface::warmup::Connectivity;
 use fewview_surface::{
-    Densify, InitialPoses, LossSwitches, LossWeights, Overrides, RunConfig, Scene, Schedule,
+    DEFAULT_POSE_NOISE, Densify, InitialPoses, LossSwitches, LossWeights, Overrides, RunConfig,
+    Scene, Schedule,
 };
 
 use super::flags::{
@@ -16,6 +17,11 @@ use super::flags::{
     loss_weight, pose_noise, pose_rates, switch,
 };
 use crate::commands::dataset_args::DatasetArgs;
+
+/// The library's defaults, the one source of every flag's default below.
+fn defaults() -> Overrides {
+    Overrides::default()
+}
 
 /// Reconstruct a surface (NeuS SDF) and refine noisy camera poses from a few views (the surface paper):
 /// a run directory with the refined poses, `mesh.ply`, renders and `metrics.json`.
@@ -42,16 +48,16 @@ pub struct Args {
     #[arg(long)]
     pub resume: bool,
     /// Training iterations (the surface paper: 100k on a GPU; the default fits a CPU budget).
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, default_value_t = defaults().iterations)]
     pub iterations: usize,
     /// Random rays per iteration.
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = defaults().rays_per_batch)]
     pub rays: usize,
     /// Correspondences per iteration (two rays each).
-    #[arg(long, default_value_t = 128)]
+    #[arg(long, default_value_t = defaults().matches_per_batch)]
     pub matches_per_batch: usize,
     /// σ of the se(3) pose noise (0 = ground-truth poses; at most π).
-    #[arg(long, default_value_t = 0.15, value_parser = pose_noise)]
+    #[arg(long, default_value_t = DEFAULT_POSE_NOISE, value_parser = pose_noise)]
     pub pose_noise: f64,
     /// Start from the perturbed ground truth (`noisy`) or from the dataset's poses (`loaded`).
     #[arg(long, value_enum, default_value_t = InitialPosesArg::Noisy)]
@@ -71,13 +77,13 @@ pub struct Args {
     #[arg(long, default_value_t = 1, value_name = "K")]
     pub match_downscale: u32,
     /// Match only views whose optical axes are at most this many degrees apart (180: all).
-    #[arg(long, default_value_t = 80.0, value_name = "DEG")]
+    #[arg(long, default_value_t = defaults().max_pair_angle_deg, value_name = "DEG")]
     pub max_pair_angle: f64,
     /// Which matcher finds the correspondences: `classical` (SIFT), or the learned XFeat with
     /// mutual nearest neighbours (`xfeat`), semi-dense and refined (`xfeat-star`), or matched by
     /// LighterGlue (`lighterglue`); their weights come from `scripts/setup.sh`, and without
     /// them the run says so and uses the classical matcher.
-    #[arg(long, value_enum, default_value_t = MatcherKind::Classical)]
+    #[arg(long, value_enum, default_value_t = defaults().matcher)]
     pub matcher: MatcherKind,
     /// Sub-pixel refinement of the matches by Lucas–Kanade (a deviation from the surface paper).
     #[arg(long, value_enum, default_value_t = MatchRefineArg::Affine)]
@@ -95,10 +101,10 @@ pub struct Args {
     #[arg(long, value_name = "on|off")]
     pub pose_warmup: Option<Toggle>,
     /// The warm-up uses only the pairs of views with at least this many matches.
-    #[arg(long, default_value_t = 40, value_name = "N")]
+    #[arg(long, default_value_t = defaults().warmup_min_matches, value_name = "N")]
     pub warmup_min_matches: usize,
     /// Final scale (pixels) of the warm-up's Cauchy loss on the Sampson distances.
-    #[arg(long, default_value_t = Overrides::default().warmup_cauchy_px, value_name = "PX",
+    #[arg(long, default_value_t = defaults().warmup_cauchy_px, value_name = "PX",
           value_parser = crate::commands::number_args::positive)]
     pub warmup_cauchy: f64,
     /// Polish the warmed-up poses with each dense match weighted by its Lucas–Kanade
@@ -122,19 +128,19 @@ pub struct Args {
     #[arg(long, value_name = "FRACTION")]
     pub pose_start: Option<f64>,
     /// Seed of the noise, sampling and initialisation.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = defaults().seed)]
     pub seed: u64,
     /// Geometry encoder (`neus-mlp`: the paper's 8×256 MLP, slow on a CPU).
-    #[arg(long, value_enum, default_value_t = EncoderKind::HashGrid)]
+    #[arg(long, value_enum, default_value_t = defaults().encoder)]
     pub encoder: EncoderKind,
     /// Finite-difference stencil of the normals (4 or 6 taps).
-    #[arg(long, value_enum, default_value_t = FdScheme::Tetrahedron)]
+    #[arg(long, value_enum, default_value_t = defaults().fd_scheme)]
     pub fd: FdScheme,
     /// Coarse samples per ray.
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, default_value_t = defaults().n_coarse)]
     pub coarse: usize,
     /// Importance samples per ray.
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, default_value_t = defaults().n_importance)]
     pub importance: usize,
     /// Switch loss terms off for ablations, e.g. `--no-loss ncc,gc`.
     #[arg(long, value_name = "TERM,...", value_delimiter = ',')]
@@ -150,20 +156,20 @@ pub struct Args {
     #[arg(long, value_name = "A1,A2", value_parser = c2f_window)]
     pub c2f: Option<(f64, f64)>,
     /// Marching-cubes resolution over [−1, 1]³ (2 to 2048).
-    #[arg(long, default_value_t = 256,
+    #[arg(long, default_value_t = defaults().mesh_resolution as u32,
           value_parser = clap::value_parser!(u32).range(2..=MAX_MESH_RESOLUTION))]
     pub mesh_resolution: u32,
     /// Test views rendered and scored.
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = defaults().eval_views)]
     pub eval_views: usize,
     /// Render test views at 1/K of their size.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    #[arg(long, default_value_t = defaults().eval_scale, value_parser = clap::value_parser!(u32).range(1..))]
     pub eval_scale: u32,
     /// Reference surface (PLY/OBJ, in the dataset's normalised frame) for Chamfer.
     #[arg(long, value_name = "FILE")]
     pub reference: Option<PathBuf>,
     /// Iterations between checkpoints.
-    #[arg(long, default_value_t = 250)]
+    #[arg(long, default_value_t = defaults().checkpoint_every)]
     pub checkpoint_every: usize,
 }
 

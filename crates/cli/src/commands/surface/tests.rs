@@ -179,3 +179,11 @@ fn contradictory_or_bad_schedule_flags_are_refused() {
     let err = args.config().unwrap_err().to_string();
     assert!(err.contains("--pose-start 1.5"), "{err}");
 }
+
+/// Every flag's default is the library's: an empty command line gives `Overrides::default()`.
+#[test]
+fn an_empty_command_line_gives_the_librarys_defaults() {
+    let argv = ["surface", "--synthetic"];
+    let args = Cli::try_parse_from(argv).unwrap().args;
+    assert_eq!(args.overrides(), fewview_surface::Overrides::default());
+}
