@@ -39,12 +39,15 @@ CLI_EXCEPTIONS: set[str] = set()
 # The method commands, whose flags set a library's configuration (files or folders under
 # crates/cli/src/commands), and their flags with a number default of the command's own (the
 # demo scene's size, a dataset's downscale, a checkpoint interval the library does not keep).
-METHOD_COMMANDS = ["surface/", "fusion.rs", "human/train.rs", "poses.rs", "study.rs"]
+METHOD_COMMANDS = [
+    "surface/", "fusion.rs", "human/train.rs", "poses.rs", "study.rs", "train_args.rs",
+]
 OWN_DEFAULTS = {
     "surface/args.rs:match_downscale",
     "fusion.rs:width",
     "fusion.rs:downscale",
     "human/train.rs:checkpoint_every",
+    "train_args.rs:checkpoint_every",
 }
 LITERAL_DEFAULT_RE = re.compile(r"default_value_t\s*=\s*-?[0-9][0-9_.eE+-]*\s*[,)\]]")
 FIELD_RE = re.compile(r"\n\s*(?:pub(?:\([^)]*\))?\s+)?([a-z_][a-z0-9_]*)\s*:")

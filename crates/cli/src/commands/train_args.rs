@@ -25,10 +25,10 @@ pub struct TrainArgs {
     #[arg(long)]
     pub iterations: Option<usize>,
     /// Seed of every random choice (initialisation, view order, splits of Gaussians).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = TrainConfig::inria().seed)]
     pub seed: u64,
     /// Largest spherical-harmonics degree (0–3).
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = TrainConfig::inria().sh_degree)]
     pub sh_degree: usize,
     /// Initial Gaussians: `auto` (dataset points; else `stereo` when at least two training views
     /// overlap; else random in the training frustums when the views have depth bounds, else
@@ -57,7 +57,8 @@ pub struct TrainArgs {
     /// Fraction of the stereo point cloud that becomes Gaussians (the fusion paper: 0.1; its
     /// sparse alternative (a): 0.01), whenever the stereo start runs (`stereo`, `depth:DIR`, or
     /// `auto` choosing it).
-    #[arg(long, default_value_t = 0.1, value_parser = super::number_args::fraction)]
+    #[arg(long, default_value_t = StereoInit::default().fraction,
+          value_parser = super::number_args::fraction)]
     pub stereo_fraction: f64,
     /// How the stereo start brings each pair's photos to one brightness before matching: `as-is`
     /// (OpenCV's matcher, robust to moderate exposure differences) or `gain-matched` (a gain per
@@ -66,10 +67,10 @@ pub struct TrainArgs {
     #[arg(long, value_enum, default_value_t)]
     pub stereo_photometry: Photometry,
     /// Number of random initial points.
-    #[arg(long, default_value_t = 20_000)]
+    #[arg(long, default_value_t = RunConfig::new(TrainConfig::inria()).init_points)]
     pub init_points: usize,
     /// Weight λ of the SSIM term in `(1 − λ) L1 + λ (1 − SSIM)`.
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = TrainConfig::inria().lambda_dssim)]
     pub lambda_dssim: f32,
     /// Background behind the Gaussians while training on images with alpha (NeRF-synthetic
     /// RGBA): `random` (a random colour each iteration, the target re-composited over it, as
@@ -194,4 +195,39 @@ fn parse_init(s: &str) -> anyhow::Result<(InitStrategy, DepthFrom)> {
         ),
     };
     Ok((strategy, DepthFrom::Sgm))
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: TrainArgs,
+    }
+
+    /// The flags' defaults are the library's (the Inria schedule's, which the sparse-view one
+    /// keeps): an empty command line gives the sparse-view schedule's training settings and
+    /// the library's start, but for the command's own two choices: a checkpoint every 500
+    /// iterations and a random background behind photos with alpha.
+    #[test]
+    fn an_empty_command_line_gives_the_librarys_defaults() {
+        let args = Cli::try_parse_from(["train"]).unwrap().args;
+        let run = args.run_config([0.0; 3], 1000).unwrap();
+        let library = RunConfig::new(TrainConfig::sparse_view(1000));
+        let mut train = run.train.clone();
+        assert_eq!(
+            (train.checkpoint_interval, train.random_background),
+            (500, true)
+        );
+        train.checkpoint_interval = library.train.checkpoint_interval;
+        train.random_background = library.train.random_background;
+        assert_eq!(train, library.train);
+        assert_eq!(run.init_points, library.init_points);
+        assert_eq!(run.stereo, library.stereo);
+        assert_eq!(run.surface_depth_weight, library.surface_depth_weight);
+    }
 }
