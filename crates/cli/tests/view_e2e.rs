@@ -505,22 +505,34 @@ fn write_surface_run(dir: &Path) {
     .unwrap();
 }
 
+/// The page script's "surface" mode (geometry, cameras, a look through camera `camera`) on a
+/// folder served by `fewview view`.
+fn page_of_folder(folder: &Path, out: &Path, camera: &str) -> serde_json::Value {
+    let viewer = serve(&[s(folder)]);
+    let result = page_with(&viewer.1, out, "surface", &[("CAMERA", camera)]);
+    println!("page result: {result}");
+    result
+}
+
+/// The group of every camera the page lists.
+fn camera_groups(result: &serde_json::Value) -> Vec<&str> {
+    result["groups"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|g| g.as_str().unwrap())
+        .collect()
+}
+
 #[test]
 fn a_surface_run_shows_its_mesh_and_both_camera_sets_in_the_browser() {
     browser();
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("surface");
     write_surface_run(&run);
-    let viewer = serve(&[s(&run)]);
     let out = artefacts("surface");
-    let result = page_with(&viewer.1, &out, "surface", &[("CAMERA", "3")]);
-    println!("page result: {result}");
-    let groups: Vec<&str> = result["groups"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|g| g.as_str().unwrap())
-        .collect();
+    let result = page_of_folder(&run, &out, "3");
+    let groups = camera_groups(&result);
     assert_eq!(
         groups,
         ["initial"; 3]
@@ -591,17 +603,8 @@ fn a_poses_folder_shows_its_cameras_and_points_in_the_browser() {
     let dir = tempfile::tempdir().unwrap();
     let folder = dir.path().join("poses");
     write_poses_folder(&folder);
-    let viewer = serve(&[s(&folder)]);
-    let out = artefacts("poses");
-    let result = page_with(&viewer.1, &out, "surface", &[("CAMERA", "1")]);
-    println!("page result: {result}");
-    let groups: Vec<&str> = result["groups"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|g| g.as_str().unwrap())
-        .collect();
-    assert_eq!(groups, ["estimated"; 3]);
+    let result = page_of_folder(&folder, &artefacts("poses"), "1");
+    assert_eq!(camera_groups(&result), ["estimated"; 3]);
     assert_eq!(result["cameras"], 3);
     assert!(result["metricsRows"].as_u64().unwrap() >= 3);
     let lit = result["interactive"]["litFraction"].as_f64().unwrap();
