@@ -161,7 +161,8 @@ impl Plane {
     fn taps(&self, x: f64, y: f64) -> [(usize, f64); 4] {
         let fx = (x - 0.5).clamp(0.0, (self.width - 1) as f64);
         let fy = (y - 0.5).clamp(0.0, (self.height - 1) as f64);
-        let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
+        // Both are clamped to ≥ 0, where truncation is the floor (and needs no libm call).
+        let (x0, y0) = (fx as usize, fy as usize);
         let (x1, y1) = ((x0 + 1).min(self.width - 1), (y0 + 1).min(self.height - 1));
         let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
         let w = self.width;
@@ -179,6 +180,13 @@ impl Plane {
             .iter()
             .map(|&(i, t)| plane[i] as f64 * t)
             .sum()
+    }
+
+    /// The bilinear samples of the values and both gradients at `(x, y)`, the taps found once.
+    pub fn sample_with_gradient(&self, x: f64, y: f64) -> (f64, f64, f64) {
+        let taps = self.taps(x, y);
+        let at = |plane: &[f32]| -> f64 { taps.iter().map(|&(i, t)| plane[i] as f64 * t).sum() };
+        (at(&self.value), at(&self.grad_x), at(&self.grad_y))
     }
 }
 
@@ -405,8 +413,7 @@ fn normal_equations<const N: usize>(
     let (mut squares, mut weights) = (0.0, 0.0);
     for ((d, &w), &t) in window.offsets.iter().zip(&window.weights).zip(template) {
         let x = warp.apply(d);
-        let value = b.sample(&b.value, x.x, x.y);
-        let (gx, gy) = (b.sample(&b.grad_x, x.x, x.y), b.sample(&b.grad_y, x.x, x.y));
+        let (value, gx, gy) = b.sample_with_gradient(x.x, x.y);
         let residual = value - (gain * t + bias);
         let jac = jacobian_row::<N>(gx, gy, d, t);
         normal += w * jac * jac.transpose();
