@@ -509,9 +509,7 @@ fn write_surface_run(dir: &Path) {
 /// folder served by `fewview view`.
 fn page_of_folder(folder: &Path, out: &Path, camera: &str) -> serde_json::Value {
     let viewer = serve(&[s(folder)]);
-    let result = page_with(&viewer.1, out, "surface", &[("CAMERA", camera)]);
-    println!("page result: {result}");
-    result
+    page_with(&viewer.1, out, "surface", &[("CAMERA", camera)])
 }
 
 /// The group of every camera the page lists.
@@ -532,6 +530,7 @@ fn a_surface_run_shows_its_mesh_and_both_camera_sets_in_the_browser() {
     write_surface_run(&run);
     let out = artefacts("surface");
     let result = page_of_folder(&run, &out, "3");
+    println!("page result: {result}");
     let groups = camera_groups(&result);
     assert_eq!(
         groups,
@@ -604,6 +603,7 @@ fn a_poses_folder_shows_its_cameras_and_points_in_the_browser() {
     let folder = dir.path().join("poses");
     write_poses_folder(&folder);
     let result = page_of_folder(&folder, &artefacts("poses"), "1");
+    println!("page result: {result}");
     assert_eq!(camera_groups(&result), ["estimated"; 3]);
     assert_eq!(result["cameras"], 3);
     assert!(result["metricsRows"].as_u64().unwrap() >= 3);

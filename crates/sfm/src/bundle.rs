@@ -591,6 +591,18 @@ pub fn bundle_adjust(
     matches: &[Match],
     options: &BundleOptions,
 ) -> (Vec<Se3>, BundleReport) {
+    bundle_adjust_with(intrinsics, poses, matches, options, |_| {})
+}
+
+/// [`bundle_adjust`], telling `on_iteration(k)` after its `k`-th Levenberg–Marquardt
+/// iteration (at most [`BundleOptions::max_iterations`]).
+pub fn bundle_adjust_with(
+    intrinsics: &[Intrinsics],
+    poses: &[Se3],
+    matches: &[Match],
+    options: &BundleOptions,
+    on_iteration: impl Fn(usize),
+) -> (Vec<Se3>, BundleReport) {
     let Some(cameras) = Cameras::new(intrinsics) else {
         let report = BundleReport {
             skipped: Some("intrinsics with a focal length that is not positive".into()),
@@ -644,6 +656,7 @@ pub fn bundle_adjust(
             &mut lambda,
         );
         report.iterations = iteration + 1;
+        on_iteration(iteration + 1);
         if iteration == 0 {
             report.initial_cost = step.cost_before;
         }

@@ -140,9 +140,26 @@ pub fn relative_start(
     min_per_pair: usize,
     seed: u64,
 ) -> Result<GlobalStart, String> {
-    let mut pairs: Vec<PairPose> = pairs_of(matches, n, min_per_pair)
+    relative_start_with(n, intrinsics, matches, (min_per_pair, seed), |_, _| {})
+}
+
+/// [`relative_start`], telling `on_pair(done, total)` after each pair's relative pose.
+pub fn relative_start_with(
+    n: usize,
+    intrinsics: &[Intrinsics],
+    matches: &[Match],
+    (min_per_pair, seed): (usize, u64),
+    on_pair: impl Fn(usize, usize),
+) -> Result<GlobalStart, String> {
+    let overlapping = pairs_of(matches, n, min_per_pair);
+    let mut pairs: Vec<PairPose> = overlapping
         .iter()
-        .filter_map(|pair| pair_pose(pair, intrinsics, seed))
+        .enumerate()
+        .filter_map(|(i, pair)| {
+            let pose = pair_pose(pair, intrinsics, seed);
+            on_pair(i + 1, overlapping.len());
+            pose
+        })
         .collect();
     let mut rotations = averaged_rotations(n, &pairs)?;
     // A pair whose relative rotation disagrees with the others (a wrong model from few or

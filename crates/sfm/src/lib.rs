@@ -10,7 +10,7 @@ pub mod poses;
 pub mod schur;
 pub mod se3;
 
-pub use bundle::{BundleOptions, BundleReport, bundle_adjust};
+pub use bundle::{BundleOptions, BundleReport, bundle_adjust, bundle_adjust_with};
 pub use error::{Result, SfmError};
 pub use export::{place_images, write_model};
 pub use folder::{FolderOptions, poses_for_folder};

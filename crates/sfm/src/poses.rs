@@ -26,10 +26,10 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::bundle::{
-    BundleOptions, BundleReport, adjusted_intrinsics, bundle_adjust, triangulated_tracks,
+    BundleOptions, BundleReport, adjusted_intrinsics, bundle_adjust_with, triangulated_tracks,
 };
 use crate::error::{Result, SfmError};
-use crate::global_start::{PairPose, relative_start};
+use crate::global_start::{PairPose, relative_start_with};
 use crate::photos::{FocalSource, Photo};
 
 /// Options of [`estimate_poses`].
@@ -202,12 +202,18 @@ pub fn estimate_poses_with(
         )));
     }
     let (intrinsics, matches) = restricted(photos, &matches, &group);
-    let start = relative_start(
+    let start = relative_start_with(
         group.len(),
         &intrinsics,
         &matches,
-        options.min_matches,
-        options.seed,
+        (options.min_matches, options.seed),
+        |done, total| {
+            on_progress(&PoseProgress {
+                stage: PoseStage::RelativePoses,
+                done,
+                total,
+            })
+        },
     )
     .map_err(SfmError::NoModel)?;
     let one_camera = intrinsics.iter().all(|k| *k == intrinsics[0]);
@@ -217,7 +223,20 @@ pub fn estimate_poses_with(
         refine_principal_point: one_camera && options.bundle.refine_principal_point,
         ..options.bundle
     };
-    let (poses, bundle) = bundle_adjust(&intrinsics, &start.poses, &matches, &bundle_options);
+    let on_iteration = |done| {
+        on_progress(&PoseProgress {
+            stage: PoseStage::Adjustment,
+            done,
+            total: bundle_options.max_iterations,
+        })
+    };
+    let (poses, bundle) = bundle_adjust_with(
+        &intrinsics,
+        &start.poses,
+        &matches,
+        &bundle_options,
+        on_iteration,
+    );
     let intrinsics = adjusted_intrinsics(&intrinsics, &bundle);
     let k1 = bundle.radial_k1.unwrap_or(0.0);
     let (poses, points) =
@@ -275,6 +294,12 @@ pub enum PoseStage {
     Matching,
     /// The dense matcher on the pairs where SIFT found few matches.
     DenseMatching,
+    /// Every match refined by affine Lucas–Kanade (one step: no finer progress is told).
+    Refinement,
+    /// The five-point relative pose of every overlapping pair.
+    RelativePoses,
+    /// The bundle adjustment's iterations (up to its most; it usually stops before).
+    Adjustment,
 }
 
 impl PoseStage {
@@ -283,6 +308,9 @@ impl PoseStage {
             Self::Features => "features",
             Self::Matching => "matching",
             Self::DenseMatching => "dense matching",
+            Self::Refinement => "refining matches",
+            Self::RelativePoses => "relative poses",
+            Self::Adjustment => "bundle adjustment",
         }
     }
 }
@@ -383,7 +411,16 @@ fn correspondences(
         step(PoseStage::DenseMatching, sparse_pairs.len());
     }
     let images: Vec<&Image> = inputs.iter().map(|i| i.image).collect();
+    let refinement = |done| {
+        on_progress(&PoseProgress {
+            stage: PoseStage::Refinement,
+            done,
+            total: 1,
+        })
+    };
+    refinement(0);
     let refined = refine_matches(&images, &matches, &AffineRefineOptions::default());
+    refinement(1);
     (shared_ends(&matches, refined), matched)
 }
 
