@@ -451,9 +451,9 @@ fn chamfer_refuses_more_samples_than_the_cap() {
 #[test]
 fn pose_error_of_identical_poses_is_the_floor() {
     let dir = tempfile::tempdir().unwrap();
-    let poses = r#"[[[1,0,0,0],[0,1,0,0],[0,0,1,1],[0,0,0,1]],
+    let poses = r"[[[1,0,0,0],[0,1,0,0],[0,0,1,1],[0,0,0,1]],
                     [[0,0,1,0],[0,1,0,0],[-1,0,0,2],[0,0,0,1]],
-                    [[0,-1,0,0],[1,0,0,0],[0,0,1,3],[0,0,0,1]]]"#;
+                    [[0,-1,0,0],[1,0,0,0],[0,0,1,3],[0,0,0,1]]]";
     let p = dir.path().join("p.json");
     std::fs::write(&p, poses).unwrap();
     let (ok, stdout, err) = fewview(&["pose-error", "--est", s(&p), "--gt", s(&p)]);
@@ -472,8 +472,8 @@ fn pose_error_of_identical_poses_is_the_floor() {
 #[test]
 fn pose_error_refuses_an_eps_outside_zero_one() {
     let dir = tempfile::tempdir().unwrap();
-    let poses = r#"[[[1,0,0,0],[0,1,0,0],[0,0,1,1],[0,0,0,1]],
-                    [[0,0,1,0],[0,1,0,0],[-1,0,0,2],[0,0,0,1]]]"#;
+    let poses = r"[[[1,0,0,0],[0,1,0,0],[0,0,1,1],[0,0,0,1]],
+                    [[0,0,1,0],[0,1,0,0],[-1,0,0,2],[0,0,0,1]]]";
     let p = dir.path().join("p.json");
     std::fs::write(&p, poses).unwrap();
     for eps in ["--eps=2", "--eps=NaN", "--eps=-1"] {

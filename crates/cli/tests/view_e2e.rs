@@ -178,7 +178,7 @@ fn write_random_ply(path: &Path, n: usize, degree: usize, seed: u64) {
         "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
     ]
     .iter()
-    .map(|s| s.to_string())
+    .map(std::string::ToString::to_string)
     .collect();
     names.extend((0..rest).map(|i| format!("f_rest_{i}")));
     names.extend(
@@ -186,7 +186,7 @@ fn write_random_ply(path: &Path, n: usize, degree: usize, seed: u64) {
             "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
         ]
         .iter()
-        .map(|s| s.to_string()),
+        .map(std::string::ToString::to_string),
     );
     for name in &names {
         header += &format!("property float {name}\n");

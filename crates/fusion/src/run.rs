@@ -100,7 +100,9 @@ pub fn fusion_run(
     let summary = train_run_with(ds, &run, dir, resume, terms, on_progress)?;
     let names: Vec<&str> = ds.train_views().map(|v| v.name.as_str()).collect();
     let term = stats
-        .map(|s| serde_json::to_value(&*s.lock().unwrap_or_else(|e| e.into_inner())))
+        .map(|s| {
+            serde_json::to_value(&*s.lock().unwrap_or_else(std::sync::PoisonError::into_inner))
+        })
         .transpose()
         .map_err(|e| FusionError::Invalid(e.to_string()))?;
     let record = FusionRecord {

@@ -152,7 +152,9 @@ impl VirtualViewTerm {
     }
 
     fn stats_mut(&self) -> std::sync::MutexGuard<'_, TermStats> {
-        self.stats.lock().unwrap_or_else(|e| e.into_inner())
+        self.stats
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 
     /// The two neighbours reprojected into the virtual view whose own surface depth is `depth`.

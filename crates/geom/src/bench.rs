@@ -199,7 +199,7 @@ pub fn stereo_bench(
         ..opencv.clone()
     };
     let median = |mut v: Vec<f64>| {
-        v.sort_by(|a, b| a.total_cmp(b));
+        v.sort_by(f64::total_cmp);
         v[v.len() / 2]
     };
     let mut wall = Vec::new();
@@ -347,7 +347,7 @@ pub fn triangle_raster_bench(
     let (out, one_thread_seconds, _) = one.install(|| measure(run));
     out?;
     let median = |mut v: Vec<f64>| {
-        v.sort_by(|a, b| a.total_cmp(b));
+        v.sort_by(f64::total_cmp);
         v[v.len() / 2]
     };
     let (seconds, cpu_seconds) = (median(wall), median(cpu));

@@ -34,7 +34,7 @@ pub fn colorize(values: &[f32], width: usize, height: usize, invert: bool) -> Im
     if valid.is_empty() {
         return img;
     }
-    valid.sort_by(|a, b| a.total_cmp(b));
+    valid.sort_by(f32::total_cmp);
     let at = |q: f64| valid[((q * (valid.len() - 1) as f64).round() as usize).min(valid.len() - 1)];
     let (lo, hi) = (at(0.01), at(0.99));
     let span = (hi - lo).max(f32::EPSILON);

@@ -64,7 +64,7 @@ pub fn edge_report(mesh: &Mesh) -> EdgeReport {
             1 => r.boundary_edges += 1,
             2 => {
                 if forward != 1 {
-                    r.inconsistent_edges += 1
+                    r.inconsistent_edges += 1;
                 }
             }
             _ => r.non_manifold_edges += 1,

@@ -57,14 +57,14 @@ fn tier_accuracy_of(opts: &DemoOptions, photometry: Photometry) -> Vec<(Region, 
         .iter()
         .zip(errors.iter_mut())
         .map(|(&r, e)| {
-            e.sort_by(|a, b| a.total_cmp(b));
+            e.sort_by(f64::total_cmp);
             eprintln!(
                 "{r:?} signed quantiles: {:?}",
                 [0.05, 0.25, 0.5, 0.75, 0.95]
                     .map(|q| e.get((q * e.len() as f64) as usize).copied().unwrap_or(0.0))
             );
             e.iter_mut().for_each(|x| *x = x.abs());
-            e.sort_by(|a, b| a.total_cmp(b));
+            e.sort_by(f64::total_cmp);
             let within = e.iter().filter(|&&x| x < 0.01).count() as f64 / e.len().max(1) as f64;
             let median = e.get(e.len() / 2).copied().unwrap_or(f64::NAN);
             (r, e.len(), within, median)

@@ -44,13 +44,19 @@ impl ReadLog {
             frame,
         };
         // A poisoned lock only means another thread panicked mid-push; the list is still valid.
-        let mut reads = self.reads.lock().unwrap_or_else(|e| e.into_inner());
+        let mut reads = self
+            .reads
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         reads.push(read);
     }
 
     /// Every read so far, in order.
     pub fn reads(&self) -> Vec<Read> {
-        self.reads.lock().unwrap_or_else(|e| e.into_inner()).clone()
+        self.reads
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone()
     }
 
     /// The content reads so far.
@@ -64,7 +70,10 @@ impl ReadLog {
 
     /// Number of reads so far.
     pub fn len(&self) -> usize {
-        self.reads.lock().unwrap_or_else(|e| e.into_inner()).len()
+        self.reads
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .len()
     }
 
     pub fn is_empty(&self) -> bool {

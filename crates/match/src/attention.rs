@@ -85,13 +85,13 @@ pub fn softmax_in_place(row: &mut [f32]) {
         // SAFETY: the CPU has AVX2 and FMA (checked just above).
         return unsafe { softmax_avx2(row) };
     }
-    softmax_body(row)
+    softmax_body(row);
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn softmax_avx2(row: &mut [f32]) {
-    softmax_body(row)
+    softmax_body(row);
 }
 
 /// `exp(x − max) / Σ` with a branch-free exponential and eight partial sums and maxima, so

@@ -85,7 +85,7 @@ fn features(input: &MatchInput, limit: Option<usize>) -> SiftFeatures {
     let d = res
         .descriptors
         .as_slice()
-        .map(|s| s.to_vec())
+        .map(<[u8]>::to_vec)
         .unwrap_or_else(|| res.descriptors.iter().copied().collect());
     let mut points = Vec::new();
     let mut descriptors = Vec::new();

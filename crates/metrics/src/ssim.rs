@@ -523,7 +523,7 @@ fn ssim_planar_into<T: Float + Send + Sync>(
                 y,
                 task * ROWS_PER_TASK,
                 out
-            ))
+            ));
         });
     Ok(value)
 }
@@ -745,7 +745,7 @@ mod avx2 {
         first: usize,
         out: &mut [T],
     ) {
-        super::vertical_adjoint_rows(f, hadj, x, y, first, out)
+        super::vertical_adjoint_rows(f, hadj, x, y, first, out);
     }
 }
 

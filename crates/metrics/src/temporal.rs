@@ -198,7 +198,7 @@ pub fn evaluate_sequence(
         psnr: psnr_series,
         ssim: ssim_series,
         lpips,
-        perceptual: perceptual.map(|p| p.name()),
+        perceptual: perceptual.map(PerceptualDistance::name),
         tlp,
         warping_error,
     })

@@ -115,7 +115,7 @@ impl Dataset {
 /// Centre and radius of a set of cameras, as 3DGS's `getNerfppNorm`: the radius is 1.1 × the
 /// largest distance of a camera centre from their mean (never below a small positive value).
 pub fn camera_extent<'a>(cameras: impl Iterator<Item = &'a Camera>) -> (Vector3<f64>, f64) {
-    let centers: Vec<Vector3<f64>> = cameras.map(|c| c.center()).collect();
+    let centers: Vec<Vector3<f64>> = cameras.map(super::camera::Camera::center).collect();
     if centers.is_empty() {
         return (Vector3::zeros(), 1.0);
     }

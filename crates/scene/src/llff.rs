@@ -321,7 +321,7 @@ pub(crate) mod tests {
         let cols = [down, right, back, eye];
         let mut row = Vec::with_capacity(17);
         for r in 0..3 {
-            for c in cols.iter() {
+            for c in &cols {
                 row.push(c[r]);
             }
             row.push(hwf[r]);

@@ -65,7 +65,7 @@ fn fortran_to_c(data: &[f64], shape: &[usize]) -> Vec<f64> {
     let n = data.len();
     let mut out = vec![0.0; n];
     let mut index = vec![0usize; shape.len()];
-    for slot in out.iter_mut() {
+    for slot in &mut out {
         // `index` walks C order; its Fortran offset is Σ index[k]·Π_{j<k} shape[j].
         let mut offset = 0;
         let mut stride = 1;

@@ -212,7 +212,7 @@ pub fn estimate_poses_with(
                 stage: PoseStage::RelativePoses,
                 done,
                 total,
-            })
+            });
         },
     )
     .map_err(SfmError::NoModel)?;
@@ -228,7 +228,7 @@ pub fn estimate_poses_with(
             stage: PoseStage::Adjustment,
             done,
             total: bundle_options.max_iterations,
-        })
+        });
     };
     let (poses, bundle) = bundle_adjust_with(
         &intrinsics,
@@ -349,7 +349,10 @@ fn correspondences(
         Vec::new()
     };
     let pairs = if retrieve {
-        let descriptors: Vec<&[[f32; 128]]> = features.iter().map(|f| f.descriptors()).collect();
+        let descriptors: Vec<&[[f32; 128]]> = features
+            .iter()
+            .map(fewview_match::sift::SiftFeatures::descriptors)
+            .collect();
         let retrieval = RetrievalOptions {
             seed: options.seed,
             ..options.retrieval
@@ -416,7 +419,7 @@ fn correspondences(
             stage: PoseStage::Refinement,
             done,
             total: 1,
-        })
+        });
     };
     refinement(0);
     let refined = refine_matches(&images, &matches, &AffineRefineOptions::default());

@@ -144,7 +144,7 @@ pub fn median_seconds(runs: usize, mut f: impl FnMut()) -> (f64, f64) {
         cpu.push(c);
     }
     let median = |mut v: Vec<f64>| {
-        v.sort_by(|a, b| a.total_cmp(b));
+        v.sort_by(f64::total_cmp);
         v[v.len() / 2]
     };
     (median(wall), median(cpu))

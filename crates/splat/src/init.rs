@@ -137,7 +137,7 @@ mod tests {
                 .filter(|(j, _)| *j != i)
                 .map(|(_, q)| (0..3).map(|a| (p[a] - q[a]).powi(2)).sum())
                 .collect();
-            d.sort_by(|a, b| a.total_cmp(b));
+            d.sort_by(f32::total_cmp);
             let want = ((d[0] + d[1] + d[2]) / 3.0).sqrt();
             assert!((fast[i] - want).abs() < 1e-5, "{i}: {} vs {want}", fast[i]);
         }

@@ -423,7 +423,7 @@ pub fn initial_model_and_start(
             let cams: Vec<&Camera> = ds.train_views().map(|v| &v.camera).collect();
             let center = look_at_point(&cams);
             let mut dists: Vec<f64> = cams.iter().map(|c| (c.center() - center).norm()).collect();
-            dists.sort_by(|a, b| a.total_cmp(b));
+            dists.sort_by(f64::total_cmp);
             let half = half_size.unwrap_or(0.35 * dists[dists.len() / 2]);
             let lo = [center.x - half, center.y - half, center.z - half];
             let hi = [center.x + half, center.y + half, center.z + half];

@@ -25,7 +25,7 @@ pub fn write_ply(path: &Path, model: &GaussianModel) -> Result<(), SceneError> {
     header += &format!("element vertex {n}\n");
     let mut names: Vec<String> = ["x", "y", "z", "nx", "ny", "nz"]
         .iter()
-        .map(|s| s.to_string())
+        .map(std::string::ToString::to_string)
         .collect();
     names.extend((0..3).map(|c| format!("f_dc_{c}")));
     names.extend((0..3 * (k - 1)).map(|i| format!("f_rest_{i}")));
@@ -124,7 +124,7 @@ pub fn read_ply(path: &Path) -> Result<GaussianModel, SceneError> {
                     .ok_or_else(|| bad(format!("unknown property type `{ty}`")))?;
                 props.push((name.to_string(), s));
             }
-            ["comment", ..] | ["obj_info", ..] | ["property", ..] | [] => {}
+            ["comment" | "obj_info" | "property", ..] | [] => {}
             _ => return Err(bad(format!("unexpected header line `{}`", line.trim_end()))),
         }
     }
@@ -208,7 +208,7 @@ pub fn read_ply(path: &Path) -> Result<GaussianModel, SceneError> {
                 .map_err(|e| SceneError::io(path, e))?;
             let mut tokens = text.split_whitespace();
             for v in 0..n {
-                for value in values.iter_mut() {
+                for value in &mut values {
                     let t = tokens
                         .next()
                         .ok_or_else(|| bad(format!("file ends at vertex {v} of {n}")))?;

@@ -81,7 +81,7 @@ pub struct StudyConfig {
 }
 
 fn valid_name(s: &str) -> bool {
-    !s.is_empty() && s.len() <= 100 && !s.chars().any(|c| c.is_control())
+    !s.is_empty() && s.len() <= 100 && !s.chars().any(char::is_control)
 }
 
 impl StudyConfig {

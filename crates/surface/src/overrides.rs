@@ -292,7 +292,7 @@ impl RunConfig {
         match o.bundle_adjustment {
             Some(false) => self.bundle_adjustment = None,
             Some(true) => {
-                self.bundle_adjustment = self.bundle_adjustment.or(Some(BundleOptions::default()))
+                self.bundle_adjustment = self.bundle_adjustment.or(Some(BundleOptions::default()));
             }
             None if !o.refine_poses => self.bundle_adjustment = None,
             None => {}
@@ -335,7 +335,7 @@ impl RunConfig {
                 self.densify = Some(DensifyOptions {
                     spacing_px,
                     ..Default::default()
-                })
+                });
             }
         }
         Ok(())

@@ -189,7 +189,7 @@ pub fn sample_rays(
     };
     let mut sdfs: Vec<Vec<f32>> = {
         let values = sdf(&points_of(&zs))?;
-        values.chunks(nc).map(|c| c.to_vec()).collect()
+        values.chunks(nc).map(<[f32]>::to_vec).collect()
     };
     let steps = cfg.up_sample_steps.max(1);
     let per_step = cfg.n_importance / steps;
@@ -209,7 +209,7 @@ pub fn sample_rays(
                 None
             } else {
                 let v = sdf(&points_of(&new))?;
-                Some(v.chunks(n).map(|c| c.to_vec()).collect())
+                Some(v.chunks(n).map(<[f32]>::to_vec).collect())
             };
             for k in 0..r {
                 merge_sorted(

@@ -116,7 +116,7 @@ pub fn read_row(dir: &Path) -> Result<Table1Row> {
         v if v == WIDE => "wide".to_string(),
         v => v.iter().map(usize::to_string).collect::<Vec<_>>().join(","),
     };
-    let size = match m["image_size"].as_array().map(|a| a.as_slice()) {
+    let size = match m["image_size"].as_array().map(std::vec::Vec::as_slice) {
         Some([w, h]) => match (w.as_u64(), h.as_u64()) {
             (Some(w), Some(h)) => [w as usize, h as usize],
             _ => return Err(invalid(&file, "image_size is not two whole numbers")),

@@ -57,8 +57,7 @@ pub(crate) fn write_frames(dir: &Path, frames: &[Image], fps: f32) -> Result<()>
                 return Err(SceneError::invalid(
                     dir,
                     format!(
-                        "folder already holds {:?}, which is not a frame of ours; refusing to replace it",
-                        name
+                        "folder already holds {name:?}, which is not a frame of ours; refusing to replace it"
                     ),
                 ));
             }

@@ -48,7 +48,10 @@ fn scalar_size(ty: &str) -> Option<usize> {
 
 /// The names of the properties the page draws, for SH degree `degree`.
 fn drawn(degree: usize) -> Vec<String> {
-    let mut names: Vec<String> = ["x", "y", "z"].iter().map(|s| s.to_string()).collect();
+    let mut names: Vec<String> = ["x", "y", "z"]
+        .iter()
+        .map(std::string::ToString::to_string)
+        .collect();
     names.extend((0..3).map(|c| format!("f_dc_{c}")));
     let rest = 3 * ((degree + 1) * (degree + 1) - 1);
     names.extend((0..rest).map(|i| format!("f_rest_{i}")));

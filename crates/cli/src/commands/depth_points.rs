@@ -81,7 +81,7 @@ pub fn run(args: Args) -> Result<()> {
             &args.input,
             cam_file,
             view,
-            args.images.get(k).map(|p| p.as_path()),
+            args.images.get(k).map(std::path::PathBuf::as_path),
         )?);
     }
     let opts = DepthOptions {

@@ -150,7 +150,9 @@ pub fn print_model(model: &PoseModel, fov_deg: f64) {
 pub fn with_progress<T>(f: impl FnOnce(&(dyn Fn(&PoseProgress) + Sync)) -> T) -> T {
     let current: Mutex<Option<(PoseStage, progress::Bar)>> = Mutex::new(None);
     let on = |p: &PoseProgress| {
-        let mut current = current.lock().unwrap_or_else(|e| e.into_inner());
+        let mut current = current
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         if current.as_ref().map(|(stage, _)| *stage) != Some(p.stage) {
             if let Some((_, bar)) = current.take() {
                 bar.finish_and_clear();
@@ -165,7 +167,11 @@ pub fn with_progress<T>(f: impl FnOnce(&(dyn Fn(&PoseProgress) + Sync)) -> T) ->
         }
     };
     let out = f(&on);
-    if let Some((_, bar)) = current.lock().unwrap_or_else(|e| e.into_inner()).take() {
+    if let Some((_, bar)) = current
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .take()
+    {
         bar.finish_and_clear();
     }
     out

@@ -93,7 +93,9 @@ impl Bar {
 
     fn with_log(&self, f: impl FnOnce(&mut Log)) {
         if let Some(log) = &self.log {
-            f(&mut log.lock().unwrap_or_else(|e| e.into_inner()));
+            f(&mut log
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner));
         }
     }
 }

@@ -86,7 +86,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let bar = progress::iterations(2, "stereo");
     let inspection = inspect_pair(&ds, (a, b), &init, &mut |done, _| {
-        bar.set_position(done as u64)
+        bar.set_position(done as u64);
     })?;
     bar.finish_and_clear();
     inspection.write(&args.out)?;

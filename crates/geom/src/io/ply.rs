@@ -94,7 +94,7 @@ fn parse_header(text: &str) -> std::result::Result<(PlyEncoding, Vec<Element>), 
                     "binary_little_endian" => PlyEncoding::BinaryLittleEndian,
                     "binary_big_endian" => PlyEncoding::BinaryBigEndian,
                     other => return Err(format!("unknown PLY format '{other}'")),
-                })
+                });
             }
             ["element", name, count] => elements.push(Element {
                 name: name.to_string(),
@@ -123,7 +123,7 @@ fn parse_header(text: &str) -> std::result::Result<(PlyEncoding, Vec<Element>), 
             ["end_header"] => {
                 return Ok((encoding.ok_or("header has no 'format' line")?, elements));
             }
-            ["comment", ..] | ["obj_info", ..] | [] => {}
+            ["comment" | "obj_info", ..] | [] => {}
             _ => return Err(format!("unexpected header line '{line}'")),
         }
     }

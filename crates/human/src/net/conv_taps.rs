@@ -84,7 +84,7 @@ unsafe fn gemm(
             false,
             false,
             gemm::Parallelism::Rayon(0),
-        )
+        );
     }
 }
 

@@ -6,7 +6,9 @@
 /// process.
 pub fn seeded(seed: u64) -> std::sync::MutexGuard<'static, ()> {
     static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    let guard = LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let guard = LOCK
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     burn::tensor::Device::flex().seed(seed);
     guard
 }

@@ -154,7 +154,7 @@ fn objective(net: &PoseGaussianNet, x: NetInput) -> (Tensor<1>, f64) {
     let host_sum = heads.iter().flat_map(host).map(f64::from).sum();
     let sum = heads
         .into_iter()
-        .map(|t| t.sum())
+        .map(burn::Tensor::sum)
         .reduce(|a, b| a + b)
         .unwrap();
     (sum, host_sum)

@@ -78,7 +78,7 @@ pub fn keypoint_heatmap(logits: &[f32], w: usize, h: usize) -> Vec<f32> {
         }
         let max = bins.iter().copied().fold(f32::NEG_INFINITY, f32::max);
         let mut sum = 0.0f32;
-        for b in bins.iter_mut() {
+        for b in &mut bins {
             *b = (*b - max).exp();
             sum += *b;
         }

@@ -171,11 +171,11 @@ fn images_with_pose_offsets(bytes: &[u8], path: &Path) -> Result<Vec<(ColmapImag
         let id = r.u32("an image id")?;
         let pose_offset = r.pos;
         let mut qvec = [0.0; 4];
-        for q in qvec.iter_mut() {
+        for q in &mut qvec {
             *q = r.f64("a quaternion")?;
         }
         let mut tvec = [0.0; 3];
-        for t in tvec.iter_mut() {
+        for t in &mut tvec {
             *t = r.f64("a translation")?;
         }
         let camera_id = r.u32("a camera id")?;

@@ -78,7 +78,7 @@ pub fn camera_from_transforms(
 ) -> std::result::Result<LensCamera, String> {
     let k = k.map(|v| v.unwrap_or(0.0));
     let p = p.map(|v| v.unwrap_or(0.0));
-    let model = camera_model.map(|m| m.to_ascii_uppercase());
+    let model = camera_model.map(str::to_ascii_uppercase);
     let distortion = match model.as_deref() {
         None | Some("OPENCV" | "PINHOLE" | "SIMPLE_PINHOLE") => Distortion::RadialTangential {
             radial: k,

@@ -188,10 +188,10 @@ pub fn forward_tile<F: Real, M: MulAdd>(
                 for c in 0..BLOCK {
                     let dx = x[c] - s.mean[0];
                     let (power, _, alpha) = splat_alpha::<F, M>(s, row, dx);
-                    let valid = (al[c] > zero) & (power <= zero) & (alpha >= amin);
+                    let valid = (al[c] > zero) && (power <= zero) && (alpha >= amin);
                     let test_t = t[c] * (F::one() - alpha);
-                    let stop = valid & (test_t < tmin);
-                    let contrib = valid & !stop;
+                    let stop = valid && (test_t < tmin);
+                    let contrib = valid && !stop;
                     let w = if contrib { alpha * t[c] } else { zero };
                     cr[c] = M::madd(w, s.color[0], cr[c]);
                     cg[c] = M::madd(w, s.color[1], cg[c]);
@@ -297,7 +297,7 @@ pub fn backward_tile<F: Real, M: MulAdd>(
             for c in 0..TILE {
                 let dx = px[c] - s.mean[0];
                 let (power, g, alpha) = splat_alpha::<F, M>(s, row, dx);
-                let valid = (rank < last[c]) & (power <= zero) & (alpha >= amin);
+                let valid = (rank < last[c]) && (power <= zero) && (alpha >= amin);
                 let one_minus = one - alpha;
                 let t_j = t[c] / one_minus;
                 let w = if valid { alpha * t_j } else { zero };
@@ -312,7 +312,7 @@ pub fn backward_tile<F: Real, M: MulAdd>(
                 lane[8][c] = M::madd(w, gb[c], lane[8][c]);
                 lane[9][c] = M::madd(w, gd[c], lane[9][c]);
                 // α = o·g unless clamped at 0.99, where it no longer depends on o or the shape.
-                let free = valid & (s.opacity * g < amax);
+                let free = valid && (s.opacity * g < amax);
                 let dl_dalpha = if free { dl_dalpha } else { zero };
                 let dpow = dl_dalpha * alpha;
                 lane[5][c] = M::madd(dl_dalpha, g, lane[5][c]);

@@ -314,7 +314,7 @@ pub fn densify_and_prune<R: Rng>(
 /// Caps every opacity at 0.01 and clears its Adam moments (the reference code's `reset_opacity`).
 pub fn reset_opacity(model: &mut GaussianModel, adam: &mut ModelAdam) {
     let cap = inverse_sigmoid(0.01);
-    for o in model.opacity_logits.iter_mut() {
+    for o in &mut model.opacity_logits {
         *o = o.min(cap);
     }
     adam.opacity_logits.reset();

@@ -459,7 +459,7 @@ impl Trainer {
         let left = self
             .resident
             .as_ref()
-            .map_or(self.state.model.len(), |r| r.len());
+            .map_or(self.state.model.len(), super::resident::ResidentState::len);
         if left == 0 {
             return Err(TrainError::NoGaussiansLeft {
                 iteration: it,

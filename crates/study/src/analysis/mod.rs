@@ -312,9 +312,9 @@ impl StudyAnalysis {
                 s += &format!("| {m} |");
                 for j in 0..bt.methods.len() {
                     if i == j {
-                        s += " – |"
+                        s += " – |";
                     } else {
-                        s += &format!(" {:.3} |", bt.win_probability[i][j])
+                        s += &format!(" {:.3} |", bt.win_probability[i][j]);
                     }
                 }
                 s += "\n";

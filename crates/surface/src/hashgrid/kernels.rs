@@ -214,7 +214,7 @@ mod avx2 {
         pos: &[T],
         o: &mut [T],
     ) {
-        super::forward_chunk(layout, table, window, bound, pos, o)
+        super::forward_chunk(layout, table, window, bound, pos, o);
     }
 
     #[target_feature(enable = "avx2,fma")]
@@ -230,7 +230,7 @@ mod avx2 {
         grad_out: &[T],
         g: &mut [T],
     ) {
-        super::backward_table_level(lay, l, nf, dim, m, bound, positions, grad_out, g)
+        super::backward_table_level(lay, l, nf, dim, m, bound, positions, grad_out, g);
     }
 
     #[target_feature(enable = "avx2,fma")]
@@ -243,7 +243,7 @@ mod avx2 {
         go: &[T],
         gp: &mut [T],
     ) {
-        super::backward_positions_chunk(layout, table, window, bound, pos, go, gp)
+        super::backward_positions_chunk(layout, table, window, bound, pos, go, gp);
     }
 }
 
@@ -315,7 +315,7 @@ pub fn backward_positions<T: Float + Send + Sync>(
         .for_each(|((gp, pos), go)| {
             dispatch!(backward_positions_chunk(
                 layout, table, window, bound, pos, go, gp
-            ))
+            ));
         });
     grad
 }

@@ -121,14 +121,14 @@ fn forward_block_best<T: Float>(spec: &MlpSpec, params: &[T], x: &[T], o: &mut [
     {
         #[target_feature(enable = "avx2,fma")]
         fn avx2<T: Float>(spec: &MlpSpec, params: &[T], x: &[T], o: &mut [T]) {
-            forward_block(spec, params, x, o)
+            forward_block(spec, params, x, o);
         }
         if has_avx2() {
             // SAFETY: the CPU supports AVX2 and FMA (checked just above).
             return unsafe { avx2(spec, params, x, o) };
         }
     }
-    forward_block(spec, params, x, o)
+    forward_block(spec, params, x, o);
 }
 
 /// Gradients `(d input [N, dims[0]], d params [P])` given `grad_out [N, dims.last()]`.
@@ -297,14 +297,14 @@ fn backward_block_best<T: Float>(
             gp: &mut [T],
             gin: &mut [T],
         ) {
-            backward_block(ctx, input, grad_out, gp, gin)
+            backward_block(ctx, input, grad_out, gp, gin);
         }
         if has_avx2() {
             // SAFETY: the CPU supports AVX2 and FMA (checked just above).
             return unsafe { avx2(ctx, input, grad_out, gp, gin) };
         }
     }
-    backward_block(ctx, input, grad_out, gp, gin)
+    backward_block(ctx, input, grad_out, gp, gin);
 }
 
 #[cfg(test)]

@@ -215,7 +215,7 @@ pub(super) fn render_test_views(
             config.train.background,
             4096,
         )?;
-        let name = |s: &str| renders.join(format!("{:03}_{s}.png", vi));
+        let name = |s: &str| renders.join(format!("{vi:03}_{s}.png"));
         r.rgb.save_png(&name("rgb"))?;
         r.depth.scaled_to_unit_max().save_png(&name("depth"))?;
         let depth_npy = renders.join(format!("{vi:03}_depth.npy"));

@@ -93,7 +93,7 @@ pub(super) fn print_table(r: &Report) {
 }
 
 fn print_raster(rb: &fewview_splat::bench::RasterBench) {
-    let g = |v: f64| format!("{:.3e}", v);
+    let g = |v: f64| format!("{v:.3e}");
     println!(
         "{:<46} {:>14} {:>14}",
         format!(
@@ -204,7 +204,7 @@ fn print_training(r: &Report) {
 }
 
 fn print_blend_and_stereo(r: &Report) {
-    let g = |v: f64| format!("{:.3e}", v);
+    let g = |v: f64| format!("{v:.3e}");
     if let Some(b) = &r.blend {
         println!(
             "{:<46} {:>14.2} {:>14.2}",

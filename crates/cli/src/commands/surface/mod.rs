@@ -54,7 +54,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     let report = fewview_surface::run(inputs.run_inputs(), &config, &out, args.resume, &mut |e| {
-        print_event(&bar, e)
+        print_event(&bar, e);
     })
     .with_context(|| format!("surface run in {}", out.display()))?;
     bar.finish_and_clear();

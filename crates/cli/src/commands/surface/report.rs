@@ -35,7 +35,7 @@ pub(super) fn print_event(bar: &Bar, e: Event) {
                         "sparse matches cannot tie the views together ({why}): growing dense ones"
                     );
                 }
-                eprintln!("{matches} correspondences{by}{p}")
+                eprintln!("{matches} correspondences{by}{p}");
             });
         }
         Event::Step(s) => {
@@ -52,7 +52,7 @@ pub(super) fn print_event(bar: &Bar, e: Event) {
                 "iteration {iteration}: rotation error {:.3}°, translation error (×100) {:.3}",
                 pose_error.rotation_deg,
                 100.0 * pose_error.translation
-            )
+            );
         }),
         Event::WarmedUp {
             report,
@@ -97,7 +97,7 @@ pub(super) fn print_event(bar: &Bar, e: Event) {
                 "so the poses are refined from {from} at {:e} → {:e} instead (views that share \
                  few matches may need a larger --max-pair-angle: 180 matches every pair)",
                 timing.lr.start, timing.lr.end
-            )
+            );
         }),
         Event::Stage(st) => bar.set_message(st.to_string()),
         Event::Notice(text) => bar.suspend(|| eprintln!("note: {text}")),

@@ -135,14 +135,14 @@ fn dispatch_row(c: &[i16], s: &mut [i16], layout: &Layout, p: &Resolved) {
     {
         #[target_feature(enable = "avx2")]
         fn avx2(c: &[i16], s: &mut [i16], layout: &Layout, p: &Resolved) {
-            horizontal_row(c, s, layout, p)
+            horizontal_row(c, s, layout, p);
         }
         if fewview_scene::cpu::avx2() {
             // SAFETY: the CPU supports AVX2 (checked just above).
             return unsafe { avx2(c, s, layout, p) };
         }
     }
-    horizontal_row(c, s, layout, p)
+    horizontal_row(c, s, layout, p);
 }
 
 #[inline(always)]
@@ -186,14 +186,14 @@ fn vertical(
     {
         #[target_feature(enable = "avx2")]
         fn avx2(c: &[i16], h: usize, l: &Layout, p: &Resolved, dir: Direction, s: &mut [i16]) {
-            vertical_paths(c, h, l, p, dir, s)
+            vertical_paths(c, h, l, p, dir, s);
         }
         if fewview_scene::cpu::avx2() {
             // SAFETY: the CPU supports AVX2 (checked just above).
             return unsafe { avx2(c, height, layout, p, dir, s) };
         }
     }
-    vertical_paths(c, height, layout, p, dir, s)
+    vertical_paths(c, height, layout, p, dir, s);
 }
 
 /// Path rows of one image row for the three vertical directions: `columns × (d + 2)` padded
