@@ -369,8 +369,6 @@ UPWARD_EXCEPTIONS = {
     "crates/human/src/gaussians/pixels.rs",
     "crates/human/src/gaussians/render.rs",
     "crates/human/src/infer.rs",
-    "crates/scene/src/colmap/binary.rs",
-    "crates/scene/src/colmap/text.rs",
     "crates/splat/src/bench.rs",
     "crates/splat/src/raster/blend.rs",
     "crates/splat/src/raster/project.rs",

@@ -14,7 +14,9 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use super::{CAMERA_MODELS, ColmapCamera, ColmapImage, ColmapPoint, PoseFields, locate_poses};
+use super::model::{
+    CAMERA_MODELS, ColmapCamera, ColmapImage, ColmapPoint, PoseFields, locate_poses,
+};
 use crate::error::{Result, SceneError};
 
 /// A bounds-checked little-endian reader over a whole file.

@@ -5,7 +5,9 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::str::FromStr;
 
-use super::{ColmapCamera, ColmapImage, ColmapPoint, PoseFields, locate_poses, model_param_count};
+use super::model::{
+    ColmapCamera, ColmapImage, ColmapPoint, PoseFields, locate_poses, model_param_count,
+};
 use crate::error::{Result, SceneError};
 
 fn read(path: &Path) -> Result<String> {
@@ -142,7 +144,12 @@ fn images_with_lines(text: &str, path: &Path) -> Result<Vec<(ColmapImage, usize)
 
 /// The first line of an image in `images.txt`: `IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME`
 /// for the world-to-camera `pose` (no newline).
-pub fn image_line(image_id: usize, pose: &crate::Se3, camera_id: usize, name: &str) -> String {
+pub fn image_line(
+    image_id: usize,
+    pose: &crate::camera::Se3,
+    camera_id: usize,
+    name: &str,
+) -> String {
     let q = nalgebra::UnitQuaternion::from_matrix(&pose.rotation);
     let t = pose.translation;
     format!(
