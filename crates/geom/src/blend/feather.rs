@@ -2,7 +2,7 @@
 
 use fewview_scene::Image;
 
-use super::{Weights, check_images, check_mask};
+use super::inputs::{Weights, check_images, check_mask};
 use crate::error::{GeomError, Result};
 
 /// Separable Gaussian blur of a `w × h` plane (mirror boundary), kernel radius `⌈3σ⌉`.

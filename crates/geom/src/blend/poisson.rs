@@ -12,8 +12,8 @@
 
 use fewview_scene::Image;
 
+use super::inputs::{Weights, check_images, check_mask};
 use super::solver::{GridOperator, SolveStats, Solver, solve};
-use super::{Weights, check_images, check_mask};
 use crate::error::Result;
 
 /// Options of the Poisson blends.

@@ -9,7 +9,7 @@
 
 use fewview_scene::Image;
 
-use super::{Weights, check_images, check_mask};
+use super::inputs::{Weights, check_images, check_mask};
 use crate::error::{GeomError, Result};
 
 const KERNEL: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];

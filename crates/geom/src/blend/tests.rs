@@ -2,6 +2,7 @@
 
 use super::poisson::occlusion_aware_planes;
 use super::*;
+use fewview_scene::Image;
 use rand::{RngExt, SeedableRng};
 
 /// Smooth-ish random test image.
