@@ -381,19 +381,13 @@ fn fusion_config(args: &Args) -> FusionConfig {
 
 #[cfg(test)]
 mod tests {
-    use clap::Parser;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        args: super::Args,
-    }
+    use crate::commands::parse_for_tests::parse;
 
     /// Every regulariser flag's default is the library's.
     #[test]
     fn an_empty_command_line_gives_the_librarys_defaults() {
-        let cli = Cli::try_parse_from(["fusion", "--demo", "--out", "o"]).unwrap();
-        let config = super::fusion_config(&cli.args);
+        let args: super::Args = parse(&["fusion", "--demo", "--out", "o"]);
+        let config = super::fusion_config(&args);
         assert_eq!(config, super::FusionConfig::default());
     }
 }

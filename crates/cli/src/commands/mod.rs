@@ -17,6 +17,8 @@ mod matching;
 mod mcubes;
 mod number_args;
 mod output_paths;
+#[cfg(test)]
+mod parse_for_tests;
 mod photo_args;
 mod pose_error;
 mod poses;

@@ -179,21 +179,14 @@ pub fn with_progress<T>(f: impl FnOnce(&(dyn Fn(&PoseProgress) + Sync)) -> T) ->
 
 #[cfg(test)]
 mod tests {
-    use clap::Parser;
-
     use super::*;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        args: Args,
-    }
+    use crate::commands::parse_for_tests::parse;
 
     /// Every flag's default is the library's: an empty command line gives `FolderOptions`'s
     /// defaults.
     #[test]
     fn an_empty_command_line_gives_the_librarys_defaults() {
-        let cli = Cli::try_parse_from(["poses", "--images", "i", "--out", "o"]).unwrap();
-        assert_eq!(folder_options(&cli.args), FolderOptions::default());
+        let args: Args = parse(&["poses", "--images", "i", "--out", "o"]);
+        assert_eq!(folder_options(&args), FolderOptions::default());
     }
 }

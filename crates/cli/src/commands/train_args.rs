@@ -199,15 +199,8 @@ fn parse_init(s: &str) -> anyhow::Result<(InitStrategy, DepthFrom)> {
 
 #[cfg(test)]
 mod tests {
-    use clap::Parser;
-
     use super::*;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        args: TrainArgs,
-    }
+    use crate::commands::parse_for_tests::parse;
 
     /// The flags' defaults are the library's (the Inria schedule's, which the sparse-view one
     /// keeps): an empty command line gives the sparse-view schedule's training settings and
@@ -215,7 +208,7 @@ mod tests {
     /// iterations and a random background behind photos with alpha.
     #[test]
     fn an_empty_command_line_gives_the_librarys_defaults() {
-        let args = Cli::try_parse_from(["train"]).unwrap().args;
+        let args: TrainArgs = parse(&["train"]);
         let run = args.run_config([0.0; 3], 1000).unwrap();
         let library = RunConfig::new(TrainConfig::sparse_view(1000));
         let mut train = run.train.clone();

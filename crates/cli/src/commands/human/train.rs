@@ -179,20 +179,13 @@ pub(super) fn train(args: TrainArgs) -> anyhow::Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use clap::Parser;
-
     use super::*;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        args: TrainArgs,
-    }
+    use crate::commands::parse_for_tests::parse;
 
     /// Every flag's default is the library's: an empty command line gives `TrainConfig::default()`.
     #[test]
     fn an_empty_command_line_gives_the_librarys_defaults() {
-        let cli = Cli::try_parse_from(["train", "--data", "d", "--out", "o"]).unwrap();
-        assert_eq!(config(&cli.args).unwrap(), TrainConfig::default());
+        let args: TrainArgs = parse(&["train", "--data", "d", "--out", "o"]);
+        assert_eq!(config(&args).unwrap(), TrainConfig::default());
     }
 }
