@@ -363,8 +363,6 @@ UPWARD_EXCEPTIONS = {
     "crates/geom/src/bench.rs",
     "crates/geom/src/similarity.rs",
     "crates/human/src/eval.rs",
-    "crates/human/src/gaussians/pixels.rs",
-    "crates/human/src/gaussians/render.rs",
     "crates/human/src/infer.rs",
     "crates/splat/src/bench.rs",
     "crates/splat/src/raster/blend.rs",

@@ -30,6 +30,7 @@
 //! - [`select`]: [`nearest_sources`], the source cameras nearest a target.
 //! - [`render`]: [`render_gaussians`] and [`novel_view`], the render into a target camera.
 
+mod options;
 pub mod params;
 pub mod pixels;
 pub mod render;
@@ -38,31 +39,8 @@ pub mod select;
 #[cfg(test)]
 mod tests;
 
+pub use options::GaussianOptions;
 pub use params::PixelMaps;
 pub use pixels::{SourceView, pixel_gaussians};
 pub use render::{Rendered, concat, novel_view, render_gaussians};
 pub use select::{Nearness, nearest_sources};
-
-/// Choices of the per-pixel Gaussians and their source views that the paper leaves open.
-#[derive(Clone, Debug, PartialEq)]
-pub struct GaussianOptions {
-    /// How many source views render a target (2: the paper builds on GPS-Gaussian's pair of
-    /// views nearest the target).
-    pub source_views: usize,
-    /// How "nearest" is measured ([`Nearness`]).
-    pub nearness: Nearness,
-    /// Upper bound on a Gaussian's standard deviation, metres; `None` for none. GPS-Gaussian
-    /// clamps its scale head at 0.01; the clamp also stops a Gaussian from smearing one pixel's
-    /// colour over the body before the heads are trained.
-    pub max_scale: Option<f32>,
-}
-
-impl Default for GaussianOptions {
-    fn default() -> Self {
-        Self {
-            source_views: 2,
-            nearness: Nearness::ViewDirection,
-            max_scale: Some(0.01),
-        }
-    }
-}

@@ -7,7 +7,7 @@ use fewview_scene::{Camera, Image};
 use fewview_splat::op::GaussianTensors;
 use fewview_splat::sh::SH_C0;
 
-use super::GaussianOptions;
+use super::options::GaussianOptions;
 use super::params::PixelMaps;
 use crate::error::{HumanError, Result};
 use crate::maps::Mask;

@@ -7,7 +7,7 @@ use fewview_scene::Camera;
 use fewview_splat::op::{GaussianTensors, RenderView, render};
 use fewview_splat::raster::{RenderCamera, RenderSettings};
 
-use super::GaussianOptions;
+use super::options::GaussianOptions;
 use super::params::PixelMaps;
 use super::pixels::{SourceView, pixel_gaussians};
 use crate::error::{HumanError, Result};
