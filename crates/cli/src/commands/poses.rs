@@ -144,6 +144,11 @@ pub fn print_model(model: &PoseModel, fov_deg: f64) {
     if let Some(k1) = r.bundle.radial_k1 {
         println!("radial distortion k1 {k1:.5} (SIMPLE_RADIAL)");
     }
+    if let Some([dx, dy]) = r.bundle.principal_shift_px {
+        println!(
+            "principal point moved by ({dx:+.2}, {dy:+.2}) px of the matched images from their centre"
+        );
+    }
 }
 
 /// Runs `f` with a progress callback that shows a bar per stage of pose estimation.
