@@ -350,13 +350,9 @@ impl Run {
     /// report as the metrics and its picture of the cameras from above.
     fn open_poses(dir: &Path) -> Result<Self> {
         let mut run = Run::empty(RunKind::Poses, display_name(dir));
-        let cams_path = dir.join("cameras.json");
-        let cams = fewview_geom::io::cameras::read_cameras(&cams_path)?;
-        let names = read_json(&cams_path)?.unwrap_or_default();
-        for (i, c) in cams.iter().enumerate() {
-            let name = names[i]["name"]
-                .as_str()
-                .map_or_else(|| format!("camera {i}"), str::to_string);
+        let cams = fewview_geom::io::cameras::read_named_cameras(&dir.join("cameras.json"))?;
+        for (i, (c, name)) in cams.iter().enumerate() {
+            let name = name.clone().unwrap_or_else(|| format!("camera {i}"));
             run.manifest
                 .cameras
                 .push(PageCamera::new(name, "estimated", c));

@@ -127,12 +127,12 @@ fn every_view(path: &Path) -> Result<fewview_scene::load::LoadOptions> {
     Ok(options)
 }
 
-/// The `name` of every camera in a camera JSON list, when each has one (`fewview poses`
-/// writes them).
+/// The `name` of every camera in a camera file, when each has one (`fewview poses` writes
+/// them).
 fn camera_names(path: &Path) -> Option<Vec<String>> {
-    let text = std::fs::read_to_string(path).ok()?;
-    let list: Vec<serde_json::Value> = serde_json::from_str(&text).ok()?;
-    list.iter()
-        .map(|c| c.get("name")?.as_str().map(str::to_string))
+    fewview_geom::io::cameras::read_named_cameras(path)
+        .ok()?
+        .into_iter()
+        .map(|(_, name)| name)
         .collect()
 }

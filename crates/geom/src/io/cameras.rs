@@ -131,6 +131,15 @@ fn check(c: &Camera, m: &Matrix4<f64>, i: usize) -> std::result::Result<(), Stri
 
 /// Reads one camera or a list of cameras.
 pub fn read_cameras(path: &Path) -> Result<Vec<Camera>> {
+    Ok(read_named_cameras(path)?
+        .into_iter()
+        .map(|(camera, _)| camera)
+        .collect())
+}
+
+/// [`read_cameras`], each camera with its `name` when the file gives one (`fewview poses`
+/// names each camera by its photo).
+pub fn read_named_cameras(path: &Path) -> Result<Vec<(Camera, Option<String>)>> {
     let text = std::fs::read_to_string(path).map_err(|e| GeomError::io(path, e))?;
     let v: Value = serde_json::from_str(&text)
         .map_err(|e| GeomError::format(path, format!("not JSON: {e}")))?;
@@ -144,7 +153,8 @@ pub fn read_cameras(path: &Path) -> Result<Vec<Camera>> {
         .map(|(i, c)| {
             let (cam, m) = camera_from_value(c).map_err(|m| format!("camera {i}: {m}"))?;
             check(&cam, &m, i)?;
-            Ok(cam)
+            let name = c.get("name").and_then(Value::as_str).map(str::to_string);
+            Ok((cam, name))
         })
         .collect::<std::result::Result<Vec<_>, String>>()
         .map_err(|m| GeomError::format(path, m))?;
