@@ -445,7 +445,7 @@ def cli_findings(crates):
                 findings[f"enum:{rel}:{name}"] = (
                     f"crates/cli/src/commands/{rel}: ValueEnum {name} mirrors {library[variants]}"
                 )
-        if any(rel == m or rel.startswith(m) for m in METHOD_COMMANDS if m.endswith("/")) or rel in METHOD_COMMANDS:
+        if any(rel == m or (m.endswith("/") and rel.startswith(m)) for m in METHOD_COMMANDS):
             for field in literal_defaults(path):
                 key = f"{rel}:{field}"
                 own_seen.add(key)

@@ -317,8 +317,19 @@ pub fn scaled_focal(intrinsics: &[Intrinsics], scale: f64) -> Vec<Intrinsics> {
 /// The intrinsics a bundle adjustment started from, with the focal factor and principal point
 /// shift its report found applied.
 pub fn adjusted_intrinsics(intrinsics: &[Intrinsics], report: &BundleReport) -> Vec<Intrinsics> {
-    let [dx, dy] = report.principal_shift_px.unwrap_or([0.0; 2]);
-    scaled_focal(intrinsics, report.focal_scale.unwrap_or(1.0))
+    let scale = report.focal_scale.unwrap_or(1.0);
+    shifted_and_scaled(intrinsics, scale, report.principal_shift_px)
+}
+
+/// `intrinsics` with every focal length times `scale` and every principal point moved by
+/// `shift` (pixels).
+fn shifted_and_scaled(
+    intrinsics: &[Intrinsics],
+    scale: f64,
+    shift: Option<[f64; 2]>,
+) -> Vec<Intrinsics> {
+    let [dx, dy] = shift.unwrap_or([0.0; 2]);
+    scaled_focal(intrinsics, scale)
         .into_iter()
         .map(|k| Intrinsics {
             cx: k.cx + dx,
@@ -378,9 +389,9 @@ impl Lens {
 
     /// The cameras of the intrinsics `base` seen through this lens.
     fn cameras(&self, base: &[Intrinsics]) -> Option<Cameras> {
-        let mut report = BundleReport::default();
-        self.report_into(&mut report);
-        Cameras::with_radial(&adjusted_intrinsics(base, &report), self.k1.unwrap_or(0.0))
+        let scale = self.log_focal.unwrap_or(0.0).exp();
+        let intrinsics = shifted_and_scaled(base, scale, self.principal);
+        Cameras::with_radial(&intrinsics, self.k1.unwrap_or(0.0))
     }
 }
 
@@ -762,7 +773,6 @@ mod tests {
         (intrinsics, poses, points)
     }
 
-    /// Matches of every pair of views at the points' exact projections.
     /// A camera at `centre` looking at the origin, image rows along the world's y.
     fn looking_at_origin(centre: Vector3<f64>) -> Se3 {
         let forward = (-centre).normalize();
@@ -772,6 +782,7 @@ mod tests {
         Se3::new(r, -(r * centre))
     }
 
+    /// Matches of every pair of views at the points' exact projections.
     fn exact_matches(
         intrinsics: &[Intrinsics],
         poses: &[Se3],
@@ -1098,8 +1109,9 @@ mod tests {
     }
 
     /// Matches of cameras whose principal point sits 6 px right and 4 px below the centre the
-    /// adjustment assumes: the shift comes back with the poses; held, it turns the cameras. The rig's arc gains a camera above and one below, as a capture moves the camera
-    /// both ways; on one horizontal arc the vertical shift trades off against the pitch.
+    /// adjustment assumes: the shift comes back with the poses; held, it turns the cameras. The
+    /// rig's arc gains a camera above and one below, as a capture moves the camera both ways;
+    /// on one horizontal arc the vertical shift trades off against the pitch.
     #[test]
     fn a_shared_principal_point_shift_is_recovered() {
         let (mut intrinsics, mut truth, points) = rig();

@@ -316,9 +316,9 @@ impl PoseStage {
 }
 
 /// SIFT matches of every pair (each photo's features computed once; with more than
-/// [`PoseOptions::retrieval_above`] photos, of the pairs [`retrieval_pairs`] chooses), dense ones
-/// added to pairs with few, all refined by affine Lucas–Kanade (the refinement drops the matches whose
-/// windows do not agree).
+/// [`PoseOptions::retrieval_above`] photos, of the pairs [`pairs_to_match`] chooses), dense
+/// ones added to pairs with few, all refined by affine Lucas–Kanade (the refinement drops the
+/// matches whose windows do not agree).
 fn correspondences(
     inputs: &[MatchInput],
     (sift, learned): (&SiftMatcher, Option<&dyn Matcher>),
@@ -348,25 +348,7 @@ fn correspondences(
     } else {
         Vec::new()
     };
-    let pairs = if retrieve {
-        let descriptors: Vec<&[[f32; 128]]> = features
-            .iter()
-            .map(fewview_match::sift::SiftFeatures::descriptors)
-            .collect();
-        let retrieval = RetrievalOptions {
-            seed: options.seed,
-            ..options.retrieval
-        };
-        retrieval_pairs(&descriptors, &retrieval)
-    } else {
-        (0..n)
-            .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
-            .collect()
-    };
-    let matched = MatchedPairs {
-        pairs: pairs.len(),
-        chosen_by_retrieval: retrieve,
-    };
+    let (pairs, matched) = pairs_to_match(n, retrieve.then_some(features.as_slice()), options);
     let with_views = |(a, b): (usize, usize), found: Vec<Match>| {
         found.into_iter().map(move |m| Match {
             view_a: a,
@@ -425,6 +407,34 @@ fn correspondences(
     let refined = refine_matches(&images, &matches, &AffineRefineOptions::default());
     refinement(1);
     (shared_ends(&matches, refined), matched)
+}
+
+/// The pairs `(a, b)`, `a < b`, of `n` photos to match: those [`retrieval_pairs`] chooses from
+/// the photos' SIFT `features` when given, else every pair.
+fn pairs_to_match(
+    n: usize,
+    features: Option<&[SiftFeatures]>,
+    options: &PoseOptions,
+) -> (Vec<(usize, usize)>, MatchedPairs) {
+    let pairs: Vec<(usize, usize)> = match features {
+        Some(features) => {
+            let descriptors: Vec<&[[f32; 128]]> =
+                features.iter().map(SiftFeatures::descriptors).collect();
+            let retrieval = RetrievalOptions {
+                seed: options.seed,
+                ..options.retrieval
+            };
+            retrieval_pairs(&descriptors, &retrieval)
+        }
+        None => (0..n)
+            .flat_map(|a| (a + 1..n).map(move |b| (a, b)))
+            .collect(),
+    };
+    let matched = MatchedPairs {
+        pairs: pairs.len(),
+        chosen_by_retrieval: features.is_some(),
+    };
+    (pairs, matched)
 }
 
 /// The refined matches with every end that was one pixel before the refinement one pixel
