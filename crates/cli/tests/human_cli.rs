@@ -250,4 +250,15 @@ fn human_depth_reports_stereo_and_refuses_what_the_capture_cannot_give() {
     ]);
     assert_clean_error(&refused, &["no depth maps"]);
     assert!(!run.exists(), "an output folder was written");
+
+    let wrong = dir.path().join("wrong");
+    assert_clean_error(
+        &depth(&wrong, &["--stereo-search", "0.1,-0.2"]),
+        &["stereo search", "0.1,-0.2", "metres"],
+    );
+    assert_clean_error(
+        &depth(&wrong, &["--stereo-search", "0.1"]),
+        &["--stereo-search", "FRONT,BEHIND"],
+    );
+    assert!(!wrong.exists(), "an output folder was written");
 }

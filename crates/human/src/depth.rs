@@ -85,6 +85,23 @@ pub struct DepthBracket {
     pub behind: f32,
 }
 
+impl DepthBracket {
+    /// An error naming the setting when the bracket is not a finite, non-empty range.
+    pub fn check(&self) -> Result<()> {
+        check_range("depth bracket", self.front as f64, self.behind as f64)
+    }
+}
+
+/// An error naming `what` unless `front` and `behind` are finite distances ≥ 0, not both 0.
+fn check_range(what: &str, front: f64, behind: f64) -> Result<()> {
+    let distance = |v: f64| v.is_finite() && v >= 0.0;
+    if distance(front) && distance(behind) && front + behind > 0.0 {
+        return Ok(());
+    }
+    let m = format!("{front},{behind}: expected two distances ≥ 0 in metres, not both 0");
+    Err(HumanError::argument(what, m))
+}
+
 impl Default for DepthBracket {
     fn default() -> Self {
         Self {
@@ -123,6 +140,35 @@ impl StereoPartner {
     }
 }
 
+/// Which of Semi-Global Matching's disparities stereo depth keeps.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
+pub enum StereoChecks {
+    /// OpenCV's `StereoSGBM` checks: uniqueness, left–right consistency and the speckle
+    /// filter drop doubtful pixels, which take the hull's depth.
+    #[default]
+    Opencv,
+    /// Every masked pixel keeps the winning disparity, as a stereo network regresses one
+    /// everywhere (GPS-Gaussian's per-frame setting): denser, and noisier from frame to frame.
+    Dense,
+}
+
+impl StereoChecks {
+    /// `sgm` with these checks: `Dense` turns off uniqueness, left–right agreement and speckles.
+    fn applied(self, sgm: &SgmParams) -> SgmParams {
+        match self {
+            Self::Opencv => sgm.clone(),
+            Self::Dense => SgmParams {
+                uniqueness_ratio: 0,
+                disp12_max_diff: i32::from(i16::MAX),
+                speckle_window_size: 0,
+                ..sgm.clone()
+            },
+        }
+    }
+}
+
 /// How stereo depth is searched and kept.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StereoSettings {
@@ -131,6 +177,9 @@ pub struct StereoSettings {
     pub partner: StereoPartner,
     /// Semi-Global Matching's parameters; the disparity range is set per pair.
     pub sgm: SgmParams,
+    /// Which disparities are kept.
+    #[serde(default)]
+    pub checks: StereoChecks,
     /// How far in front of the hull's depth stereo may put the surface (metres).
     pub hull_front: f64,
     /// How far behind it.
@@ -139,12 +188,24 @@ pub struct StereoSettings {
     pub min_overlap: f64,
 }
 
+impl StereoSettings {
+    /// An error naming the setting when the search bracket is not a finite, non-empty range.
+    pub fn check(&self) -> Result<()> {
+        check_range(
+            "stereo search around the hull",
+            self.hull_front,
+            self.hull_behind,
+        )
+    }
+}
+
 impl Default for StereoSettings {
     fn default() -> Self {
         let bracket = DepthBracket::default();
         Self {
             partner: StereoPartner::default(),
             sgm: SgmParams::default(),
+            checks: StereoChecks::default(),
             hull_front: bracket.front as f64,
             hull_behind: bracket.behind as f64,
             min_overlap: 0.2,
@@ -237,7 +298,7 @@ pub fn pair_depth(
     let stereo = match_pair(
         &stereo_view(first),
         &stereo_view(second),
-        &settings.sgm,
+        &settings.checks.applied(&settings.sgm),
         DisparityRange::Fixed { min, count },
         None,
         Photometry::AsIs,
@@ -380,8 +441,9 @@ mod tests {
     }
 
     /// A textured plane `z = 0.4` (world) seen by `camera`: the image (a pattern with energy
-    /// at every scale, fixed on the plane) and the exact z-depth.
-    fn plane_view(camera: &Camera) -> (Image, DepthMap) {
+    /// at every scale, fixed on the plane, flat grey where `x > blank_from`) and the exact
+    /// z-depth.
+    fn plane_view(camera: &Camera, blank_from: f64) -> (Image, DepthMap) {
         let n = SIZE as usize;
         let (mut image, mut depth) = (Image::new(n, n, 3), vec![0.0f32; n * n]);
         for p in 0..n * n {
@@ -389,7 +451,10 @@ mod tests {
             let t = (0.4 - o.z) / d.z;
             let x = o + d * t;
             let texture = |s: f64| ((x.x * s).sin() * (x.y * 1.3 * s).cos() + 1.0) / 2.0;
-            let v = (0.5 * texture(17.0) + 0.3 * texture(41.0) + 0.2 * texture(97.0)) as f32;
+            let mut v = (0.5 * texture(17.0) + 0.3 * texture(41.0) + 0.2 * texture(97.0)) as f32;
+            if x.x > blank_from {
+                v = 0.5;
+            }
             image.data[3 * p..3 * p + 3].copy_from_slice(&[v, 0.8 * v + 0.1, 1.0 - v]);
             depth[p] = camera.world_to_camera.transform_point(&x).z as f32;
         }
@@ -415,8 +480,20 @@ mod tests {
         second: f64,
         hull_offset: f32,
     ) -> (Result<PairDepth>, [DepthMap; 2]) {
+        let s = StereoSettings::default();
+        plane_stereo_with(first, second, hull_offset, f64::INFINITY, &s)
+    }
+
+    /// [`plane_stereo`] with the plane blank where `x > blank_from`, and settings `s`.
+    fn plane_stereo_with(
+        first: f64,
+        second: f64,
+        hull_offset: f32,
+        blank_from: f64,
+        s: &StereoSettings,
+    ) -> (Result<PairDepth>, [DepthMap; 2]) {
         let (a, b) = (ring_camera(first), ring_camera(second));
-        let ((ia, ga), (ib, gb)) = (plane_view(&a), plane_view(&b));
+        let ((ia, ga), (ib, gb)) = (plane_view(&a, blank_from), plane_view(&b, blank_from));
         let (ha, hb) = (shifted(&ga, hull_offset), shifted(&gb, hull_offset));
         let n = SIZE as usize;
         let mask = Mask::new(n, n, vec![true; n * n]);
@@ -427,8 +504,7 @@ mod tests {
             mask: &mask,
             hull,
         };
-        let s = StereoSettings::default();
-        let got = pair_depth(&input(&a, &ia, &ha), &input(&b, &ib, &hb), &s);
+        let got = pair_depth(&input(&a, &ia, &ha), &input(&b, &ib, &hb), s);
         (got, [ga, gb])
     }
 
@@ -492,6 +568,64 @@ mod tests {
                 errors.last().unwrap()
             );
         }
+    }
+
+    #[test]
+    fn dense_stereo_keeps_what_the_checks_drop_on_a_blank_wall() {
+        // Half the plane is flat grey, where SGM's winner is a guess: OpenCV's checks drop
+        // more of it than the dense setting, which keeps every winner inside the bracket. On
+        // the textured plane the two agree.
+        let run = |checks, blank_from| {
+            let s = StereoSettings {
+                checks,
+                ..StereoSettings::default()
+            };
+            let (got, [truth, _]) = plane_stereo_with(-12.0, 12.0, -0.02, blank_from, &s);
+            (got.unwrap(), truth)
+        };
+        let (checked, truth) = run(StereoChecks::Opencv, 0.0);
+        let (dense, _) = run(StereoChecks::Dense, 0.0);
+        let gained: Vec<f64> = (0..2)
+            .map(|k| dense.matched[k] - checked.matched[k])
+            .collect();
+        assert!(
+            gained.iter().all(|&g| g >= 0.0) && gained.iter().sum::<f64>() > 0.04,
+            "matched: checked {:?}, dense {:?}",
+            checked.matched,
+            dense.matched
+        );
+        let worst = (dense.depth[0].data.iter().zip(&truth.data))
+            .map(|(d, g)| (d - g).abs())
+            .fold(0.0f32, f32::max);
+        assert!(worst < 0.121, "worst {worst}");
+        let (checked, _) = run(StereoChecks::Opencv, f64::INFINITY);
+        let (dense, _) = run(StereoChecks::Dense, f64::INFINITY);
+        for k in 0..2 {
+            assert!((dense.matched[k] - checked.matched[k]).abs() < 0.01);
+        }
+    }
+
+    #[test]
+    fn a_search_or_bracket_that_is_not_a_range_is_an_error() {
+        for (front, behind) in [(-0.1, 0.2), (0.0, 0.0), (f64::NAN, 0.1)] {
+            let s = StereoSettings {
+                hull_front: front,
+                hull_behind: behind,
+                ..StereoSettings::default()
+            };
+            let err = s.check().unwrap_err().to_string();
+            assert!(
+                err.contains("stereo search") && err.contains("metres"),
+                "{err}"
+            );
+            let b = DepthBracket {
+                front: front as f32,
+                behind: behind as f32,
+            };
+            assert!(b.check().unwrap_err().to_string().contains("depth bracket"));
+        }
+        assert!(StereoSettings::default().check().is_ok());
+        assert!(DepthBracket::default().check().is_ok());
     }
 
     #[test]

@@ -3,10 +3,9 @@
 use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
 use fewview_human::Split;
-use fewview_human::depth::{StereoPartner, StereoSettings};
 use fewview_human::train::{Preset, TrainConfig};
 
-use super::shared::{CaptureArgs, parse_frames};
+use super::shared::{CaptureArgs, StereoArgs, parse_frames};
 
 /// Compare the input depths of the input cameras over frames: writes `depth_report.json` (each
 /// depth's flicker between frames, its flicker beyond the person's motion and its error against
@@ -27,9 +26,8 @@ pub struct DepthArgs {
     /// The camera of `depth_strip.png` (default: the first input camera).
     #[arg(long)]
     pub camera: Option<usize>,
-    /// The input camera each view's stereo depth is matched with.
-    #[arg(long, value_enum, default_value_t)]
-    pub stereo_partner: StereoPartner,
+    #[command(flatten)]
+    pub stereo: StereoArgs,
 }
 
 pub(super) fn depth(args: DepthArgs) -> anyhow::Result<()> {
@@ -61,10 +59,7 @@ pub(super) fn depth(args: DepthArgs) -> anyhow::Result<()> {
         size: [net.input[1], net.input[0]],
         crop_margin: train.crop_margin,
         hull_voxel: train.hull_voxel,
-        stereo: StereoSettings {
-            partner: args.stereo_partner,
-            ..train.stereo.clone()
-        },
+        stereo: args.stereo.settings()?,
     };
     let inputs = InferenceInputs {
         source: &*capture,

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
+use fewview_human::depth::{StereoChecks, StereoPartner, StereoSettings};
 use fewview_human::tps::TpsConfig;
 use fewview_human::{MultiView, Split};
 
@@ -21,6 +22,53 @@ pub struct CaptureArgs {
     /// Output folder.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+}
+
+/// How stereo depth is matched (`--depth stereo`), shared by `train` and `depth`.
+#[derive(Debug, ClapArgs)]
+pub struct StereoArgs {
+    /// The input camera each view's stereo depth is matched with.
+    #[arg(long, value_enum, default_value_t)]
+    pub stereo_partner: StereoPartner,
+    /// Which of Semi-Global Matching's disparities are kept.
+    #[arg(long, value_enum, default_value_t)]
+    pub stereo_checks: StereoChecks,
+    /// How far in front of and behind the visual hull's depth stereo searches, in metres
+    /// (default: the hull bracket the network refines within).
+    #[arg(long, value_name = "FRONT,BEHIND", value_parser = parse_metres_pair)]
+    pub stereo_search: Option<(f64, f64)>,
+}
+
+impl StereoArgs {
+    /// The library's stereo settings with these flags, checked.
+    pub fn settings(&self) -> anyhow::Result<StereoSettings> {
+        let defaults = StereoSettings::default();
+        let (hull_front, hull_behind) = self
+            .stereo_search
+            .unwrap_or((defaults.hull_front, defaults.hull_behind));
+        let settings = StereoSettings {
+            partner: self.stereo_partner,
+            checks: self.stereo_checks,
+            hull_front,
+            hull_behind,
+            ..defaults
+        };
+        settings.check()?;
+        Ok(settings)
+    }
+}
+
+/// `FRONT,BEHIND`: two distances in metres.
+pub fn parse_metres_pair(text: &str) -> Result<(f64, f64), String> {
+    let parse = |t: &str| {
+        t.trim()
+            .parse::<f64>()
+            .map_err(|e| format!("{text}: {e} (expected FRONT,BEHIND in metres)"))
+    };
+    let (a, b) = text
+        .split_once(',')
+        .ok_or_else(|| format!("{text}: expected FRONT,BEHIND in metres"))?;
+    Ok((parse(a)?, parse(b)?))
 }
 
 /// The Temporal Pose Stabilizer's settings (our design; see `fewview_human::tps`).

@@ -5,12 +5,12 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
-use fewview_human::depth::{DepthInput, StereoPartner, StereoSettings};
+use fewview_human::depth::{DepthBracket, DepthInput};
 use fewview_human::net::Variant;
 use fewview_human::train::{Preset, TrainConfig, Trainer};
 use fewview_human::{Split, TrainingView};
 
-use super::shared::CaptureArgs;
+use super::shared::{CaptureArgs, StereoArgs, parse_metres_pair};
 use fewview_splat::ComputeDevice;
 
 use crate::commands::progress;
@@ -52,9 +52,12 @@ pub struct TrainArgs {
     /// The depth the network reads and refines.
     #[arg(long, value_enum, default_value_t)]
     pub depth: DepthInput,
-    /// The input camera each view's stereo depth is matched with (`--depth stereo`).
-    #[arg(long, value_enum, default_value_t)]
-    pub stereo_partner: StereoPartner,
+    /// Where the depth head's output may move the input depth: in front of it and behind it,
+    /// in metres (default: the depth input's own bracket).
+    #[arg(long, value_name = "FRONT,BEHIND", value_parser = parse_metres_pair)]
+    pub depth_bracket: Option<(f64, f64)>,
+    #[command(flatten)]
+    pub stereo: StereoArgs,
     /// Write a checkpoint every N iterations (and at the end).
     #[arg(long, default_value_t = 100)]
     pub checkpoint_every: usize,
@@ -89,13 +92,23 @@ fn config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
         source_views: args.source_views,
         use_pose: !args.no_pose,
         depth: args.depth,
-        bracket: args.depth.bracket(),
-        stereo: StereoSettings {
-            partner: args.stereo_partner,
-            ..StereoSettings::default()
-        },
+        bracket: bracket(args)?,
+        stereo: args.stereo.settings()?,
         ..TrainConfig::default()
     })
+}
+
+/// `--depth-bracket`, or the depth input's own bracket.
+fn bracket(args: &TrainArgs) -> anyhow::Result<DepthBracket> {
+    let bracket = match args.depth_bracket {
+        Some((front, behind)) => DepthBracket {
+            front: front as f32,
+            behind: behind as f32,
+        },
+        None => args.depth.bracket(),
+    };
+    bracket.check()?;
+    Ok(bracket)
 }
 
 pub(super) fn train(args: TrainArgs) -> anyhow::Result<()> {
@@ -187,5 +200,37 @@ mod tests {
     fn an_empty_command_line_gives_the_librarys_defaults() {
         let args: TrainArgs = parse(&["train", "--data", "d", "--out", "o"]);
         assert_eq!(config(&args).unwrap(), TrainConfig::default());
+    }
+
+    #[test]
+    fn the_stereo_and_bracket_flags_reach_the_config() {
+        let args: TrainArgs = parse(&[
+            "train",
+            "--data",
+            "d",
+            "--out",
+            "o",
+            "--stereo-checks",
+            "dense",
+            "--stereo-search",
+            "0.3,0.6",
+            "--depth-bracket",
+            "0.25,0.5",
+        ]);
+        let c = config(&args).unwrap();
+        assert_eq!(c.stereo.checks, fewview_human::depth::StereoChecks::Dense);
+        assert_eq!((c.stereo.hull_front, c.stereo.hull_behind), (0.3, 0.6));
+        assert_eq!((c.bracket.front, c.bracket.behind), (0.25, 0.5));
+        let args: TrainArgs = parse(&[
+            "train",
+            "--data",
+            "d",
+            "--out",
+            "o",
+            "--depth-bracket",
+            "0,0",
+        ]);
+        let err = config(&args).unwrap_err().to_string();
+        assert!(err.contains("depth bracket"), "{err}");
     }
 }
