@@ -16,8 +16,8 @@
    flags the library has no setting for are listed in OWN_DEFAULTS.
 4. Upward imports: a file that names a module above it (its parent `mod.rs`, an ancestor, or
    the crate root, whose re-exports are for users) depends on what is built from it; shared
-   items belong in a sibling module that both use. Known files in UPWARD_EXCEPTIONS (none in
-   surface), with the same shrinking rule.
+   items belong in a sibling module that both use. Documented exceptions would go in
+   UPWARD_EXCEPTIONS (empty: every crate is clean).
 
 Test code does not count: `#[cfg(test)]` items (the `mod tests` blocks) are cut out before both
 checks, and `tests/`, `benches/` and `examples/` folders are not read.
@@ -358,24 +358,8 @@ def upward_imports(crate):
     return found
 
 
-# Files with upward imports today (check 4), to be emptied crate by crate.
-UPWARD_EXCEPTIONS = {
-    "crates/geom/src/bench.rs",
-    "crates/geom/src/similarity.rs",
-    "crates/human/src/eval.rs",
-    "crates/human/src/infer.rs",
-    "crates/splat/src/bench.rs",
-    "crates/splat/src/raster/blend.rs",
-    "crates/splat/src/raster/project.rs",
-    "crates/splat/src/raster/reference.rs",
-    "crates/splat/src/raster/render.rs",
-    "crates/splat/src/raster/tiles.rs",
-    "crates/splat/src/train/appearance.rs",
-    "crates/splat/src/train/config.rs",
-    "crates/splat/src/train/densify.rs",
-    "crates/study/src/analysis/plot.rs",
-    "crates/video/src/mp4_h264.rs",
-}
+# Files allowed an upward import (check 4), each with the reason beside it; none today.
+UPWARD_EXCEPTIONS: set[str] = set()
 
 
 VARIANT_RE = re.compile(r"^\s*([A-Z]\w*)\s*(?:[,({=]|$)", re.M)

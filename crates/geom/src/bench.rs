@@ -213,7 +213,7 @@ pub fn stereo_bench(
     let one = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
-        .map_err(|e| crate::GeomError::numerical(e.to_string()))?;
+        .map_err(|e| crate::error::GeomError::numerical(e.to_string()))?;
     let (out, one_thread_seconds, _) = one.install(|| measure(|| match_left(&l, &r, &opencv)));
     out?;
     let (out, default_seconds, _) = measure(|| match_left(&l, &r, &ours));
@@ -343,7 +343,7 @@ pub fn triangle_raster_bench(
     let one = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
-        .map_err(|e| crate::GeomError::numerical(e.to_string()))?;
+        .map_err(|e| crate::error::GeomError::numerical(e.to_string()))?;
     let (out, one_thread_seconds, _) = one.install(|| measure(run));
     out?;
     let median = |mut v: Vec<f64>| {

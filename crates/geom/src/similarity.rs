@@ -58,9 +58,9 @@ impl Similarity {
 
     /// A copy of `mesh` in the mapped world: vertices mapped, normals rotated (a positive scale
     /// keeps the faces' orientation), faces and colours as they are.
-    pub fn apply_to_mesh(&self, mesh: &crate::Mesh) -> crate::Mesh {
+    pub fn apply_to_mesh(&self, mesh: &crate::mesh::Mesh) -> crate::mesh::Mesh {
         let rotate = |n: &[f32; 3]| crate::mesh::f3(&(self.rotation * crate::mesh::v3(n)));
-        crate::Mesh {
+        crate::mesh::Mesh {
             vertices: self.apply_points(&mesh.vertices),
             normals: mesh
                 .normals
@@ -288,7 +288,7 @@ pub(crate) mod tests {
     /// vertex normals are turned alike.
     #[test]
     fn a_mapped_mesh_keeps_its_shape_and_orientation() {
-        let mut mesh = crate::Mesh::new(
+        let mut mesh = crate::mesh::Mesh::new(
             vec![
                 [0.0, 0.0, 0.0],
                 [1.0, 0.0, 0.0],
@@ -307,13 +307,13 @@ pub(crate) mod tests {
         mesh.colors = Some(vec![[0.1, 0.2, 0.3]; 4]);
         let sim = random_similarity(7);
         let mapped = sim.apply_to_mesh(&mesh);
-        let v = |m: &crate::Mesh, i: u32| crate::mesh::v3(&m.vertices[i as usize]);
+        let v = |m: &crate::mesh::Mesh, i: u32| crate::mesh::v3(&m.vertices[i as usize]);
         for f in &mesh.faces {
             let normal =
-                |m: &crate::Mesh| (v(m, f[1]) - v(m, f[0])).cross(&(v(m, f[2]) - v(m, f[0])));
+                |m: &crate::mesh::Mesh| (v(m, f[1]) - v(m, f[0])).cross(&(v(m, f[2]) - v(m, f[0])));
             let expected = sim.rotation * normal(&mesh).normalize();
             assert!((normal(&mapped).normalize() - expected).norm() < 1e-6);
-            let edge = |m: &crate::Mesh| (v(m, f[1]) - v(m, f[0])).norm();
+            let edge = |m: &crate::mesh::Mesh| (v(m, f[1]) - v(m, f[0])).norm();
             assert!((edge(&mapped) - sim.scale * edge(&mesh)).abs() < 1e-5 * sim.scale);
         }
         for (n, m) in mesh

@@ -233,7 +233,7 @@ pub fn evaluate(
     model: &crate::infer::Model,
     baselines: &[(String, &crate::infer::Model)],
     source: &dyn MultiView,
-    split: &crate::Split,
+    split: &crate::split::Split,
     options: &EvalOptions,
     perceptual: Option<&dyn PerceptualDistance>,
     progress: &mut dyn FnMut(usize),

@@ -134,7 +134,7 @@ impl<'a> SequenceRenderer<'a> {
     pub fn new(
         model: &'a Model,
         source: &'a dyn MultiView,
-        split: &'a crate::Split,
+        split: &'a crate::split::Split,
         tps: Option<TpsConfig>,
     ) -> Self {
         Self {
@@ -264,7 +264,7 @@ fn host(t: &Tensor<3>) -> Result<Vec<f32>> {
         .map_err(|e| HumanError::argument("inference", format!("cannot read a map: {e:?}")))
 }
 
-pub(crate) fn to_source_maps(maps: &PixelMaps, mask: &crate::Mask) -> Result<SourceMaps> {
+pub(crate) fn to_source_maps(maps: &PixelMaps, mask: &crate::maps::Mask) -> Result<SourceMaps> {
     let (width, height) = maps.size();
     let mut values = host(&maps.scale)?;
     values.extend(host(&maps.rotation)?);

@@ -6,13 +6,13 @@ use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::cputime::measure;
 use crate::raster::project::Splat;
 use crate::raster::render::{OUT_CHANNELS, backward, forward};
 use crate::raster::{
     ALPHA_MAX, ALPHA_MIN, GaussianRefs, RenderCamera, RenderSettings, T_MIN, TILE,
 };
 use crate::sh::SH_C0;
+use fewview_scene::cputime::measure;
 
 /// A synthetic scene shaped like a trained forward-facing capture: Gaussians spread through the
 /// view frustum between depths 2 and 10, screen sizes log-uniform between 0.5 and 6 px (σ),
@@ -76,8 +76,8 @@ impl SyntheticScene {
     }
 
     /// The scene as a model (to write it as a PLY).
-    pub fn to_model(&self) -> crate::GaussianModel {
-        crate::GaussianModel {
+    pub fn to_model(&self) -> crate::model::GaussianModel {
+        crate::model::GaussianModel {
             means: self.means.clone(),
             log_scales: self.log_scales.clone(),
             quats: self.quats.clone(),
@@ -281,7 +281,7 @@ pub struct TrainStepBench {
 pub fn train_step_bench(
     ds: &fewview_scene::Dataset,
     iterations: usize,
-    device: crate::ComputeDevice,
+    device: crate::device::ComputeDevice,
 ) -> Result<TrainStepBench, crate::pipeline::PipelineError> {
     let mut cfg = crate::pipeline::RunConfig::new(crate::train::TrainConfig::sparse_view(3000));
     cfg.train.background = ds.background;

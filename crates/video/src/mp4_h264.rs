@@ -25,7 +25,7 @@ use openh264::encoder::{
 use openh264::formats::{YUVBuffer, YUVSource};
 
 use super::color::{Matrix, Yuv420, YuvFormat, rgb_to_yuv420, yuv420_to_rgb};
-use super::{H264Quality, OddSizePolicy, VideoOptions};
+use super::options::{H264Quality, OddSizePolicy, VideoOptions};
 use fewview_scene::Image;
 use fewview_scene::error::{Result, SceneError};
 

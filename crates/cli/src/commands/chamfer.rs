@@ -38,10 +38,10 @@ pub struct Args {
     #[arg(long, value_enum, default_value = "dtu")]
     pub protocol: Protocol,
     /// DTU sampling density and down-sampling radius.
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = DtuOptions::default().density)]
     pub density: f64,
     /// DTU: distances at or above this are left out.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = DtuOptions::default().max_dist)]
     pub max_dist: f64,
     /// DTU: keep predicted points in "minx,miny,minz,maxx,maxy,maxz" (without an observation mask).
     #[arg(long, allow_hyphen_values = true)]
@@ -67,7 +67,7 @@ pub struct Args {
     /// Synthetic: F-score thresholds (repeatable).
     #[arg(long, default_values_t = [0.01], value_parser = positive)]
     pub tau: Vec<f64>,
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = DtuOptions::default().seed)]
     pub seed: u64,
     /// Write the figures as JSON.
     #[arg(long)]

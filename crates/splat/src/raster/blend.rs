@@ -8,8 +8,8 @@
 //! The loops run splat-outer, pixel-inner over whole 16-pixel tile rows so they vectorise; a
 //! splat only visits the tile rows its `α ≥ 1/255` ellipse can reach.
 
+use super::inputs::{ALPHA_MAX, ALPHA_MIN, T_MIN, TILE};
 use super::project::{Splat, SplatGrad};
-use super::{ALPHA_MAX, ALPHA_MIN, T_MIN, TILE};
 use crate::real::{MulAdd, Real};
 
 pub const TILE_PIXELS: usize = TILE * TILE;

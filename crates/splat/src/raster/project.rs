@@ -13,7 +13,7 @@
 //! with negated comparisons (`!(z >= near)` is true for NaN), so two clippy lints are off here.
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
-use super::{ALPHA_MIN, DILATION, FOV_CLAMP, GaussianRefs, RenderCamera};
+use super::inputs::{ALPHA_MIN, DILATION, FOV_CLAMP, GaussianRefs, RenderCamera, sh_degree_of};
 use crate::real::Real;
 use crate::sh;
 
@@ -277,7 +277,7 @@ fn forward_one<F: Real>(
     let dir_norm = dot(&dv, &dv).sqrt().max(F::c(1e-20));
     let dir = [dv[0] / dir_norm, dv[1] / dir_norm, dv[2] / dir_norm];
     let mut basis = [F::zero(); 16];
-    let degree = sh_degree.min(super::sh_degree_of(g.sh_coeffs));
+    let degree = sh_degree.min(sh_degree_of(g.sh_coeffs));
     sh::basis(degree, dir, &mut basis, None);
     let k_used = sh::num_coeffs(degree);
     let base = i * g.sh_coeffs * 3;
@@ -427,7 +427,7 @@ pub fn project_one_backward<F: Real>(
     out.opacity_logit = dl.opacity * f.opacity * (one - f.opacity);
 
     // Colour: max(0, raw) → SH coefficients and view direction.
-    let degree = sh_degree.min(super::sh_degree_of(g.sh_coeffs));
+    let degree = sh_degree.min(sh_degree_of(g.sh_coeffs));
     let k_used = sh::num_coeffs(degree);
     let mut dcolor = [zero; 3];
     for ch in 0..3 {

@@ -6,8 +6,9 @@
 
 use nalgebra::{Matrix2, Matrix2x3, Matrix3, Quaternion, UnitQuaternion, Vector3};
 
-use super::{
+use super::inputs::{
     ALPHA_MAX, ALPHA_MIN, DILATION, FOV_CLAMP, GaussianRefs, RenderCamera, RenderSettings, T_MIN,
+    sh_degree_of,
 };
 use crate::sh;
 
@@ -73,7 +74,7 @@ fn project(
     let conic = cov.try_inverse()?;
     let center = cam.center();
     let d = (p - Vector3::from(center)).normalize();
-    let degree = settings.sh_degree.min(super::sh_degree_of(g.sh_coeffs));
+    let degree = settings.sh_degree.min(sh_degree_of(g.sh_coeffs));
     let mut y = [0.0; 16];
     sh::basis(degree, [d.x, d.y, d.z], &mut y, None);
     let mut color = [0.5; 3];

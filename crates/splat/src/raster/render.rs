@@ -5,9 +5,9 @@
 use rayon::prelude::*;
 
 use super::blend::{TileGeometry, TileGrad, TileState, backward_tile, forward_tile};
+use super::inputs::{GaussianRefs, RenderCamera, RenderSettings, TILE};
 use super::project::{CameraF, ParamGrad, Splat, SplatGrad, project_one, project_one_backward};
 use super::tiles::{TileBins, bin};
-use super::{GaussianRefs, RenderCamera, RenderSettings, TILE};
 use crate::real::{Fused, Real, Unfused};
 
 /// Channels of the rasterizer's output image, interleaved per pixel: R, G, B, depth, alpha.

@@ -6,7 +6,7 @@
 
 use rayon::prelude::*;
 
-use super::TILE;
+use super::inputs::TILE;
 use super::project::Splat;
 use crate::real::Real;
 

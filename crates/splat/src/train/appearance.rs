@@ -13,7 +13,7 @@
 use burn::tensor::{Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 
-use super::adam::{AdamConfig, AdamState};
+use fewview_optim::adam::{AdamConfig, AdamState};
 
 /// Which appearance model training uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]

@@ -3,8 +3,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::adam::AdamConfig;
 use super::appearance::AppearanceConfig;
+use fewview_optim::adam::AdamConfig;
 
 /// Learning rates (the fusion paper §3; Kerbl et al. 2023).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

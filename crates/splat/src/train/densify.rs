@@ -6,9 +6,9 @@ use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
-use super::adam::AdamState;
 use super::config::DensifyConfig;
 use crate::model::{GaussianModel, inverse_sigmoid, sigmoid};
+use fewview_optim::adam::AdamState;
 
 /// Adam moments of every parameter group, row-aligned with the model.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]

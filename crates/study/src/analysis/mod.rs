@@ -6,12 +6,14 @@ pub mod binomial;
 pub mod bradley_terry;
 pub mod diagnostics;
 pub mod plot;
+pub mod results;
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
 pub use binomial::binom_test_two_sided;
 pub use bradley_terry::{BtPosterior, BtSettings, SkillSummary, WinCount, fit_bradley_terry};
+pub use results::{PairResult, QuestionAnalysis, StudyAnalysis};
 
 use crate::error::{Result, StudyError};
 
@@ -118,35 +120,6 @@ pub fn write_responses_csv(path: &Path, responses: &[Response]) -> Result<()> {
         .map_err(|e| StudyError::invalid(e.to_string()))?;
     fewview_scene::atomic::write_bytes(path, &bytes)?;
     Ok(())
-}
-
-/// Win counts of one unordered method pair for one question.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct PairResult {
-    pub method_a: String,
-    pub method_b: String,
-    pub wins_a: u64,
-    pub wins_b: u64,
-    /// `wins_a / (wins_a + wins_b)`.
-    pub win_rate_a: f64,
-    /// Two-sided exact binomial test of `wins_a` against no preference (p = 0.5).
-    pub p_value: f64,
-}
-
-/// Everything computed for one question.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct QuestionAnalysis {
-    pub question: String,
-    pub methods: Vec<String>,
-    pub responses: u64,
-    pub pairs: Vec<PairResult>,
-    pub bradley_terry: BtPosterior,
-}
-
-/// The analysis of a whole study, one entry per question (in first-appearance order).
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct StudyAnalysis {
-    pub questions: Vec<QuestionAnalysis>,
 }
 
 /// Analyses the responses. `method_order` fixes the order of methods in tables (default: first

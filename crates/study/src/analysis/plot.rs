@@ -9,7 +9,7 @@ use std::sync::Once;
 
 use plotters::prelude::*;
 
-use super::QuestionAnalysis;
+use super::results::QuestionAnalysis;
 use crate::error::{Result, StudyError};
 
 const FONT: &[u8] = include_bytes!("../../assets/DejaVuSansMono.ttf");

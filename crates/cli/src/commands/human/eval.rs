@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
-use fewview_human::baseline::BaselineInit;
+use fewview_human::baseline::{BaselineInit, SplatBaselineOptions};
 
 use super::shared::{CaptureArgs, TpsArgs, load_model, parse_frames, run_split};
 use crate::commands::progress;
@@ -37,7 +37,7 @@ pub struct EvalArgs {
     #[arg(long, default_value_t = 0)]
     pub splat_frames: usize,
     /// Training iterations of each 3DGS-per-frame model.
-    #[arg(long, default_value_t = 3000)]
+    #[arg(long, default_value_t = SplatBaselineOptions::default().iterations)]
     pub splat_iterations: usize,
     /// Where each 3DGS-per-frame model starts: `train` (what `fewview train` does on those
     /// views: the stereo start, else random points) or `hull` (points in the frame's visual
@@ -119,7 +119,7 @@ pub(super) fn eval(args: EvalArgs) -> anyhow::Result<()> {
         splat: (args.splat_frames > 0).then(|| {
             let start = split.test_frames.start.max(frames.start);
             let end = (start + args.splat_frames).min(frames.end);
-            let opts = fewview_human::baseline::SplatBaselineOptions {
+            let opts = SplatBaselineOptions {
                 iterations: args.splat_iterations,
                 init: args.splat_init,
                 ..Default::default()
