@@ -35,7 +35,7 @@ pub enum OddSizePolicy {
     Crop,
 }
 
-/// Options of [`write_video`]; each applies to the containers named in its doc.
+/// Options of [`write_video`](crate::write_video); each applies to the containers named in its doc.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct VideoOptions {
     /// MP4: quantiser or bitrate.
@@ -60,7 +60,7 @@ impl Default for VideoOptions {
     }
 }
 
-/// Options of [`read_video_with`].
+/// Options of [`read_video_with`](crate::read_video_with).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ReadOptions {
     /// The colour transparent GIF/PNG pixels are composited over (sR'G'B' in `[0, 1]`).

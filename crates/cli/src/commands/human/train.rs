@@ -198,18 +198,19 @@ mod tests {
     /// Every flag's default is the library's: an empty command line gives `TrainConfig::default()`.
     #[test]
     fn an_empty_command_line_gives_the_librarys_defaults() {
-        let args: TrainArgs = parse(&["train", "--data", "d", "--out", "o"]);
-        assert_eq!(config(&args).unwrap(), TrainConfig::default());
+        assert_eq!(config(&parsed(&[])).unwrap(), TrainConfig::default());
+    }
+
+    /// `human train` on placeholder paths with `extra` flags.
+    fn parsed(extra: &[&str]) -> TrainArgs {
+        let mut line = vec!["train", "--data", "d", "--out", "o"];
+        line.extend(extra);
+        parse(&line)
     }
 
     #[test]
     fn the_stereo_and_bracket_flags_reach_the_config() {
-        let args: TrainArgs = parse(&[
-            "train",
-            "--data",
-            "d",
-            "--out",
-            "o",
+        let args = parsed(&[
             "--stereo-checks",
             "dense",
             "--stereo-search",
@@ -221,16 +222,9 @@ mod tests {
         assert_eq!(c.stereo.checks, fewview_human::depth::StereoChecks::Dense);
         assert_eq!((c.stereo.hull_front, c.stereo.hull_behind), (0.3, 0.6));
         assert_eq!((c.bracket.front, c.bracket.behind), (0.25, 0.5));
-        let args: TrainArgs = parse(&[
-            "train",
-            "--data",
-            "d",
-            "--out",
-            "o",
-            "--depth-bracket",
-            "0,0",
-        ]);
-        let err = config(&args).unwrap_err().to_string();
+        let err = config(&parsed(&["--depth-bracket", "0,0"]))
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("depth bracket"), "{err}");
     }
 }
