@@ -7,7 +7,10 @@
 //! setting back with classical stereo: each input view is rectified with a partner input camera
 //! and matched by Semi-Global Matching (`fewview-geom`, the code of the fusion method's stereo
 //! start), searched only over the depths the visual hull allows, and the hull's depth fills what
-//! stereo leaves unmatched. [`DepthInput::Hull`] (the visual hull alone, smooth over time) and
+//! stereo leaves unmatched. OpenCV's checks drop doubtful disparities by default;
+//! [`StereoChecks::Dense`] keeps every pixel's winner, as GPS-Gaussian's stereo network outputs
+//! one everywhere, and with a wider search ([`StereoSettings::hull_front`], `hull_behind`) it
+//! flickers from frame to frame the way per-frame stereo on real video does. [`DepthInput::Hull`] (the visual hull alone, smooth over time) and
 //! [`DepthInput::Dataset`] (the capture's exact depth, an oracle) are the ablations.
 //!
 //! GPS-Gaussian rectifies the two source views of each target together. Our inference computes

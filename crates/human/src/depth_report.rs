@@ -63,6 +63,7 @@ pub fn measure(
     inputs: &dyn InputViews,
     config: &DepthReportConfig,
 ) -> Result<(DepthReport, Vec<PreparedFrame>)> {
+    config.stereo.check()?;
     let voxel = hull_config(config.hull_voxel);
     let meshes = config
         .frames

@@ -152,6 +152,8 @@ impl<'a> Trainer<'a> {
         device: Device,
     ) -> Result<Self> {
         check_depth_input(inputs, frames.start, config.depth)?;
+        config.bracket.check()?;
+        config.stereo.check()?;
         let hulls = carve_all(inputs, frames.clone(), config.hull_voxel)?;
         let net_config = net_config(&config, parents);
         let size = [net_config.input[1], net_config.input[0]];
