@@ -191,6 +191,12 @@ pub struct RunInfo {
     pub name: String,
     /// The depth its network reads.
     pub depth: crate::depth::DepthInput,
+    /// How its stereo depth was matched (read with `--depth stereo`).
+    #[serde(default)]
+    pub stereo: crate::depth::StereoSettings,
+    /// Where its depth head could move the input depth.
+    #[serde(default)]
+    pub bracket: crate::depth::DepthBracket,
     /// Whether its pose encoder saw the pose (`false`: the per-frame baseline).
     pub use_pose: bool,
     /// Training steps behind its weights.
@@ -202,6 +208,8 @@ impl RunInfo {
         Self {
             name: name.to_string(),
             depth: model.config.depth,
+            stereo: model.config.stereo.clone(),
+            bracket: model.config.bracket,
             use_pose: model.config.use_pose,
             iterations: model.iterations,
         }

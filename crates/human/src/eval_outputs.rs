@@ -6,7 +6,7 @@ use std::path::Path;
 
 use fewview_scene::Image;
 
-use crate::depth::DepthInput;
+use crate::depth::{DepthInput, StereoSettings};
 use crate::error::{HumanError, Result};
 use crate::eval::{EvalReport, Renders, RunInfo, side_by_side, table};
 
@@ -24,15 +24,41 @@ pub struct TableContext {
 pub fn runs_table(runs: &[RunInfo]) -> String {
     let mut s = String::from("| run | depth input | pose | steps |\n|---|---|---|---|\n");
     for r in runs {
-        let depth = match r.depth {
-            DepthInput::Stereo => "stereo",
-            DepthInput::Hull => "hull",
-            DepthInput::Dataset => "dataset",
-        };
         let pose = if r.use_pose { "yes" } else { "no (per-frame)" };
+        let depth = depth_cell(r);
         s += &format!("| {} | {depth} | {pose} | {} |\n", r.name, r.iterations);
     }
     s
+}
+
+/// The depth input's name, with the stereo settings and the depth head's bracket where they
+/// differ from the defaults, e.g. `stereo (dense, search −30/+60 cm, head −30/+30 cm)`.
+fn depth_cell(r: &RunInfo) -> String {
+    let cm = |front: f64, behind: f64| format!("−{:.0}/+{:.0} cm", 100.0 * front, 100.0 * behind);
+    let mut notes = Vec::new();
+    let name = match r.depth {
+        DepthInput::Stereo => {
+            let (s, default) = (&r.stereo, StereoSettings::default());
+            if s.checks != default.checks {
+                notes.push(format!("{:?}", s.checks).to_lowercase());
+            }
+            if (s.hull_front, s.hull_behind) != (default.hull_front, default.hull_behind) {
+                notes.push(format!("search {}", cm(s.hull_front, s.hull_behind)));
+            }
+            "stereo"
+        }
+        DepthInput::Hull => "hull",
+        DepthInput::Dataset => "dataset",
+    };
+    if r.bracket != r.depth.bracket() {
+        let b = r.bracket;
+        notes.push(format!("head {}", cm(b.front as f64, b.behind as f64)));
+    }
+    if notes.is_empty() {
+        name.to_string()
+    } else {
+        format!("{name} ({})", notes.join(", "))
+    }
 }
 
 /// `table.md`'s text.
@@ -107,4 +133,48 @@ pub fn write(
     fewview_video::write_video(&path, &video, 30.0, &opts)
         .map_err(|e| HumanError::argument(path.display().to_string(), e.to_string()))?;
     Ok(md)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::depth::{DepthBracket, StereoChecks};
+
+    fn run(depth: DepthInput) -> RunInfo {
+        RunInfo {
+            name: "r".into(),
+            depth,
+            stereo: StereoSettings::default(),
+            bracket: depth.bracket(),
+            use_pose: true,
+            iterations: 7,
+        }
+    }
+
+    #[test]
+    fn the_runs_table_names_settings_only_where_they_differ() {
+        let dense = RunInfo {
+            stereo: StereoSettings {
+                checks: StereoChecks::Dense,
+                hull_front: 0.3,
+                hull_behind: 0.6,
+                ..StereoSettings::default()
+            },
+            bracket: DepthBracket {
+                front: 0.3,
+                behind: 0.3,
+            },
+            ..run(DepthInput::Stereo)
+        };
+        let table = runs_table(&[run(DepthInput::Stereo), run(DepthInput::Hull), dense]);
+        let rows: Vec<&str> = table.lines().skip(2).collect();
+        assert_eq!(
+            rows,
+            [
+                "| r | stereo | yes | 7 |",
+                "| r | hull | yes | 7 |",
+                "| r | stereo (dense, search −30/+60 cm, head −30/+30 cm) | yes | 7 |",
+            ]
+        );
+    }
 }
