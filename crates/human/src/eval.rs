@@ -26,6 +26,36 @@ pub struct Scores {
     pub delta_psnr: (f64, f64),
     pub delta_ssim: (f64, f64),
     pub delta_lpips: Option<(f64, f64)>,
+    /// The flicker of the error: per camera the mean over consecutive frames of the mean
+    /// absolute change of `render − truth` (colour values in [0, 1]), averaged over the
+    /// cameras. Zero for a render that tracks the truth or keeps a steady error, where the
+    /// Δ-metrics also move with the person's motion and with how good a render is at all.
+    #[serde(default)]
+    pub error_flicker: f64,
+}
+
+/// Mean over consecutive frames of the mean absolute change of `render − truth`.
+fn error_flicker(renders: &[Image], truths: &[Image]) -> f64 {
+    let error = |r: &Image, t: &Image| -> Vec<f32> {
+        r.data.iter().zip(&t.data).map(|(a, b)| a - b).collect()
+    };
+    let errors: Vec<Vec<f32>> = renders
+        .iter()
+        .zip(truths)
+        .map(|(r, t)| error(r, t))
+        .collect();
+    let changes: Vec<f64> = errors
+        .windows(2)
+        .map(|w| {
+            let sum: f64 = w[1]
+                .iter()
+                .zip(&w[0])
+                .map(|(a, b)| (a - b).abs() as f64)
+                .sum();
+            sum / w[1].len().max(1) as f64
+        })
+        .collect();
+    changes.iter().sum::<f64>() / changes.len().max(1) as f64
 }
 
 fn averaged(stats: impl Iterator<Item = MeanStd>) -> (f64, f64) {
@@ -77,6 +107,12 @@ pub fn score(
                     .filter_map(|r| r.lpips.as_ref().map(|l| l.delta)),
             )
         }),
+        error_flicker: renders
+            .iter()
+            .zip(truths)
+            .map(|(r, t)| error_flicker(r, t))
+            .sum::<f64>()
+            / n,
     })
 }
 
@@ -101,12 +137,12 @@ pub fn truth_frames(
 /// A Markdown table of `rows`.
 pub fn table(rows: &[Scores]) -> String {
     let mut s = String::from(
-        "| method | PSNR | SSIM | LPIPS | μ(ΔPSNR) | σ(ΔPSNR) | μ(ΔSSIM) | σ(ΔSSIM) | μ(ΔLPIPS) | σ(ΔLPIPS) |\n|---|---|---|---|---|---|---|---|---|---|\n",
+        "| method | PSNR | SSIM | LPIPS | μ(ΔPSNR) | σ(ΔPSNR) | μ(ΔSSIM) | σ(ΔSSIM) | μ(ΔLPIPS) | σ(ΔLPIPS) | error flicker |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     let opt = |v: Option<f64>, d: usize| v.map_or("–".to_string(), |v| format!("{v:.d$}"));
     for r in rows {
         s += &format!(
-            "| {} | {:.2} | {:.4} | {} | {:.3} | {:.3} | {:.4} | {:.4} | {} | {} |\n",
+            "| {} | {:.2} | {:.4} | {} | {:.3} | {:.3} | {:.4} | {:.4} | {} | {} | {:.4} |\n",
             r.method,
             r.psnr,
             r.ssim,
@@ -117,6 +153,7 @@ pub fn table(rows: &[Scores]) -> String {
             r.delta_ssim.1,
             opt(r.delta_lpips.map(|d| d.0), 4),
             opt(r.delta_lpips.map(|d| d.1), 4),
+            r.error_flicker,
         );
     }
     s
@@ -155,6 +192,12 @@ mod tests {
             (s.delta_psnr.0 - 10.0).abs() < 1e-4 && s.delta_psnr.1.abs() < 1e-4,
             "{:?}",
             s.delta_psnr
+        );
+        // The error changes by 0.09 between each of camera 0's frames and not on camera 1.
+        assert!(
+            (s.error_flicker - 0.045).abs() < 1e-6,
+            "{}",
+            s.error_flicker
         );
         assert_eq!((s.cameras, s.frames), (2, 3));
         assert!(s.lpips.is_none());
