@@ -65,3 +65,17 @@ pub fn positive_count(s: &str) -> std::result::Result<usize, String> {
         _ => Err(format!("{s}: expected a whole number ≥ 1")),
     }
 }
+
+/// Two comma-separated numbers (their ranges are the caller's to check); `example` shows the
+/// form in the error.
+pub fn number_pair(s: &str, example: &str) -> std::result::Result<(f64, f64), String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("expected two numbers like {example}"))?;
+    match v[..] {
+        [a, b] => Ok((a, b)),
+        _ => Err(format!("expected two numbers like {example}")),
+    }
+}

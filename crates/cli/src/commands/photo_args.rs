@@ -5,6 +5,8 @@ use clap::Args;
 use fewview_scene::photometric::{MAX_EXPOSURE_EV, MAX_VIGNETTING, MAX_WHITE_BALANCE, PhotoJitter};
 use fewview_scene::synthetic::{DemoGloss, DemoOptions};
 
+use crate::commands::number_args::number_pair;
+
 /// Per-photo exposure, white balance and vignetting of the training photos (held-out photos
 /// keep theirs), as a phone's automatic exposure gives them.
 #[derive(Debug, Clone, Args)]
@@ -96,11 +98,7 @@ fn in_range(s: &str, max: f64, what: &str) -> Result<f64, String> {
 
 /// `KS,EXP`: two numbers (their ranges are the scene's to check).
 fn highlight(s: &str) -> Result<(f64, f64), String> {
-    let (ks, exponent) = s
-        .split_once(',')
-        .ok_or_else(|| format!("`{s}`: expected KS,EXP, e.g. 0.4,40"))?;
-    let number = |v: &str| v.trim().parse::<f64>().map_err(|e| format!("`{v}`: {e}"));
-    Ok((number(ks)?, number(exponent)?))
+    number_pair(s, "0.4,40")
 }
 
 fn baseline_scale(s: &str) -> Result<f64, String> {

@@ -8,6 +8,8 @@ use fewview_human::depth::{StereoChecks, StereoPartner, StereoSettings};
 use fewview_human::tps::TpsConfig;
 use fewview_human::{MultiView, Split};
 
+use crate::commands::number_args::number_pair;
+
 /// The capture, its sequence and the output folder, shared by the subcommands.
 #[derive(Debug, ClapArgs)]
 pub struct CaptureArgs {
@@ -58,17 +60,9 @@ impl StereoArgs {
     }
 }
 
-/// `FRONT,BEHIND`: two distances in metres.
+/// `FRONT,BEHIND`: two distances in metres (the library checks their range).
 pub fn parse_metres_pair(text: &str) -> Result<(f64, f64), String> {
-    let parse = |t: &str| {
-        t.trim()
-            .parse::<f64>()
-            .map_err(|e| format!("{text}: {e} (expected FRONT,BEHIND in metres)"))
-    };
-    let (a, b) = text
-        .split_once(',')
-        .ok_or_else(|| format!("{text}: expected FRONT,BEHIND in metres"))?;
-    Ok((parse(a)?, parse(b)?))
+    number_pair(text, "0.3,0.6")
 }
 
 /// The Temporal Pose Stabilizer's settings (our design; see `fewview_human::tps`).

@@ -4,7 +4,7 @@
 use fewview_surface::adam::ExpSchedule;
 use fewview_surface::matching::refine::WarpModel;
 
-use crate::commands::number_args::{non_negative, non_negative_f32};
+use crate::commands::number_args::{non_negative, non_negative_f32, number_pair};
 
 /// The largest `--pose-noise`. σ is the standard deviation of every se(3) component: radians
 /// for the rotation and units of the normalised scene (radius 1) for the translation. At σ = π
@@ -87,19 +87,6 @@ impl MatchRefineArg {
             MatchRefineArg::Quadratic => Some(WarpModel::Quadratic),
             MatchRefineArg::None => None,
         }
-    }
-}
-
-/// Two comma-separated numbers.
-fn number_pair(s: &str, example: &str) -> Result<(f64, f64), String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| format!("expected two numbers like {example}"))?;
-    match v[..] {
-        [a, b] => Ok((a, b)),
-        _ => Err(format!("expected two numbers like {example}")),
     }
 }
 
