@@ -4,7 +4,9 @@
 //! each averaged over the held-out cameras.
 
 use fewview_metrics::ssim::SsimOptions;
-use fewview_metrics::temporal::{MeanStd, PerceptualDistance, TemporalReport, evaluate_sequence};
+use fewview_metrics::temporal::{
+    MeanStd, PerceptualDistance, TemporalReport, error_changes, evaluate_sequence,
+};
 use fewview_scene::Image;
 use serde::{Deserialize, Serialize};
 
@@ -27,35 +29,12 @@ pub struct Scores {
     pub delta_ssim: (f64, f64),
     pub delta_lpips: Option<(f64, f64)>,
     /// The flicker of the error: per camera the mean over consecutive frames of the mean
-    /// absolute change of `render − truth` (colour values in [0, 1]), averaged over the
-    /// cameras. Zero for a render that tracks the truth or keeps a steady error, where the
-    /// Δ-metrics also move with the person's motion and with how good a render is at all.
+    /// absolute change of `render − truth` (colour values in [0, 1]; fewview-metrics'
+    /// `error_changes`), averaged over the cameras. Zero for a render that tracks the truth
+    /// or keeps a steady error, where the Δ-metrics also move with the person's motion and
+    /// with how good a render is at all.
     #[serde(default)]
     pub error_flicker: f64,
-}
-
-/// Mean over consecutive frames of the mean absolute change of `render − truth`.
-fn error_flicker(renders: &[Image], truths: &[Image]) -> f64 {
-    let error = |r: &Image, t: &Image| -> Vec<f32> {
-        r.data.iter().zip(&t.data).map(|(a, b)| a - b).collect()
-    };
-    let errors: Vec<Vec<f32>> = renders
-        .iter()
-        .zip(truths)
-        .map(|(r, t)| error(r, t))
-        .collect();
-    let changes: Vec<f64> = errors
-        .windows(2)
-        .map(|w| {
-            let sum: f64 = w[1]
-                .iter()
-                .zip(&w[0])
-                .map(|(a, b)| (a - b).abs() as f64)
-                .sum();
-            sum / w[1].len().max(1) as f64
-        })
-        .collect();
-    changes.iter().sum::<f64>() / changes.len().max(1) as f64
 }
 
 fn averaged(stats: impl Iterator<Item = MeanStd>) -> (f64, f64) {
@@ -89,6 +68,12 @@ pub fn score(
         .collect::<std::result::Result<Vec<TemporalReport>, _>>()
         .map_err(|e| HumanError::argument("evaluation", e.to_string()))?;
     let n = reports.len() as f64;
+    let flicker = renders
+        .iter()
+        .zip(truths)
+        .map(|(r, t)| error_changes(r, t).map(|c| MeanStd::of(&c).mean))
+        .sum::<std::result::Result<f64, _>>()
+        .map_err(|e| HumanError::argument("evaluation", e.to_string()))?;
     let mean = |f: &dyn Fn(&TemporalReport) -> f64| reports.iter().map(f).sum::<f64>() / n;
     let has_lpips = reports.iter().all(|r| r.lpips.is_some());
     Ok(Scores {
@@ -107,12 +92,7 @@ pub fn score(
                     .filter_map(|r| r.lpips.as_ref().map(|l| l.delta)),
             )
         }),
-        error_flicker: renders
-            .iter()
-            .zip(truths)
-            .map(|(r, t)| error_flicker(r, t))
-            .sum::<f64>()
-            / n,
+        error_flicker: flicker / n,
     })
 }
 

@@ -148,22 +148,7 @@ pub fn evaluate_sequence(
     perceptual: Option<&dyn PerceptualDistance>,
     flows: Option<&[Flow]>,
 ) -> Result<TemporalReport> {
-    if output.len() != ground_truth.len() {
-        return Err(MetricsError::ShapeMismatch(format!(
-            "{} output frames vs {} ground-truth frames",
-            output.len(),
-            ground_truth.len()
-        )));
-    }
-    if output.len() < 2 {
-        return Err(MetricsError::invalid(
-            "temporal metrics need at least two frames",
-        ));
-    }
-    for (t, (o, g)) in output.iter().zip(ground_truth).enumerate() {
-        check_same_shape(o, g)
-            .map_err(|e| MetricsError::ShapeMismatch(format!("frame {t}: {e}")))?;
-    }
+    check_sequences(output, ground_truth)?;
     let per_frame = |f: &dyn Fn(&Image, &Image) -> Result<f64>| -> Result<Vec<f64>> {
         output
             .iter()
@@ -202,6 +187,52 @@ pub fn evaluate_sequence(
         tlp,
         warping_error,
     })
+}
+
+/// An error unless `output` and `ground_truth` hold the same number (≥ 2) of frames, frame by
+/// frame of one shape.
+fn check_sequences(output: &[Image], ground_truth: &[Image]) -> Result<()> {
+    if output.len() != ground_truth.len() {
+        return Err(MetricsError::ShapeMismatch(format!(
+            "{} output frames vs {} ground-truth frames",
+            output.len(),
+            ground_truth.len()
+        )));
+    }
+    if output.len() < 2 {
+        return Err(MetricsError::invalid(
+            "temporal metrics need at least two frames",
+        ));
+    }
+    for (t, (o, g)) in output.iter().zip(ground_truth).enumerate() {
+        check_same_shape(o, g)
+            .map_err(|e| MetricsError::ShapeMismatch(format!("frame {t}: {e}")))?;
+    }
+    Ok(())
+}
+
+/// The flicker of the error for each transition `t = 1..T−1`: the mean over pixels and
+/// channels of `|(out_t − gt_t) − (out_{t−1} − gt_{t−1})|`. Zero for an output that tracks the
+/// ground truth or keeps a steady error; unlike the Δ of a metric, neither the scene's own
+/// motion nor the output's overall quality moves it.
+pub fn error_changes(output: &[Image], ground_truth: &[Image]) -> Result<Vec<f64>> {
+    check_sequences(output, ground_truth)?;
+    let error = |t: usize| {
+        output[t]
+            .data
+            .iter()
+            .zip(&ground_truth[t].data)
+            .map(|(o, g)| o - g)
+    };
+    Ok((1..output.len())
+        .map(|t| {
+            let sum: f64 = error(t)
+                .zip(error(t - 1))
+                .map(|(now, before)| f64::from((now - before).abs()))
+                .sum();
+            sum / output[t].data.len().max(1) as f64
+        })
+        .collect())
 }
 
 /// TecoGAN's tLP for each transition `t = 1..T−1`:
@@ -501,6 +532,22 @@ mod tests {
             d[0].abs() < 1e-12 && d[3].abs() < 1e-12 && (d[1] - d[2]).abs() < 1e-9 && d[1] > 0.0,
             "{d:?}"
         );
+    }
+
+    #[test]
+    fn error_changes_follow_the_error_not_the_frames() {
+        // Truth brightens 0.1 a frame; the output follows it with a steady error of 0.05, then
+        // jumps to an error of −0.02.
+        let flat = |v: f32| Image::from_vec(4, 3, 3, vec![v; 36]);
+        let truth: Vec<Image> = (0..4).map(|t| flat(0.2 + 0.1 * t as f32)).collect();
+        let output = vec![flat(0.25), flat(0.35), flat(0.45), flat(0.48)];
+        let changes = error_changes(&output, &truth).unwrap();
+        assert_eq!(changes.len(), 3);
+        for (got, want) in changes.iter().zip([0.0, 0.0, 0.07]) {
+            assert!((got - want).abs() < 1e-6, "{changes:?}");
+        }
+        assert!(error_changes(&output[..1], &truth[..1]).is_err());
+        assert!(error_changes(&output, &truth[..3]).is_err());
     }
 
     #[test]
