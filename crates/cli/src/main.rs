@@ -25,7 +25,7 @@ fn keep_freed_pages() {
     unsafe { libmimalloc_sys::mi_option_set(MI_OPTION_PURGE_DELAY, -1) };
 }
 
-use clap::Parser;
+use clap::{Arg, ArgAction, CommandFactory, FromArgMatches, Parser};
 
 /// Reconstruct 3D scenes from a few photos and render new views of them.
 #[derive(Debug, Parser)]
@@ -35,9 +35,34 @@ struct Cli {
     command: commands::Command,
 }
 
+/// The command line with its two levels of help: `-h`/`--help` list every flag on one line
+/// with the first sentence of its description (so that a command's help fits two screens),
+/// `--help-all` (or `fewview help COMMAND`) prints every description in full.
+fn command_line() -> clap::Command {
+    Cli::command()
+        .disable_help_flag(true)
+        .arg(
+            Arg::new("help")
+                .short('h')
+                .long("help")
+                .global(true)
+                .action(ArgAction::HelpShort)
+                .display_order(usize::MAX - 1)
+                .help("Print a summary of the flags (`--help-all`: in full)"),
+        )
+        .arg(
+            Arg::new("help-all")
+                .long("help-all")
+                .global(true)
+                .action(ArgAction::HelpLong)
+                .display_order(usize::MAX)
+                .help("Print every flag's full description"),
+        )
+}
+
 fn main() -> std::process::ExitCode {
     keep_freed_pages();
-    let cli = Cli::parse();
+    let cli = Cli::from_arg_matches(&command_line().get_matches()).unwrap_or_else(|e| e.exit());
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_env("FEWVIEW_LOG")
@@ -69,6 +94,57 @@ mod tests {
         }
         keep_freed_pages();
         assert_eq!(get(), -1);
+    }
+
+    /// Columns and rows of the screen the help is measured on.
+    const SCREEN: (usize, usize) = (100, 50);
+
+    /// Every command's help at `SCREEN`'s width, by its path (`fewview surface`, ...).
+    fn helps(long: bool) -> Vec<(String, String)> {
+        fn walk(cmd: &mut clap::Command, path: &str, long: bool, out: &mut Vec<(String, String)>) {
+            let path = format!("{path} {}", cmd.get_name()).trim().to_string();
+            let mut sized = cmd.clone().term_width(SCREEN.0);
+            let help = if long {
+                sized.render_long_help()
+            } else {
+                sized.render_help()
+            };
+            out.push((path.clone(), help.to_string()));
+            for sub in cmd.get_subcommands_mut() {
+                walk(sub, &path, long, out);
+            }
+        }
+        let mut cmd = super::command_line();
+        cmd.build();
+        let mut out = Vec::new();
+        walk(&mut cmd, "", long, &mut out);
+        out
+    }
+
+    /// `-h`/`--help` of the binary and of every command fit two screens; `--help-all` still
+    /// has each flag's full description (here, one from a second paragraph).
+    #[test]
+    fn every_help_fits_two_screens() {
+        let short = helps(false);
+        assert!(short.len() > 25, "{} commands", short.len());
+        for (path, help) in &short {
+            let rows = help.lines().count();
+            assert!(rows <= 2 * SCREEN.1, "`{path} --help`: {rows} lines");
+            let wide = help.lines().map(|l| l.chars().count()).max().unwrap_or(0);
+            assert!(
+                wide <= SCREEN.0,
+                "`{path} --help`: a line of {wide} columns"
+            );
+        }
+        let detail = "100k on a GPU";
+        let find = |helps: &[(String, String)]| {
+            helps
+                .iter()
+                .find(|(p, _)| p == "fewview surface")
+                .map(|(_, h)| h.contains(detail))
+        };
+        assert_eq!(find(&short), Some(false));
+        assert_eq!(find(&helps(true)), Some(true));
     }
 
     /// The libraries' errors carry their cause in their message and not also as `source()`,

@@ -51,7 +51,9 @@ pub struct Args {
     /// Where F is valid (Ω_f*).
     #[arg(long)]
     pub mask_f: PathBuf,
-    /// Where G is valid (Ω_g*); for `--method poisson`, the region G is pasted into.
+    /// Where G is valid (Ω_g*).
+    ///
+    /// For `--method poisson`, the region G is pasted into.
     #[arg(long)]
     pub mask_g: PathBuf,
     /// Output PNG (the name must end in `.png`).
@@ -59,9 +61,13 @@ pub struct Args {
     pub out: PathBuf,
     #[arg(long, value_enum, default_value = "occlusion-aware")]
     pub method: Method,
+    /// Weight of F in the overlap.
+    ///
     /// Weight of F's gradients (or colour) in the overlap; G gets 1 − weight.
     #[arg(long, default_value_t = 0.5)]
     pub weight: f32,
+    /// Per-pixel weights of F (float32 .npy).
+    ///
     /// Per-pixel weights of F instead of --weight: a float32 .npy of shape H×W in [0, 1].
     #[arg(long)]
     pub weights_npy: Option<PathBuf>,
@@ -71,6 +77,8 @@ pub struct Args {
     /// Relative residual at which the iterative solver stops.
     #[arg(long, default_value_t = 1e-7, value_parser = positive)]
     pub tolerance: f64,
+    /// Pérez's mixed gradients (Poisson).
+    ///
     /// Pérez's mixed gradients (the larger of the two images' differences), `--method poisson`.
     #[arg(long)]
     pub mixed: bool,
@@ -80,6 +88,8 @@ pub struct Args {
     /// Gaussian σ in pixels, `--method feather`.
     #[arg(long, default_value_t = 8.0)]
     pub sigma: f32,
+    /// Also write the solver figures as JSON.
+    ///
     /// Also write the solver figures (unknowns, iterations, residual) as JSON.
     #[arg(long)]
     pub stats: Option<PathBuf>,

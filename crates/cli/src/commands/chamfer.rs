@@ -28,6 +28,8 @@ pub enum Protocol {
 /// Compare a reconstructed mesh with the ground truth.
 #[derive(Debug, ClapArgs)]
 pub struct Args {
+    /// Reconstructed mesh or points.
+    ///
     /// Reconstructed mesh (.ply/.obj/.off); for --protocol dtu a face-less point cloud is used
     /// as already-sampled points.
     #[arg(long)]
@@ -43,22 +45,32 @@ pub struct Args {
     /// DTU: distances at or above this are left out.
     #[arg(long, default_value_t = DtuOptions::default().max_dist)]
     pub max_dist: f64,
+    /// DTU: bounding box of the kept points.
+    ///
     /// DTU: keep predicted points in "minx,miny,minz,maxx,maxy,maxz" (without an observation mask).
     #[arg(long, allow_hyphen_values = true)]
     pub bbox: Option<String>,
+    /// DTU observation mask (.npy voxel grid).
+    ///
     /// DTU observation mask: a boolean/uint8/float .npy voxel grid (ObsMask converted from .mat).
     #[arg(long, requires_all = ["obs_bb_min", "obs_bb_max", "obs_res"])]
     pub obs_mask: Option<PathBuf>,
+    /// Lower corner of the observation mask.
+    ///
     /// The observation mask's lower corner "x,y,z" (the first row of `BB` in ObsMask*.mat).
     #[arg(long, allow_hyphen_values = true)]
     pub obs_bb_min: Option<String>,
+    /// Upper corner of the observation mask.
+    ///
     /// The observation mask's upper corner "x,y,z" (the second row of `BB` in ObsMask*.mat).
     #[arg(long, allow_hyphen_values = true)]
     pub obs_bb_max: Option<String>,
     /// The observation mask's voxel size (`Res` in ObsMask*.mat).
     #[arg(long)]
     pub obs_res: Option<f64>,
-    /// DTU ground plane "a,b,c,d": only ground truth with a·x + b·y + c·z + d > 0 counts.
+    /// DTU ground plane "a,b,c,d".
+    ///
+    /// Only ground truth with a·x + b·y + c·z + d > 0 counts.
     #[arg(long, allow_hyphen_values = true)]
     pub ground_plane: Option<String>,
     /// Synthetic: samples per mesh.

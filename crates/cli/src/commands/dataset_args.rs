@@ -20,18 +20,24 @@ pub fn parse_views(s: &str) -> Result<ViewList, String> {
 /// Which dataset and which views.
 #[derive(Debug, Clone, Args)]
 pub struct DatasetArgs {
+    /// Dataset folder (LLFF, NeRF-synthetic, DTU, COLMAP, …).
+    ///
     /// Dataset folder: LLFF (`poses_bounds.npy` + `images_N/`), NeRF-synthetic
     /// (`transforms_train.json`), nerfstudio (`transforms.json`), IDR/NeuS DTU
     /// (`cameras_sphere.npz` + `image/` + `mask/`) or COLMAP (`sparse/0` + `images/`).
     /// Required (an `Option` only so that `surface --synthetic` can go without it).
     #[arg(long, value_name = "DIR", required = true)]
     pub data: Option<PathBuf>,
-    /// Force the format instead of detecting it: llff, blender, nerfstudio, dtu, colmap.
+    /// Force the format instead of detecting it.
+    ///
+    /// One of llff, blender, nerfstudio, dtu, colmap.
     #[arg(long, value_name = "NAME")]
     pub format: Option<DatasetFormat>,
     /// Downscale images by this integer factor on load (intrinsics follow).
     #[arg(long, default_value_t = 1, value_name = "K")]
     pub downscale: u32,
+    /// Training views of the format's sparse split.
+    ///
     /// Number of training views of the format's standard sparse split (LLFF 3, NeRF-synthetic 8,
     /// DTU 3 by default).
     #[arg(long, value_name = "N")]
@@ -45,6 +51,8 @@ pub struct DatasetArgs {
     /// DTU: camera file inside the scene folder (e.g. `cameras_linear_init.npz`).
     #[arg(long, value_name = "FILE")]
     pub cameras_file: Option<String>,
+    /// Lens distortion: no-border, all-pixels or ignore.
+    ///
     /// COLMAP / nerfstudio lens distortion: `no-border` undistorts each photo into a pinhole
     /// with no blank border (COLMAP image_undistorter's default), `all-pixels` keeps every photo
     /// pixel and masks the blank border out of losses and metrics, `ignore` uses the photos as
@@ -52,11 +60,15 @@ pub struct DatasetArgs {
     /// `.fewview-cache/undistorted/`.
     #[arg(long, default_value = "no-border", value_name = "MODE")]
     pub undistort: UndistortMode,
+    /// Resampling kernel of the undistortion.
+    ///
     /// How undistortion resamples the photos: `bilinear` (what COLMAP's image_undistorter and
     /// OpenCV's cv2.undistort use) or `bicubic` (Keys' kernel with a = -0.75, as OpenCV's
     /// INTER_CUBIC: sharper, slight ringing at hard edges). Each kernel has its own cache entries.
     #[arg(long, default_value = "bilinear", value_name = "KERNEL")]
     pub resample: Resample,
+    /// Train and score the masked object alone (DTU).
+    ///
     /// Use the dataset's separate foreground masks (DTU's `mask/`) as the photos' alpha: each
     /// photo is composited over the background and training sees the object alone, as IDR/NeuS
     /// and the surface method train on DTU; scores are then the object's.

@@ -29,6 +29,8 @@ pub struct Args {
     /// Run directory.
     #[arg(long, default_value = "runs/demo", value_name = "DIR")]
     pub out: PathBuf,
+    /// Image width of the demo views (16 to 8192).
+    ///
     /// Image width of the demo views (height is 3/4 of it), 16 to 8192.
     #[arg(long, default_value_t = 200, value_parser = demo_width)]
     pub width: usize,
@@ -41,22 +43,28 @@ pub struct Args {
     /// Continue the run in `--out` from its last checkpoint.
     #[arg(long)]
     pub resume: bool,
+    /// Write the views as a photo capture instead.
+    ///
     /// Instead of training, write the demo's views as a real capture into DIR: photos ray
     /// traced through a lens with `--capture-distortion`, a nerfstudio `transforms.json` and a
     /// COLMAP model in `sparse/0/` (train on it with `fewview train --data DIR`).
     #[arg(long, value_name = "DIR")]
     pub write_capture: Option<PathBuf>,
-    /// The capture's lens: OpenCV `k1,k2,p1,p2` (phone-like by default; `0,0,0,0` for a pinhole).
+    /// The capture's lens: OpenCV `k1,k2,p1,p2`.
+    ///
+    /// Phone-like by default; `0,0,0,0` for a pinhole.
     #[arg(
         long,
-        value_name = "K1,K2,P1,P2",
+        value_name = "LIST",
         default_value = "0.06,-0.08,0.001,0.001",
         value_delimiter = ','
     )]
     pub capture_distortion: Vec<f64>,
+    /// The capture's `fx,fy,cx,cy,width,height`.
+    ///
     /// The capture's intrinsics `fx,fy,cx,cy,width,height` instead of the demo's (e.g. the
     /// undistorted camera of a distorted capture, to render its exact pinhole truth).
-    #[arg(long, value_name = "FX,FY,CX,CY,W,H", value_delimiter = ',')]
+    #[arg(long, value_name = "LIST", value_delimiter = ',')]
     pub capture_intrinsics: Option<Vec<f64>>,
 }
 

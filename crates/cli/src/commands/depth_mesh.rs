@@ -33,13 +33,17 @@ impl From<EdgeTestArg> for EdgeTest {
 /// Depth-edge filter options shared by depth-mesh and depth-points.
 #[derive(Clone, Debug, ClapArgs)]
 pub struct DepthInput {
+    /// τ_depth of Eq. (1) (0: no filter).
+    ///
     /// τ_depth of Eq. (1); pixels whose edge measure reaches it are dropped. 0 disables the
     /// filter.
     #[arg(long, default_value_t = TAU_DEPTH, value_parser = non_negative_f32)]
     pub tau: f32,
     #[arg(long, value_enum, default_value = "area")]
     pub edge_test: EdgeTestArg,
-    /// Scale of 16-bit PNG depth values (e.g. 0.001 for millimetres → metres).
+    /// Scale of 16-bit PNG depth values.
+    ///
+    /// E.g. 0.001 for millimetres → metres.
     #[arg(long, default_value_t = 1.0)]
     pub png_scale: f32,
 }
@@ -90,6 +94,8 @@ pub struct Args {
     /// Depth map (.npy or .png).
     #[arg(long)]
     pub depth: PathBuf,
+    /// Camera JSON (OpenCV axes).
+    ///
     /// Camera JSON (intrinsics + row-major world_to_camera 4×4, OpenCV axes); a file with a
     /// list of cameras needs --view.
     #[arg(long)]

@@ -35,9 +35,10 @@ pub struct Args {
     /// Depth maps (.npy or .png), repeatable.
     #[arg(long, required = true)]
     pub depth: Vec<PathBuf>,
-    /// Camera files, one per depth map (the first camera of each), or one file listing a
-    /// camera per depth map.
-    #[arg(long = "cameras", required = true)]
+    /// Camera files, one per depth map.
+    ///
+    /// The first camera of each file, or one file listing a camera per depth map.
+    #[arg(long = "cameras", value_name = "FILE", required = true)]
     pub cameras: Vec<PathBuf>,
     /// Colour images, one per depth map.
     #[arg(long = "images")]
@@ -46,9 +47,13 @@ pub struct Args {
     pub input: DepthInput,
     #[arg(long, value_enum, default_value = "none")]
     pub contract: ContractArg,
+    /// Quantile of the depths taken as B_near.
+    ///
     /// Quantile of the pooled depths taken as B_near (1.0 = the maximum depth).
     #[arg(long, default_value_t = 0.9)]
     pub quantile: f64,
+    /// Random fraction of the points kept.
+    ///
     /// Keep this random fraction of the points (0.1 for Gaussian initialisation, 0.01 for the
     /// sparse alternative (a)); 1 keeps all.
     #[arg(long, default_value_t = 1.0, value_parser = fraction)]

@@ -15,30 +15,46 @@ use super::output_paths::check_optional_file;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
+    /// Rendered sequence (.mp4, .gif or frames).
+    ///
     /// Rendered sequence: an .mp4 or .gif file, or a folder of PNG/JPEG frames (natural order).
     #[arg(long)]
     output: PathBuf,
-    /// Ground-truth sequence (same forms), same frame count and size.
+    /// Ground-truth sequence.
+    ///
+    /// The same forms, frame count and size.
     #[arg(long)]
     ground_truth: PathBuf,
+    /// LPIPS network (default: st-alex, built in).
+    ///
     /// LPIPS network: st-alex (default: ST-LPIPS AlexNet, weights built in), alex, vgg,
     /// squeeze (lpips v0.1; need --lpips-weights), st-vgg, or none.
     #[arg(long, default_value = "st-alex")]
     lpips: String,
+    /// Weight files of the LPIPS network.
+    ///
     /// PyTorch weight files for the LPIPS network (e.g. the torchvision backbone and the
     /// lpips v0.1 linear heads, or a full ST-LPIPS file).
-    #[arg(long, num_args = 1..)]
+    #[arg(long, value_name = "FILE", num_args = 1..)]
     lpips_weights: Vec<PathBuf>,
+    /// Backward flows for the warping error.
+    ///
     /// Folder of Middlebury .flo backward flows, one per transition (T − 1 files, file-name
     /// order): enables the warping error.
     #[arg(long)]
     flow_dir: Option<PathBuf>,
+    /// SSIM border: reflect or zero.
+    ///
     /// SSIM border convention: reflect (scikit-image, default) or zero (3DGS loss).
     #[arg(long, default_value = "reflect")]
     ssim_border: String,
+    /// Background of transparent pixels.
+    ///
     /// Background for transparent GIF/PNG pixels (white or black).
     #[arg(long, default_value = "white")]
     background: String,
+    /// Also write the full report as JSON.
+    ///
     /// Write the full report (per-frame values included) as JSON here; JSON has no infinity,
     /// so the PSNR of an exact frame (+∞) is written as null.
     #[arg(long)]

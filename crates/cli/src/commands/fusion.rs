@@ -45,6 +45,8 @@ pub struct Args {
         conflicts_with = "demo"
     )]
     pub data: Option<PathBuf>,
+    /// Use the in-process demo scene instead of a dataset.
+    ///
     /// Use the demo scene built in-process (3 of 24 ray-traced views, view-dependent shading)
     /// instead of a dataset; the path is then scored against its ray-traced truth.
     #[arg(long)]
@@ -55,9 +57,13 @@ pub struct Args {
     /// Downscale images by this integer factor on load.
     #[arg(long, default_value_t = 1, value_name = "K")]
     pub downscale: u32,
+    /// Training views of the format's sparse split.
+    ///
     /// Number of training views of the format's standard sparse split.
     #[arg(long, value_name = "N")]
     pub n_train: Option<usize>,
+    /// Explicit training views, e.g. `22,25,28`.
+    ///
     /// Explicit training views (indices in the dataset's view order; with `--demo`, of its 24
     /// views on an arc).
     #[arg(long, value_name = "LIST", value_parser = parse_views)]
@@ -65,6 +71,8 @@ pub struct Args {
     /// Explicit held-out views.
     #[arg(long, value_name = "LIST", value_parser = parse_views)]
     pub test_views: Option<ViewList>,
+    /// Train and score the masked object alone (DTU).
+    ///
     /// Use the dataset's separate foreground masks (DTU's `mask/`) as the photos' alpha:
     /// training and scores see the object alone, as IDR/NeuS and the surface method on DTU.
     #[arg(long)]
@@ -75,27 +83,39 @@ pub struct Args {
     pub jitter: JitterArgs,
     #[command(flatten)]
     pub scene: DemoSceneArgs,
+    /// The regulariser: gf (ours), plain, or ablations a–e.
+    ///
     /// The regulariser: gf (f, ours), plain, sparse-init (a), knn-color (b), tv (c),
     /// l1-virtual (d), poisson (e).
     #[arg(long, default_value = "gf", value_parser = parse_variant)]
     pub variant: Variant,
-    /// Weight λ of the virtual-view loss of gf, l1-virtual and poisson.
+    /// Weight λ of the virtual-view loss.
+    ///
+    /// It weighs the loss of gf, l1-virtual and poisson.
     #[arg(long, default_value_t = FusionConfig::default().weight,
           value_parser = super::number_args::non_negative_f32)]
     pub weight: f32,
+    /// Virtual-view loss every N iterations.
+    ///
     /// Take the virtual-view loss every N iterations (from 20 % of the run).
     #[arg(long, default_value_t = FusionConfig::default().every,
           value_parser = super::number_args::positive_count)]
     pub every: usize,
+    /// Refresh the training views' depth every N iterations.
+    ///
     /// Re-render and re-mesh the training views' depth every N iterations.
     #[arg(long, default_value_t = FusionConfig::default().refresh_interval,
           value_parser = super::number_args::positive_count)]
     pub refresh: usize,
+    /// Even the exposures of photos in a virtual view.
+    ///
     /// Bring the two photos reprojected into a virtual view to one exposure (their gain ratio
     /// where both see the surface, interpolated log-linearly) before the guidance field (or the
     /// pseudo ground truth of l1-virtual and poisson) is built from them.
     #[arg(long)]
     pub match_exposure: bool,
+    /// What hides a reprojected photo in a virtual view.
+    ///
     /// What decides that a photo reprojected into a virtual view shows what that view sees
     /// (with `own-depth`, a floater in the virtual view hides the photos behind it from the
     /// loss; `meshes` ignores what the virtual view renders in front).
@@ -116,12 +136,18 @@ pub struct Args {
     /// `fewview study serve --config OUT/study.toml`.
     #[arg(long, num_args = 2.., value_name = "RUN", conflicts_with_all = ["demo", "data", "table"])]
     pub study: Vec<PathBuf>,
+    /// Print the comparison table of these runs instead.
+    ///
     /// Instead of training: print the comparison table (Markdown) of these finished runs.
     #[arg(long, num_args = 1.., value_name = "RUN", conflicts_with_all = ["demo", "data"])]
     pub table: Vec<PathBuf>,
-    /// Continue the run in `--out` from its last checkpoint (same flags).
+    /// Continue the run in `--out`.
+    ///
+    /// From its last checkpoint, with the same flags.
     #[arg(long)]
     pub resume: bool,
+    /// Only re-render and re-score the run in `--out`.
+    ///
     /// Do not train: render and score the transition of the finished run in `--out` again
     /// (same dataset flags), e.g. after a change of the scores.
     #[arg(long, conflicts_with_all = ["resume", "no_transition"])]

@@ -17,6 +17,8 @@ use super::output_paths::check_folder;
 pub struct Args {
     #[command(flatten)]
     pub dataset: DatasetArgs,
+    /// Matcher: classical, xfeat, xfeat-star, lighterglue.
+    ///
     /// `classical` (SIFT), `xfeat`, `xfeat-star` or `lighterglue` (weights from
     /// `scripts/setup.sh`; without them the classical matcher runs, and the report says so).
     #[arg(long, value_enum, default_value_t = MatcherKind::Classical)]

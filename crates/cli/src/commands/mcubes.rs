@@ -37,9 +37,13 @@ pub struct Args {
     /// Keep only the largest connected component.
     #[arg(long)]
     pub largest_component: bool,
+    /// Cameras for mask culling (JSON list).
+    ///
     /// Cameras (JSON list) for mask culling; needs --masks, one per camera.
-    #[arg(long)]
+    #[arg(long, value_name = "FILE")]
     pub cameras: Option<PathBuf>,
+    /// Object masks for culling, one per camera.
+    ///
     /// Object masks (images, foreground above 0.5); vertices seen on background are removed.
     #[arg(long, num_args = 1..)]
     pub masks: Vec<PathBuf>,

@@ -11,19 +11,27 @@ use crate::commands::number_args::number_pair;
 /// keep theirs), as a phone's automatic exposure gives them.
 #[derive(Debug, Clone, Args)]
 pub struct JitterArgs {
+    /// Exposure jitter of the training photos, EV (0–3).
+    ///
     /// Exposure jitter: each training photo gets the gain 2^u, u drawn uniformly in [−EV, EV]
     /// (0 to 3).
     #[arg(long, value_name = "EV", default_value_t = 0.0, value_parser = exposure_ev)]
     pub exposure_jitter: f64,
+    /// White-balance jitter of the photos (0–0.5).
+    ///
     /// White-balance jitter: each channel of each training photo gets the factor 1 + F·v,
     /// v uniform in [−1, 1] (0 to 0.5).
     #[arg(long, value_name = "F", default_value_t = 0.0, value_parser = white_balance)]
     pub white_balance_jitter: f64,
+    /// Vignetting strength of the photos (0–0.9).
+    ///
     /// Vignetting of strength S per training photo: a radial falloff and a gradient across the
     /// frame, drawn per photo (0 to 0.9).
     #[arg(long, value_name = "S", default_value_t = 0.0, value_parser = vignetting)]
     pub vignetting: f64,
-    /// Seed of the jitter's draws (photo i's gains depend only on it and i).
+    /// Seed of the jitter's draws.
+    ///
+    /// Photo i's gains depend only on it and i.
     #[arg(long, value_name = "SEED", default_value_t = 0)]
     pub jitter_seed: u64,
 }
@@ -42,16 +50,21 @@ impl JitterArgs {
 /// How glossy the demo scene is and how wide its arc of cameras.
 #[derive(Debug, Clone, Args)]
 pub struct DemoSceneArgs {
+    /// The spheres' highlight `KS,EXP`.
+    ///
     /// The spheres' Blinn–Phong highlight `KS,EXP` (default 0.1,60, weak enough for the stereo
     /// start; 0.4,40 is a highlight at full strength).
     #[arg(long, value_name = "KS,EXP", value_parser = highlight)]
     pub specular: Option<(f64, f64)>,
+    /// Mirror reflectance of the floor, in [0, 1).
+    ///
     /// Mirror reflectance of the floor in [0, 1): the spheres' reflections move over it with the
     /// camera.
     #[arg(long, value_name = "M", default_value_t = 0.0)]
     pub mirror_floor: f64,
-    /// Widen the demo's arc of cameras K times (1: 50° of azimuth; 2: 100°, views twice as far
-    /// apart), 0.25 to 3.
+    /// Widen the demo's arc of cameras K times.
+    ///
+    /// 1: 50° of azimuth; 2: 100°, views twice as far apart; 0.25 to 3.
     #[arg(long, value_name = "K", default_value_t = 1.0, value_parser = baseline_scale)]
     pub baseline_scale: f64,
 }

@@ -34,30 +34,42 @@ pub struct Args {
     /// Output folder.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    /// Field of view (°) without an EXIF focal length.
+    ///
     /// Horizontal field of view (degrees) of photos without an EXIF focal length.
     #[arg(long, value_name = "DEG", default_value_t = FolderOptions::default().fov_deg)]
     pub fov: f64,
+    /// Longest side (px) of the photos as matched.
+    ///
     /// Photos are matched with their longer side scaled down to at most this many pixels.
     #[arg(long, value_name = "PX", default_value_t = FolderOptions::default().max_side)]
     pub max_side: usize,
     /// Fewest matches for two photos to count as overlapping.
     #[arg(long, value_name = "N", default_value_t = PoseOptions::default().min_matches)]
     pub min_matches: usize,
+    /// Matcher: classical, xfeat, xfeat-star, lighterglue.
+    ///
     /// Matcher of the sparse correspondences: `classical` (SIFT), `xfeat`, `xfeat-star` or
     /// `lighterglue` (weights from `scripts/setup.sh`; without them SIFT runs, and says so).
     #[arg(long, value_enum, default_value_t = PoseOptions::default().matcher)]
     pub matcher: MatcherKind,
+    /// Also fit a shared radial distortion k1.
+    ///
     /// Also fit one radial distortion coefficient shared by the photos (COLMAP's
     /// `SIMPLE_RADIAL`; only when all photos share one camera). The model then says
     /// `SIMPLE_RADIAL` in `cameras.txt` and `k1` in `transforms.json`, and `train` undistorts
     /// the photos on loading.
     #[arg(long)]
     pub radial: bool,
+    /// Also fit a shared principal point.
+    ///
     /// Also fit one principal point shared by the photos (only when all photos share one
     /// camera), for cameras whose principal point is not the image centre. Off by default, as
     /// in COLMAP: with few photos it trades off against their rotations.
     #[arg(long)]
     pub refine_principal_point: bool,
+    /// Neighbours each photo is matched with (0: all).
+    ///
     /// With more than 20 photos, each is matched only with the K photos most like it (VLAD
     /// global descriptors of their SIFT features) and along their maximum spanning tree; 0
     /// matches every pair.

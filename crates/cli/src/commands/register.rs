@@ -47,25 +47,35 @@ pub struct Args {
     /// Voxel size v (units of the target).
     #[arg(long)]
     pub voxel: f64,
+    /// Pre-alignment similarity (JSON 4×4).
+    ///
     /// Pre-alignment similarity, JSON: a row-major 4×4 [[sR | t], [0 0 0 1]].
     #[arg(long, conflicts_with_all = ["est_poses", "gt_poses"])]
     pub prealign: Option<PathBuf>,
+    /// Estimated camera poses (source frame).
+    ///
     /// Estimated camera poses in the source's frame (camera JSON or list of 4×4 world-to-camera).
     #[arg(long, requires = "gt_poses")]
     pub est_poses: Option<PathBuf>,
     /// Ground-truth camera poses in the target's frame.
     #[arg(long, requires = "est_poses")]
     pub gt_poses: Option<PathBuf>,
+    /// ICP correspondence distances, coarse to fine.
+    ///
     /// ICP correspondence distance(s) thr_icp, coarse to fine; default 0.4·voxel.
     #[arg(long)]
     pub icp_threshold: Vec<f64>,
     #[arg(long, value_enum, default_value = "point-to-point")]
     pub icp: IcpArg,
+    /// Plane-projection radius for noisy scans.
+    ///
     /// Deviation from Alg. 3 for noisy scans: project both clouds onto their local planes
     /// (≤ 100 neighbours within this radius, e.g. 2·voxel) and run point-to-plane ICP on them.
     /// Off by default (the paper's Open3D pipeline).
-    #[arg(long)]
+    #[arg(long, value_name = "R")]
     pub denoise_radius: Option<f64>,
+    /// ICP start: `best` of two, or `ransac`.
+    ///
     /// `best` (default; a deviation from Alg. 3): run ICP from RANSAC's result and from the
     /// pre-alignment and keep the better fit (higher fitness, then lower RMSE), so that RANSAC
     /// failing on a near-symmetric or rough reconstruction cannot undo a good pre-alignment.

@@ -39,11 +39,15 @@ pub struct Args {
     pub ply: PathBuf,
     #[command(flatten)]
     pub dataset: DatasetArgs,
-    /// Render at the cameras of this file instead of a dataset's: a run's `cameras.json` (its
-    /// training cameras, then the held-out ones) or any camera file `pose-error` reads. Writes
-    /// `camera_000.png`, `camera_001.png`, ... in the file's order.
+    /// Render at the cameras of this file instead.
+    ///
+    /// Instead of a dataset's: a run's `cameras.json` (its training cameras, then the held-out
+    /// ones) or any camera file `pose-error` reads. Writes `camera_000.png`, `camera_001.png`, ...
+    /// in the file's order.
     #[arg(long, value_name = "FILE", conflicts_with_all = ["data", "views", "path"])]
     pub cameras: Option<PathBuf>,
+    /// Background `R,G,B` with `--cameras`.
+    ///
     /// The background with `--cameras` (a dataset brings its own): `R,G,B` in [0, 1], as the
     /// run's `config.json` has it.
     #[arg(long, value_name = "R,G,B", requires = "cameras", value_parser = parse_rgb)]
@@ -51,19 +55,25 @@ pub struct Args {
     /// Which dataset views to render.
     #[arg(long, value_enum, default_value_t = Which::Test)]
     pub views: Which,
+    /// Output folder of the PNGs.
+    ///
     /// Output folder for the PNGs (`<name>.png`, and `<name>_depth.png` with `--depth`); not
     /// created with `--views none`.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    /// Also write the expected depth.
+    ///
     /// Also write expected depth, normalised by alpha and scaled to the frame's range.
     #[arg(long)]
     pub depth: bool,
+    /// Render a camera path (.mp4, .gif or frames).
+    ///
     /// Render a camera path through the training views to this file: `.mp4` (H.264), `.gif`, or
     /// a folder of PNG frames (no extension).
     #[arg(long, value_name = "FILE")]
     pub path: Option<PathBuf>,
     /// Frames between consecutive training views on the path.
-    #[arg(long, default_value_t = 30)]
+    #[arg(long, value_name = "N", default_value_t = 30)]
     pub frames_per_segment: usize,
     /// Frame rate of the path video (a GIF plays at most 50).
     #[arg(long, default_value_t = 30.0, value_parser = positive_f32)]

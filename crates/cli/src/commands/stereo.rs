@@ -35,19 +35,27 @@ pub struct Args {
         conflicts_with = "demo"
     )]
     pub data: Option<PathBuf>,
+    /// Use the in-process demo scene.
+    ///
     /// Use the demo scene built in-process instead of a dataset.
     #[arg(long)]
     pub demo: bool,
     /// Downscale images by this integer factor on load.
     #[arg(long, default_value_t = 1, value_name = "K")]
     pub downscale: u32,
+    /// The two views, e.g. `1,10`.
+    ///
     /// The two views, as indices in the dataset's view order (e.g. `1,10`).
     #[arg(long, value_name = "A,B", value_parser = super::dataset_args::parse_views)]
     pub views: ViewList,
-    /// Disparity search range `MIN:COUNT` (default: from the views' depth bounds).
+    /// Disparity search range `MIN:COUNT`.
+    ///
+    /// Default: from the views' depth bounds.
     #[arg(long, value_name = "MIN:COUNT", value_parser = parse_range)]
     pub disparities: Option<(i32, usize)>,
-    /// Keep SGM's own sub-pixel disparities (no Lucas–Kanade refinement).
+    /// Keep SGM's own sub-pixel disparities.
+    ///
+    /// No Lucas–Kanade refinement.
     #[arg(long)]
     pub no_refine: bool,
     /// Output folder.

@@ -20,10 +20,14 @@ pub struct Args {
 enum StudyCommand {
     /// Serve the study page (two videos side by side, the configured questions).
     Serve {
+        /// The study configuration (TOML).
+        ///
         /// The study configuration (TOML: title, seed, methods, scenes, questions, one video
         /// per scene and method; crates/study/README.md).
-        #[arg(long)]
+        #[arg(long, value_name = "FILE")]
         config: PathBuf,
+        /// Address to listen on (default: loopback).
+        ///
         /// Address to listen on; loopback by default. Use 0.0.0.0:PORT to accept other machines.
         #[arg(long, default_value = "127.0.0.1:8080")]
         addr: SocketAddr,
@@ -31,35 +35,41 @@ enum StudyCommand {
     /// Analyse the answers: win rates, exact binomial p-values, Bayesian Bradley–Terry ranking.
     Analyze {
         /// Read the answers from this study's database.
-        #[arg(long, conflicts_with = "responses")]
+        #[arg(long, value_name = "FILE", conflicts_with = "responses")]
         config: Option<PathBuf>,
-        /// Read the answers from CSV (participant,question,scene,left,right,winner).
-        #[arg(long)]
+        /// Read the answers from CSV.
+        ///
+        /// Columns participant,question,scene,left,right,winner.
+        #[arg(long, value_name = "FILE")]
         responses: Option<PathBuf>,
+        /// Output folder of the report.
+        ///
         /// Output folder (report.md, pairs.csv, skills.csv, analysis.json, ranking_*.png).
         #[arg(long)]
         out: PathBuf,
         /// Seed of the NUTS chains.
         #[arg(long, default_value_t = BtSettings::default().seed)]
         seed: u64,
-        #[arg(long, default_value_t = BtSettings::default().chains)]
+        #[arg(long, value_name = "N", default_value_t = BtSettings::default().chains)]
         chains: usize,
-        #[arg(long, default_value_t = BtSettings::default().tune)]
+        #[arg(long, value_name = "N", default_value_t = BtSettings::default().tune)]
         tune: u64,
-        /// Post-tuning draws per chain: at least 10 (R̂ and the ESS split each chain in halves
-        /// of at least 5 draws), at most 1,000,000 (every draw is kept in memory).
-        #[arg(long, default_value_t = BtSettings::default().draws,
+        /// Post-tuning draws per chain.
+        ///
+        /// At least 10 (R̂ and the ESS split each chain in halves of at least 5 draws), at most
+        /// 1,000,000 (every draw is kept in memory).
+        #[arg(long, value_name = "N", default_value_t = BtSettings::default().draws,
               value_parser = clap::value_parser!(u64).range(MIN_DRAWS..=MAX_DRAWS))]
         draws: u64,
-        #[arg(long, default_value_t = BtSettings::default().target_accept)]
+        #[arg(long, value_name = "P", default_value_t = BtSettings::default().target_accept)]
         target_accept: f64,
         /// Standard deviation of the Normal(0, σ) skill prior.
-        #[arg(long, default_value_t = BtSettings::default().prior_sigma)]
+        #[arg(long, value_name = "SIGMA", default_value_t = BtSettings::default().prior_sigma)]
         prior_sigma: f64,
     },
     /// Export the stored answers as CSV.
     Export {
-        #[arg(long)]
+        #[arg(long, value_name = "FILE")]
         config: PathBuf,
         #[arg(long)]
         out: PathBuf,

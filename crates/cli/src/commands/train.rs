@@ -31,8 +31,10 @@ pub struct Args {
     /// Run directory. Default: `runs/<dataset folder name>`.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
-    /// Continue the run in `--out` from its last checkpoint (same flags as the first time). A
-    /// checkpoint of another dataset, split or image size is refused.
+    /// Continue the run in `--out`.
+    ///
+    /// From its last checkpoint, with the same flags as the first time. A checkpoint of another
+    /// dataset, split or image size is refused.
     #[arg(long)]
     pub resume: bool,
 }

@@ -20,6 +20,8 @@ pub enum TrainBackground {
 
 #[derive(Debug, Clone, Args)]
 pub struct TrainArgs {
+    /// Training iterations (default: by scene).
+    ///
     /// Training iterations (default for `train`: 1000 on forward-facing scenes with depth bounds, e.g. LLFF, otherwise 3000 or 50 per training view, whichever is more; `demo`: 2000). The densification
     /// schedule is rescaled to the run length (see `TrainConfig::sparse_view` and docs/guide/splatting.md).
     #[arg(long)]
@@ -30,6 +32,8 @@ pub struct TrainArgs {
     /// Largest spherical-harmonics degree (0–3).
     #[arg(long, default_value_t = TrainConfig::inria().sh_degree)]
     pub sh_degree: usize,
+    /// Initial Gaussians: auto, stereo, surface[:DIR], depth:DIR and more.
+    ///
     /// Initial Gaussians: `auto` (dataset points; else `stereo` when at least two training views
     /// overlap; else random in the training frustums when the views have depth bounds, else
     /// random in a box), `stereo` (the fusion paper's supplement §2: the hierarchical
@@ -42,29 +46,37 @@ pub struct TrainArgs {
     /// a finished one is reused, an interrupted one resumed).
     #[arg(long, default_value = "auto", value_name = "HOW")]
     pub init: String,
+    /// With a surface start: whose poses to train with.
+    ///
     /// With `--init surface:DIR`: train with the surface run's refined poses (`refined`), the
     /// dataset's (`dataset`), or the refined ones when the surface run started from poses other
     /// than the dataset's (`auto`; with a bare `--init surface`, which refines the input's own
     /// poses: the refined ones).
     #[arg(long, value_enum, default_value_t)]
     pub surface_poses: SurfacePoses,
+    /// With a surface start: weight of its depth loss.
+    ///
     /// With `--init surface:DIR`: weight of the L1 distance between the rendered depth and the
     /// mesh's depth in the training views, relative to the mesh's depth (0: none).
     #[arg(long, value_name = "W",
           default_value_t = fewview_splat::surface_start::SURFACE_DEPTH_WEIGHT,
           value_parser = super::number_args::non_negative_f32)]
     pub surface_depth_weight: f32,
+    /// Fraction of the stereo points that become Gaussians.
+    ///
     /// Fraction of the stereo point cloud that becomes Gaussians (the fusion paper: 0.1; its
     /// sparse alternative (a): 0.01), whenever the stereo start runs (`stereo`, `depth:DIR`, or
     /// `auto` choosing it).
-    #[arg(long, default_value_t = StereoInit::default().fraction,
+    #[arg(long, value_name = "F", default_value_t = StereoInit::default().fraction,
           value_parser = super::number_args::fraction)]
     pub stereo_fraction: f64,
+    /// How the stereo start evens the pairs' exposures.
+    ///
     /// How the stereo start brings each pair's photos to one brightness before matching: `as-is`
     /// (OpenCV's matcher, robust to moderate exposure differences) or `gain-matched` (a gain per
     /// channel first; keeps more points when the photos' exposures differ by more than about
     /// one EV).
-    #[arg(long, value_enum, default_value_t)]
+    #[arg(long, value_name = "HOW", value_enum, default_value_t)]
     pub stereo_photometry: Photometry,
     /// Number of random initial points.
     #[arg(long, default_value_t = RunConfig::new(TrainConfig::inria()).init_points)]
@@ -72,20 +84,26 @@ pub struct TrainArgs {
     /// Weight λ of the SSIM term in `(1 − λ) L1 + λ (1 − SSIM)`.
     #[arg(long, default_value_t = TrainConfig::inria().lambda_dssim)]
     pub lambda_dssim: f32,
+    /// Background of training images with alpha.
+    ///
     /// Background behind the Gaussians while training on images with alpha (NeRF-synthetic
     /// RGBA): `random` (a random colour each iteration, the target re-composited over it, as
     /// nerfstudio's splatfacto; a deviation from the fusion paper, it removes floaters that a
     /// fixed background hides) or `fixed` (the dataset's background, as the fusion paper and
     /// Inria 3DGS). Opaque photos always train over the fixed background.
-    #[arg(long, value_enum, default_value_t = TrainBackground::Random)]
+    #[arg(long, value_name = "HOW", value_enum, default_value_t = TrainBackground::Random)]
     pub train_background: TrainBackground,
     /// Save a checkpoint every N iterations (0: never).
-    #[arg(long, default_value_t = 500)]
+    #[arg(long, value_name = "N", default_value_t = 500)]
     pub checkpoint_every: usize,
+    /// Where to train: cpu, or gpu (`--features gpu`).
+    ///
     /// Where to train: `cpu` (every build) or `gpu` (the first GPU wgpu finds: Vulkan, Metal or
     /// DX12; builds with `--features gpu`). The two agree to rounding, not bit for bit.
     #[arg(long, value_enum, default_value_t)]
     pub device: ComputeDevice,
+    /// Per-photo colour transform learned in training.
+    ///
     /// Per-photo appearance: `affine` learns a 3×4 colour transform per training photo, applied
     /// to the render before the loss (identity at the start, pulled towards it), so photos whose
     /// exposure or white balance differ need not be explained by the Gaussians' colours; new
@@ -97,6 +115,8 @@ pub struct TrainArgs {
     #[arg(long, value_name = "LR", default_value_t = AppearanceConfig::default().lr,
           value_parser = super::number_args::non_negative_f32)]
     pub appearance_lr: f32,
+    /// Pull of each colour transform to the identity.
+    ///
     /// Weight of the squared distance of each colour transform to the identity.
     #[arg(long, value_name = "W", default_value_t = AppearanceConfig::default().weight,
           value_parser = super::number_args::non_negative_f32)]

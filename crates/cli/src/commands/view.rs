@@ -31,16 +31,24 @@ pub struct Args {
         conflicts_with = "ply"
     )]
     pub run: Option<PathBuf>,
+    /// A Gaussian PLY to look at without its run.
+    ///
     /// A Gaussian PLY (Inria 3DGS layout, binary little-endian) to look at without its run.
     #[arg(long, value_name = "FILE")]
     pub ply: Option<PathBuf>,
-    /// The dataset the run was trained on: its cameras are drawn when the run has no
-    /// `cameras.json` (runs from before it was written), the views `config.json` names.
+    /// The dataset the run was trained on.
+    ///
+    /// Its cameras are drawn when the run has no `cameras.json` (runs from before it was written),
+    /// the views `config.json` names.
     #[arg(long, value_name = "DIR", conflicts_with = "ply")]
     pub data: Option<PathBuf>,
+    /// With --data: force its format.
+    ///
     /// With --data: force the dataset format (llff, blender, nerfstudio, dtu, colmap).
     #[arg(long, value_name = "NAME", requires = "data")]
     pub format: Option<DatasetFormat>,
+    /// With --data: load it downscaled.
+    ///
     /// With --data: load the dataset downscaled by this factor (faster; the cameras are resized
     /// to the run's image size either way).
     #[arg(long, default_value_t = 1, value_name = "K", requires = "data")]
@@ -48,9 +56,13 @@ pub struct Args {
     /// Port to listen on; 0 picks a free one (the URL is printed).
     #[arg(long, default_value_t = 0)]
     pub port: u16,
+    /// Address to listen on (default: loopback).
+    ///
     /// Address to listen on: loopback by default. 0.0.0.0 lets other machines in.
     #[arg(long, default_value_t = IpAddr::V4(Ipv4Addr::LOCALHOST))]
     pub host: IpAddr,
+    /// Open the page in the browser.
+    ///
     /// Open the page in the default browser (`xdg-open`, or `open` on macOS).
     #[arg(long)]
     pub open: bool,

@@ -28,40 +28,58 @@ pub struct Args {
     /// Where to write the JSON report.
     #[arg(long, default_value = "runs/bench.json", value_name = "FILE")]
     pub json: PathBuf,
+    /// LLFF fern folder (default: in `$FEWVIEW_DATA`).
+    ///
     /// LLFF fern folder for the training-step figure (default: `$FEWVIEW_DATA/llff/fern`).
     #[arg(long, value_name = "DIR")]
     pub fern: Option<PathBuf>,
-    /// Gaussians in the rasterizer benchmark (1 to 10,000,000, the `--init-points` limit).
+    /// Gaussians in the rasterizer benchmark.
+    ///
+    /// 1 to 10,000,000, the `--init-points` limit.
     #[arg(long, default_value_t = 100_000, value_parser = gaussian_count)]
     pub gaussians: usize,
     /// Training steps timed per dataset (at least 1).
     #[arg(long, default_value_t = 20, value_parser = positive_count)]
     pub train_steps: usize,
+    /// DTU scan65 folder (default: in `$FEWVIEW_DATA`).
+    ///
     /// DTU scan65 folder for the surface training-step figure (default:
     /// `$FEWVIEW_DATA/dtu/scan65`; views 22, 25, 28 at 400×300).
     #[arg(long, value_name = "DIR")]
     pub dtu: Option<PathBuf>,
-    /// Surface training steps timed (the NeuS-MLP reference runs one).
+    /// Surface training steps timed.
+    ///
+    /// The NeuS-MLP reference runs one.
     #[arg(long, default_value_t = 10)]
     pub surface_steps: usize,
+    /// PoseGaussian inference frames timed.
+    ///
     /// Frames timed for PoseGaussian inference with the CPU preset (the paper preset times one).
     #[arg(long, default_value_t = 3, value_parser = positive_count)]
     pub human_frames: usize,
-    /// Repetitions of each rasterizer measurement (median reported; at least 1).
+    /// Repetitions of each rasterizer measurement.
+    ///
+    /// The median is reported; at least 1.
     #[arg(long, default_value_t = 5, value_parser = positive_count)]
     pub runs: usize,
-    /// Where the rasterizer and training steps run: `cpu`, or `gpu` (builds with `--features
-    /// gpu`; the rasterizer's CPU figures are then measured on the same scene as the yardstick).
+    /// Where the rasterizer and training steps run.
+    ///
+    /// `cpu`, or `gpu` (builds with `--features gpu`; the rasterizer's CPU figures are then
+    /// measured on the same scene as the yardstick).
     #[arg(long, value_enum, default_value_t)]
     pub device: fewview_splat::ComputeDevice,
     /// Image size of the rasterizer benchmark, `WIDTHxHEIGHT`.
     #[arg(long, default_value = "504x378", value_parser = parse_size, value_name = "WxH")]
     pub raster_size: (usize, usize),
+    /// Also write the rasterizer's scene into DIR.
+    ///
     /// Also write the rasterizer benchmark's scene as `DIR/scene.ply` and `DIR/cameras.json`
     /// (for timing other rasterizers on the same Gaussians).
     #[arg(long, value_name = "DIR")]
     pub write_scene: Option<PathBuf>,
-    /// Measure only these sections, e.g. `--only human,ssim` (default: all).
+    /// Measure only these sections.
+    ///
+    /// E.g. `--only human,ssim` (default: all).
     #[arg(long, value_enum, value_delimiter = ',', value_name = "SECTION")]
     pub only: Vec<Section>,
 }

@@ -23,7 +23,9 @@ pub struct DepthArgs {
     /// Input cameras, spread uniformly over the rig (as `train`).
     #[arg(long, default_value_t = fewview_human::split::PAPER_INPUT_CAMERAS)]
     pub input_cameras: usize,
-    /// The camera of `depth_strip.png` (default: the first input camera).
+    /// The camera of `depth_strip.png`.
+    ///
+    /// Default: the first input camera.
     #[arg(long)]
     pub camera: Option<usize>,
     #[command(flatten)]

@@ -22,6 +22,8 @@ pub struct EvalArgs {
     /// A run trained with `--no-pose`: the per-frame baseline.
     #[arg(long, value_name = "DIR")]
     pub per_frame: Option<PathBuf>,
+    /// Another run scored beside ours, `NAME=DIR`.
+    ///
     /// Another trained run scored beside ours without TPS, as `NAME=DIR` (repeatable), e.g.
     /// `hull=runs/ours-hull` for the same method with the visual hull's depth.
     #[arg(long, value_name = "NAME=DIR")]
@@ -32,29 +34,36 @@ pub struct EvalArgs {
     /// Skip LPIPS (and its Δ).
     #[arg(long)]
     pub no_lpips: bool,
+    /// Frames of the 3DGS-per-frame baseline.
+    ///
     /// Train the 3DGS-per-frame baseline on this many consecutive frames from the first test
     /// frame (0: none; each takes minutes) and add a table of every method on them.
     #[arg(long, default_value_t = 0)]
     pub splat_frames: usize,
     /// Training iterations of each 3DGS-per-frame model.
-    #[arg(long, default_value_t = SplatBaselineOptions::default().iterations)]
+    #[arg(long, value_name = "N", default_value_t = SplatBaselineOptions::default().iterations)]
     pub splat_iterations: usize,
-    /// Where each 3DGS-per-frame model starts: `train` (what `fewview train` does on those
-    /// views: the stereo start, else random points) or `hull` (points in the frame's visual
-    /// hull, a prior plain 3DGS lacks; stronger).
+    /// Where each 3DGS-per-frame model starts.
+    ///
+    /// `train` (what `fewview train` does on those views: the stereo start, else random points) or
+    /// `hull` (points in the frame's visual hull, a prior plain 3DGS lacks; stronger).
     #[arg(long, value_enum, default_value_t)]
     pub splat_init: BaselineInit,
     #[command(flatten)]
     pub tps: TpsArgs,
+    /// Validate on the training frames instead.
+    ///
     /// Score the input cameras on the training frames instead, each predicted from its
     /// neighbours as in training (validation: choose `--tps-weight`/`--tps-speed` here without
     /// reading a held-out camera or a test frame).
     #[arg(long, conflicts_with = "splat_frames")]
     pub validation: bool,
-    /// Source views per target at inference, for the run and its baselines (default: what each
-    /// was trained with). The network sees one view at a time, so more views only add
-    /// Gaussians where the two nearest views miss the person.
-    #[arg(long)]
+    /// Source views per target at inference.
+    ///
+    /// For the run and its baselines (default: what each was trained with). The network sees one
+    /// view at a time, so more views only add Gaussians where the two nearest views miss the
+    /// person.
+    #[arg(long, value_name = "N")]
     pub source_views: Option<usize>,
 }
 

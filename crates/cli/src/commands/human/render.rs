@@ -17,9 +17,18 @@ pub struct RenderArgs {
     pub run: PathBuf,
     #[command(flatten)]
     pub capture: CaptureArgs,
-    /// Cameras of the capture to render, e.g. `2,5` (default: the run's held-out cameras).
-    #[arg(long, value_delimiter = ',', conflicts_with = "orbit")]
+    /// Cameras of the capture to render.
+    ///
+    /// E.g. `2,5` (default: the run's held-out cameras).
+    #[arg(
+        long,
+        value_name = "LIST",
+        value_delimiter = ',',
+        conflicts_with = "orbit"
+    )]
     pub cameras: Vec<usize>,
+    /// Render one camera circling the rig instead.
+    ///
     /// Render one camera circling the rig once over the frames instead (`OUT/orbit.mp4`).
     #[arg(long)]
     pub orbit: bool,
@@ -31,8 +40,10 @@ pub struct RenderArgs {
     pub no_tps: bool,
     #[command(flatten)]
     pub tps: TpsArgs,
-    /// Source views per target (default: what the run was trained with).
-    #[arg(long)]
+    /// Source views per target.
+    ///
+    /// Default: what the run was trained with.
+    #[arg(long, value_name = "N")]
     pub source_views: Option<usize>,
     /// Frames per second of the videos.
     #[arg(long, default_value_t = 30.0)]

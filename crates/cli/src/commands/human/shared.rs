@@ -13,13 +13,17 @@ use crate::commands::number_args::number_pair;
 /// The capture, its sequence and the output folder, shared by the subcommands.
 #[derive(Debug, ClapArgs)]
 pub struct CaptureArgs {
+    /// The capture's folder (synthetic or ZJU-MoCap).
+    ///
     /// The capture's folder: the synthetic layout (`cameras.json`, `joints.json`, `SEQ/`) or
     /// ZJU-MoCap's (`annots.npy`, `Camera_B*/`, `mask/`, here or in `SEQ/`; 2D pose from
     /// `joints3d/<n>.npy`).
     #[arg(long, value_name = "DIR")]
     pub data: PathBuf,
-    /// The sequence inside `--data` (ignored when `--data` itself holds `annots.npy`).
-    #[arg(long, default_value = "seq_a")]
+    /// The sequence inside `--data`.
+    ///
+    /// Ignored when `--data` itself holds `annots.npy`.
+    #[arg(long, value_name = "NAME", default_value = "seq_a")]
     pub sequence: String,
     /// Output folder.
     #[arg(long, value_name = "DIR")]
@@ -30,11 +34,13 @@ pub struct CaptureArgs {
 #[derive(Debug, ClapArgs)]
 pub struct StereoArgs {
     /// The input camera each view's stereo depth is matched with.
-    #[arg(long, value_enum, default_value_t)]
+    #[arg(long, value_name = "WHICH", value_enum, default_value_t)]
     pub stereo_partner: StereoPartner,
     /// Which of Semi-Global Matching's disparities are kept.
     #[arg(long, value_enum, default_value_t)]
     pub stereo_checks: StereoChecks,
+    /// Stereo search around the hull (m).
+    ///
     /// How far in front of and behind the visual hull's depth stereo searches, in metres
     /// (default: the hull bracket the network refines within).
     #[arg(long, value_name = "FRONT,BEHIND", value_parser = parse_metres_pair)]
@@ -68,11 +74,15 @@ pub fn parse_metres_pair(text: &str) -> Result<(f64, f64), String> {
 /// The Temporal Pose Stabilizer's settings (our design; see `fewview_human::tps`).
 #[derive(Debug, ClapArgs)]
 pub struct TpsArgs {
+    /// Stabiliser weight of the previous frame.
+    ///
     /// Weight of the previous frame's (warped) maps where the body is still, in [0, 1].
-    #[arg(long, default_value_t = TpsConfig::default().max_weight)]
+    #[arg(long, value_name = "W", default_value_t = TpsConfig::default().max_weight)]
     pub tps_weight: f32,
+    /// Joint speed (m/frame) that weight falls at.
+    ///
     /// Joint speed (metres per frame) at which that weight falls to 1/e of itself.
-    #[arg(long, default_value_t = TpsConfig::default().speed_scale)]
+    #[arg(long, value_name = "M", default_value_t = TpsConfig::default().speed_scale)]
     pub tps_speed: f32,
 }
 

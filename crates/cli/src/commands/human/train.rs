@@ -29,6 +29,8 @@ pub struct TrainArgs {
     /// Network widths and input size.
     #[arg(long, value_enum, default_value_t = defaults().preset)]
     pub preset: Preset,
+    /// Network configuration of the appendix (1–4).
+    ///
     /// Network configuration of the paper's appendix (1 simplified, 2 deep residual,
     /// 3 with batch norm, 4 without downsampling).
     #[arg(long, default_value_t = defaults().variant.number(),
@@ -44,14 +46,18 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = defaults().seed)]
     pub seed: u64,
     /// Source views per target.
-    #[arg(long, default_value_t = defaults().source_views)]
+    #[arg(long, value_name = "N", default_value_t = defaults().source_views)]
     pub source_views: usize,
+    /// Feed the pose encoder zeros (per-frame baseline).
+    ///
     /// Feed the pose encoder zeros (the per-frame baseline of PoseGaussian's comparison).
     #[arg(long)]
     pub no_pose: bool,
     /// The depth the network reads and refines.
     #[arg(long, value_enum, default_value_t)]
     pub depth: DepthInput,
+    /// How far the depth head may move its input (m).
+    ///
     /// Where the depth head's output may move the input depth: in front of it and behind it,
     /// in metres (default: the depth input's own bracket).
     #[arg(long, value_name = "FRONT,BEHIND", value_parser = parse_metres_pair)]
@@ -59,23 +65,32 @@ pub struct TrainArgs {
     #[command(flatten)]
     pub stereo: StereoArgs,
     /// Write a checkpoint every N iterations (and at the end).
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, value_name = "N", default_value_t = 100)]
     pub checkpoint_every: usize,
-    /// Continue the run in `--out` from its checkpoint (same settings; `--iterations` may grow).
+    /// Continue the run in `--out`.
+    ///
+    /// From its checkpoint, with the same settings; `--iterations` may grow.
     #[arg(long)]
     pub resume: bool,
+    /// Input cameras, spread over the rig.
+    ///
     /// Input cameras, spread uniformly over the rig (PoseGaussian's protocol: 8; the others are
     /// held out for evaluation).
     #[arg(long, default_value_t = fewview_human::split::PAPER_INPUT_CAMERAS)]
     pub input_cameras: usize,
-    /// Training frames, from the first (default: two thirds of the sequence; the rest test
-    /// novel poses).
+    /// Training frames, from the first.
+    ///
+    /// Default: two thirds of the sequence; the rest test novel poses.
     #[arg(long, value_name = "N")]
     pub train_frames: Option<usize>,
+    /// Stop with a checkpoint after this many minutes.
+    ///
     /// Stop after this many minutes of wall time (hull carving included) with a checkpoint, even
     /// before `--iterations`: a training budget; `--resume` continues later.
     #[arg(long, value_name = "MINUTES")]
     pub max_minutes: Option<f64>,
+    /// Where to train: cpu, or gpu (`--features gpu`).
+    ///
     /// Where to train: `cpu` (every build) or `gpu` (the network's convolutions and the splat
     /// rasterizer on the first GPU wgpu finds; builds with `--features gpu`).
     #[arg(long, value_enum, default_value_t)]
