@@ -7,7 +7,7 @@ use fewview_fusion::FusionConfig;
 use fewview_scene::photometric::training_gains;
 use fewview_scene::synthetic::{DemoOptions, demo_dataset};
 
-use super::fusion::{print_transition, train_with_progress, transition, write_gains};
+use super::fusion_outputs::{print_transition, train_with_progress, transition, write_gains};
 use super::number_args::count_in;
 use super::output_paths::check_folder;
 use super::photo_args::{DemoSceneArgs, JitterArgs};

@@ -10,6 +10,7 @@ mod depth_points;
 mod eval;
 pub mod eval_video;
 mod fusion;
+mod fusion_outputs;
 mod fusion_study;
 mod geom_common;
 mod human;
