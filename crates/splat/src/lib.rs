@@ -21,6 +21,7 @@ pub mod raster;
 pub mod real;
 pub mod sh;
 pub mod stereo_pair;
+pub mod stereo_pair_check;
 pub mod stereo_start;
 pub mod surface_start;
 pub mod train;

@@ -23,6 +23,8 @@ use fewview_geom::stereo::source::{
 use fewview_scene::{Dataset, PointCloud, SceneError};
 use serde::{Deserialize, Serialize};
 
+use crate::stereo_pair_check::{PairCheck, PairCheckError, PairCheckReport, check_pairs};
+
 /// Where the pairs' depth comes from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -48,6 +50,9 @@ pub struct StereoInit {
     #[serde(default)]
     pub photometry: Photometry,
     pub overlap: OverlapRule,
+    /// The check by feature matching of the pairs that overlap (off by default).
+    #[serde(default)]
+    pub pair_check: PairCheck,
     pub hierarchy: HierarchyOptions,
 }
 
@@ -66,6 +71,7 @@ impl Default for StereoInit {
             refine: Some(RefineOptions::default()),
             photometry: Photometry::default(),
             overlap: OverlapRule::default(),
+            pair_check: PairCheck::default(),
             hierarchy: HierarchyOptions::default(),
         }
     }
@@ -81,6 +87,8 @@ pub struct StereoStart {
     /// The sampled points (positions and pixel colours) and their regions.
     pub sample: PointCloud,
     pub sample_regions: Vec<Region>,
+    /// The pairs' matches when [`StereoInit::pair_check`] names a matcher.
+    pub pair_check: Option<PairCheckReport>,
 }
 
 /// Errors of the stereo start, naming the views or the file.
@@ -90,6 +98,8 @@ pub enum StereoStartError {
     Geom(#[from] fewview_geom::GeomError),
     #[error(transparent)]
     Scene(#[from] SceneError),
+    #[error(transparent)]
+    PairCheck(#[from] PairCheckError),
     #[error("stereo start: {0}")]
     Other(String),
 }
@@ -115,7 +125,12 @@ pub fn stereo_start(
         )));
     }
     let views = stereo_views(ds);
-    let pairs = stereo_pairs(&views, &init.overlap)?;
+    let checked = check_pairs(
+        &views,
+        &stereo_pairs(&views, &init.overlap)?,
+        &init.pair_check,
+    )?;
+    let pairs = checked.pairs;
     let source: Box<dyn DepthSource + '_> = match &init.depth {
         DepthFrom::Sgm => Box::new(SgmSource {
             views: &views,
@@ -147,6 +162,7 @@ pub fn stereo_start(
         cloud,
         sample,
         sample_regions,
+        pair_check: checked.report,
     })
 }
 
@@ -164,6 +180,8 @@ pub struct StereoSummary<'a> {
     pub contraction_view: Option<String>,
     pub b_near: Option<f64>,
     pub b_far: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pair_check: Option<&'a PairCheckReport>,
 }
 
 impl StereoStart {
@@ -180,6 +198,7 @@ impl StereoStart {
             contraction_view: c.and_then(|c| c.view).map(|v| train[v].to_string()),
             b_near: c.map(|c| c.b_near),
             b_far: c.map(|c| c.b_far),
+            pair_check: self.pair_check.as_ref(),
         }
     }
 

@@ -5,8 +5,10 @@ use std::path::PathBuf;
 use anyhow::bail;
 use clap::{Args, ValueEnum};
 use fewview_geom::stereo::source::Photometry;
+use fewview_match::learned::MatcherKind;
 use fewview_splat::ComputeDevice;
 use fewview_splat::pipeline::{InitStrategy, MAX_INIT_POINTS, RunConfig};
+use fewview_splat::stereo_pair_check::PairCheck;
 use fewview_splat::stereo_start::{DepthFrom, StereoInit};
 use fewview_splat::surface_start::SurfacePoses;
 use fewview_splat::train::{AppearanceConfig, AppearanceModel, TrainConfig};
@@ -78,6 +80,18 @@ pub struct TrainArgs {
     /// one EV).
     #[arg(long, value_name = "HOW", value_enum, default_value_t)]
     pub stereo_photometry: Photometry,
+    /// Check each stereo pair by this matcher's correspondences.
+    ///
+    /// A pair that overlaps by geometry is kept only when the matcher (`classical` SIFT, `xfeat`,
+    /// `xfeat-star` or `lighterglue`) finds `--stereo-pair-matches` correspondences within 2 px
+    /// of the epipolar lines its cameras draw; `stereo.json` lists each pair's counts. Off by
+    /// default: the fusion paper matches every overlapping pair.
+    #[arg(long, value_name = "MATCHER", value_enum)]
+    pub stereo_pair_check: Option<MatcherKind>,
+    /// Fewest consistent correspondences of a checked stereo pair.
+    #[arg(long, value_name = "N", default_value_t = PairCheck::default().min_matches,
+          requires = "stereo_pair_check")]
+    pub stereo_pair_matches: usize,
     /// Number of random initial points.
     #[arg(long, default_value_t = RunConfig::new(TrainConfig::inria()).init_points)]
     pub init_points: usize,
@@ -149,6 +163,11 @@ impl TrainArgs {
             depth,
             fraction: self.stereo_fraction,
             photometry: self.stereo_photometry,
+            pair_check: PairCheck {
+                matcher: self.stereo_pair_check,
+                min_matches: self.stereo_pair_matches,
+                ..PairCheck::default()
+            },
             ..StereoInit::default()
         };
         if self.init_points == 0 {
