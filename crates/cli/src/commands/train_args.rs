@@ -34,7 +34,7 @@ pub struct TrainArgs {
     /// Largest spherical-harmonics degree (0–3).
     #[arg(long, default_value_t = TrainConfig::inria().sh_degree)]
     pub sh_degree: usize,
-    /// Initial Gaussians: auto, stereo, surface[:DIR], depth:DIR and more.
+    /// Initial Gaussians: auto, stereo, surface, …
     ///
     /// Initial Gaussians: `auto` (dataset points; else `stereo` when at least two training views
     /// overlap; else random in the training frustums when the views have depth bounds, else
