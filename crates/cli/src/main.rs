@@ -35,9 +35,9 @@ struct Cli {
     command: commands::Command,
 }
 
-/// The command line with its two levels of help: `-h`/`--help` list every flag on one line
-/// with the first sentence of its description (so that a command's help fits two screens),
-/// `--help-all` (or `fewview help COMMAND`) prints every description in full.
+/// The command line with its two levels of help: `-h`/`--help` list every flag with the first
+/// paragraph of its doc comment, a one-line summary (so that a command's help fits two
+/// screens); `--help-all` (or `fewview help COMMAND`) prints every comment in full.
 fn command_line() -> clap::Command {
     Cli::command()
         .disable_help_flag(true)
