@@ -61,8 +61,8 @@ pub struct PairMatches {
     pub kept: bool,
 }
 
-/// The check's record for `stereo.json`: the matcher that ran (and why, when it is not the one
-/// asked for) and each pair's counts.
+/// The check's record for `stereo.json`: the matcher that ran (its `--stereo-pair-check` name;
+/// why, when it is not the one asked for) and each pair's counts.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PairCheckReport {
     pub matcher: String,
@@ -99,6 +99,10 @@ pub fn check_pairs(
         .collect();
     let (matcher, fallback) = matcher_for(kind, &SiftOptions::default(), &inputs)
         .map_err(|e| PairCheckError(e.to_string()))?;
+    let ran = match fallback {
+        Some(_) => MatcherKind::Classical,
+        None => kind,
+    };
     let mut kept = Vec::new();
     let mut report = Vec::new();
     for &(a, b) in pairs {
@@ -128,11 +132,11 @@ pub fn check_pairs(
             "no pair has {} matches consistent with its cameras ({}; matcher {})",
             check.min_matches,
             counts.join(", "),
-            matcher.name()
+            ran.name()
         )));
     }
     let report = PairCheckReport {
-        matcher: matcher.name().to_string(),
+        matcher: ran.name().to_string(),
         fallback,
         pairs: report,
     };
@@ -234,7 +238,9 @@ mod tests {
     #[test]
     fn matches_must_agree_with_the_cameras() {
         let checked = check(0.0, 20).unwrap();
-        let pair = &checked.report.unwrap().pairs[0];
+        let report = checked.report.unwrap();
+        assert_eq!(report.matcher, "classical");
+        let pair = &report.pairs[0];
         assert_eq!(checked.pairs, vec![(0, 1)]);
         assert!(pair.matches >= 20, "{pair:?}");
         assert!(
