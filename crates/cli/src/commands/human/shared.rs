@@ -79,7 +79,7 @@ pub struct TpsArgs {
     /// Weight of the previous frame's (warped) maps where the body is still, in [0, 1].
     #[arg(long, value_name = "W", default_value_t = TpsConfig::default().max_weight)]
     pub tps_weight: f32,
-    /// Joint speed (m/frame) that weight falls at.
+    /// Joint speed (m/frame) where the TPS weight is 1/e.
     ///
     /// Joint speed (metres per frame) at which that weight falls to 1/e of itself.
     #[arg(long, value_name = "M", default_value_t = TpsConfig::default().speed_scale)]
