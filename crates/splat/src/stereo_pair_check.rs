@@ -211,11 +211,11 @@ mod tests {
         ([a, b], [window(&t, 0), window(&t, SHIFT)])
     }
 
-    fn check(tilt_deg: f64, min_matches: usize) -> Result<CheckedPairs, PairCheckError> {
-        let (cameras, images) = rig(tilt_deg);
-        let views: Vec<StereoView> = ["a", "b"]
+    /// The rig's two views, named `a` and `b`.
+    fn views<'a>(cameras: &'a [Camera; 2], images: &'a [Image; 2]) -> Vec<StereoView<'a>> {
+        ["a", "b"]
             .iter()
-            .zip(cameras.iter().zip(&images))
+            .zip(cameras.iter().zip(images))
             .map(|(name, (camera, image))| StereoView {
                 name,
                 camera,
@@ -223,7 +223,12 @@ mod tests {
                 depth_bounds: Some((1.0, 4.0)),
                 mask: None,
             })
-            .collect();
+            .collect()
+    }
+
+    fn check(tilt_deg: f64, min_matches: usize) -> Result<CheckedPairs, PairCheckError> {
+        let (cameras, images) = rig(tilt_deg);
+        let views = views(&cameras, &images);
         let settings = PairCheck {
             matcher: Some(MatcherKind::Classical),
             min_matches,
@@ -261,15 +266,7 @@ mod tests {
     #[test]
     fn geometry_alone_keeps_every_pair_and_bad_settings_are_refused() {
         let (cameras, images) = rig(0.0);
-        let views: Vec<StereoView> = (0..2)
-            .map(|i| StereoView {
-                name: "v",
-                camera: &cameras[i],
-                image: &images[i],
-                depth_bounds: None,
-                mask: None,
-            })
-            .collect();
+        let views = views(&cameras, &images);
         let pairs = [(0, 1), (1, 0)];
         let checked = check_pairs(&views, &pairs, &PairCheck::default()).unwrap();
         assert_eq!(checked.pairs, pairs);
