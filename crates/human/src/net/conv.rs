@@ -291,6 +291,50 @@ mod tests {
 
     use super::*;
 
+    /// Subnormal inputs and output gradients (a pose map's Gaussian tails, saturated
+    /// activations' gradients) are flushed to zero on the way into the products: the values
+    /// and gradients equal those of the same convolution with zeros in their place.
+    #[test]
+    fn subnormal_inputs_count_as_zeros() {
+        let device = Device::flex().autodiff();
+        let conv = Conv2dConfig::new([3, 4], [3, 3])
+            .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
+            .init(&device);
+        let tiny = f32::MIN_POSITIVE / 8.0;
+        let values: Vec<f32> = (0..2 * 3 * 6 * 5)
+            .map(|i| {
+                if i % 3 == 0 {
+                    tiny
+                } else {
+                    (i % 7) as f32 / 7.0
+                }
+            })
+            .collect();
+        let zeroed: Vec<f32> = values
+            .iter()
+            .map(|&v| if v == tiny { 0.0 } else { v })
+            .collect();
+        let run = |v: Vec<f32>| {
+            let x =
+                Tensor::<4>::from_data(TensorData::new(v, [2, 3, 6, 5]), &device).require_grad();
+            let y = apply(&conv, x.clone());
+            let g = (y.clone() * tiny).sum().backward();
+            let dw = conv.weight.val().grad(&g).unwrap();
+            let read = |t: Tensor<4>| t.into_data().try_to_vec::<f32>().unwrap();
+            (read(y), read(x.grad(&g).unwrap()), read(dw))
+        };
+        let (with, without) = (run(values), run(zeroed));
+        assert_eq!(with.0, without.0, "values");
+        assert!(
+            with.1.iter().all(|&v| v == 0.0),
+            "input gradient of a subnormal loss weight"
+        );
+        assert!(
+            with.2.iter().all(|&v| v == 0.0),
+            "weight gradient of a subnormal loss weight"
+        );
+    }
+
     /// The op against Burn's own convolution, values and every gradient, for the kernel sizes
     /// and strides the network has (3×3 and 1×1, stride 1 and 2, odd sizes) and a 5×5.
     #[test]

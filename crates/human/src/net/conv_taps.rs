@@ -43,6 +43,20 @@ fn with_scratch<R>(
     r
 }
 
+/// `v`, or zero if it is subnormal (below `f32::MIN_POSITIVE` in magnitude).
+///
+/// A subnormal operand makes the FPU take a microcode assist on every multiply-add it enters,
+/// about a hundred times slower than the normal path, and the network meets many: the pose
+/// map's Gaussians, `exp(−d²/2σ²)`, pass through the subnormal range in a ring around every
+/// joint, and saturated activations pass subnormal gradients back. The GEMMs read only the
+/// phases and the widened gradient, so flushing while copying into them keeps every product on
+/// the fast path. The change is below 1.2·10⁻³⁸ per value, far under f32's resolution of any
+/// sum the value enters.
+#[inline]
+fn flush_subnormal(v: f32) -> f32 {
+    if v.abs() < f32::MIN_POSITIVE { 0.0 } else { v }
+}
+
 /// A strided matrix: element `(row, col)` at `ptr + row·rs + col·cs`.
 struct Strided<P> {
     ptr: P,
@@ -53,9 +67,25 @@ struct Strided<P> {
 /// `dst[m × n] = (accumulate ? dst : 0) + lhs[m × k] · rhs[k × n]`, parallel over rayon.
 ///
 /// # Safety
+/// As [`gemm_on`].
+unsafe fn gemm(
+    mnk: [usize; 3],
+    dst: Strided<*mut f32>,
+    accumulate: bool,
+    lhs: Strided<*const f32>,
+    rhs: Strided<*const f32>,
+) {
+    // SAFETY: the caller's contract.
+    unsafe { gemm_on(gemm::Parallelism::Rayon(0), mnk, dst, accumulate, lhs, rhs) }
+}
+
+/// [`gemm`] with the given parallelism.
+///
+/// # Safety
 /// Every element the strides reach (`m × n` of `dst`, `m × k` of `lhs`, `k × n` of `rhs`) must
 /// lie inside its buffer, and `dst` must not overlap the others.
-unsafe fn gemm(
+unsafe fn gemm_on(
+    parallelism: gemm::Parallelism,
     [m, n, k]: [usize; 3],
     dst: Strided<*mut f32>,
     accumulate: bool,
@@ -83,7 +113,7 @@ unsafe fn gemm(
             false,
             false,
             false,
-            gemm::Parallelism::Rayon(0),
+            parallelism,
         );
     }
 }
@@ -201,16 +231,25 @@ pub fn forward_host(
 impl Taps {
     /// Writes the input `[B, C, H, W]` into its zero-padded stride phases.
     fn scatter(&self, x: &[f32], phases: &mut [f32]) {
-        let s = self.s;
         for bc in 0..self.b * self.c {
             let (bi, ci) = (bc / self.c, bc % self.c);
             for y in 0..self.h {
                 let row = &x[(bc * self.h + y) * self.w..][..self.w];
-                for px in 0..s {
-                    let first = self.first_column(px);
-                    let dst = self.phase_index(bi, ci, y, first.min(self.w));
-                    for (k, &v) in row.iter().skip(first).step_by(s).enumerate() {
-                        phases[dst + k] = v;
+                for px in 0..self.s {
+                    let Some(src) = row.get(self.first_column(px)..) else {
+                        continue;
+                    };
+                    let count = src.len().div_ceil(self.s);
+                    let at = self.phase_index(bi, ci, y, self.first_column(px));
+                    let dst = &mut phases[at..][..count];
+                    if self.s == 1 {
+                        for (d, &v) in dst.iter_mut().zip(src) {
+                            *d = flush_subnormal(v);
+                        }
+                    } else {
+                        for (d, &v) in dst.iter_mut().zip(src.iter().step_by(self.s)) {
+                            *d = flush_subnormal(v);
+                        }
                     }
                 }
             }
@@ -219,20 +258,24 @@ impl Taps {
 
     /// The phases read back into `[B, C, H, W]` (the input gradient).
     fn gather(&self, phases: &[f32]) -> Vec<f32> {
-        let s = self.s;
         let mut out = vec![0.0f32; self.b * self.c * self.h * self.w];
         for bc in 0..self.b * self.c {
             let (bi, ci) = (bc / self.c, bc % self.c);
             for y in 0..self.h {
                 let row = &mut out[(bc * self.h + y) * self.w..][..self.w];
-                for px in 0..s {
+                for px in 0..self.s {
                     let first = self.first_column(px);
-                    if first >= self.w {
+                    let Some(dst) = row.get_mut(first..) else {
                         continue;
-                    }
-                    let src = self.phase_index(bi, ci, y, first);
-                    for (k, v) in row.iter_mut().skip(first).step_by(s).enumerate() {
-                        *v = phases[src + k];
+                    };
+                    let count = dst.len().div_ceil(self.s);
+                    let src = &phases[self.phase_index(bi, ci, y, first)..][..count];
+                    if self.s == 1 {
+                        dst.copy_from_slice(src);
+                    } else {
+                        for (d, &v) in dst.iter_mut().step_by(self.s).zip(src) {
+                            *d = v;
+                        }
                     }
                 }
             }
@@ -378,46 +421,60 @@ impl Taps {
         for bo in 0..self.b * self.o {
             for i in 0..self.ho {
                 let src = &g[(bo * self.ho + i) * self.wo..][..self.wo];
-                wide[bo * n + i * self.wpp..][..self.wo].copy_from_slice(src);
+                let dst = &mut wide[bo * n + i * self.wpp..][..self.wo];
+                for (d, &v) in dst.iter_mut().zip(src) {
+                    *d = flush_subnormal(v);
+                }
             }
         }
     }
 
+    /// The per-tap `O × C` blocks of the weight gradient, `[kh·kw][O][C]`. Each product has
+    /// a tiny result and a long inner dimension (the pixels), which a GEMM does not split
+    /// across threads; the taps and batch items are split instead, one single-threaded product
+    /// each, and the batch items summed after.
     fn weight_grad(&self, phases: &[f32], wide: &[f32]) -> Vec<f32> {
+        use rayon::prelude::*;
         let t = self;
         let n = t.pixels();
-        // Per tap an O × C block, then rearranged to [O, C, kh, kw].
-        let mut taps = vec![0.0f32; t.kh * t.kw * t.o * t.c];
-        for dy in 0..t.kh {
-            for dx in 0..t.kw {
-                let dst = &mut taps[(dy * t.kw + dx) * t.o * t.c..][..t.o * t.c];
-                for bi in 0..t.b {
-                    let at = t.tap(bi, dy, dx, phases.len());
-                    let lhs = &wide[bi * t.o * n..];
-                    // dst[O × C] (+)= G[O × n] · phase[C × n]ᵀ
-                    // SAFETY: `tap` checked the phase view; `lhs` holds O × n values.
-                    unsafe {
-                        gemm(
-                            [t.o, t.c, n],
-                            Strided {
-                                ptr: dst.as_mut_ptr(),
-                                rs: t.c,
-                                cs: 1,
-                            },
-                            bi > 0,
-                            Strided {
-                                ptr: lhs.as_ptr(),
-                                rs: n,
-                                cs: 1,
-                            },
-                            Strided {
-                                ptr: phases[at..].as_ptr(),
-                                rs: 1,
-                                cs: t.plane,
-                            },
-                        );
-                    }
+        let block = t.o * t.c;
+        let mut parts = vec![0.0f32; t.b * t.kh * t.kw * block];
+        parts
+            .par_chunks_mut(block)
+            .enumerate()
+            .for_each(|(i, dst)| {
+                let (bi, tap) = (i / (t.kh * t.kw), i % (t.kh * t.kw));
+                let at = t.tap(bi, tap / t.kw, tap % t.kw, phases.len());
+                let lhs = &wide[bi * t.o * n..];
+                // dst[O × C] = G_b[O × n] · phase_b[C × n]ᵀ
+                // SAFETY: `tap` checked the phase view; `lhs` holds O × n values.
+                unsafe {
+                    gemm_on(
+                        gemm::Parallelism::None,
+                        [t.o, t.c, n],
+                        Strided {
+                            ptr: dst.as_mut_ptr(),
+                            rs: t.c,
+                            cs: 1,
+                        },
+                        false,
+                        Strided {
+                            ptr: lhs.as_ptr(),
+                            rs: n,
+                            cs: 1,
+                        },
+                        Strided {
+                            ptr: phases[at..].as_ptr(),
+                            rs: 1,
+                            cs: t.plane,
+                        },
+                    );
                 }
+            });
+        let (taps, rest) = parts.split_at_mut(t.kh * t.kw * block);
+        for item in rest.chunks(taps.len()) {
+            for (a, b) in taps.iter_mut().zip(item) {
+                *a += b;
             }
         }
         let k = t.kh * t.kw;

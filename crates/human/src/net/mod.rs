@@ -7,7 +7,8 @@
 //! - [`se`], [`residual`], [`encoder`], [`decoder`], [`heads`]: the blocks, each documenting
 //!   what the paper says and what was chosen where it is silent.
 //! - [`model`]: [`PoseGaussianNet`], three encoders + decoder + heads.
-//! - [`conv`]: the convolutions as im2col and a matrix product on the CPU (cheap gradients).
+//! - [`conv`]: the convolutions as one matrix product per kernel tap on the CPU (cheap
+//!   gradients).
 //! - [`flops`]: multiply-adds of one forward pass, from the configuration alone.
 //! - [`checkpoint`]: weights on disk with their configuration, refused by any other network.
 
