@@ -104,6 +104,8 @@ fn the_stereo_start_writes_its_cloud_into_the_run() {
         "demo",
         "--init",
         "stereo",
+        "--width",
+        "100",
         "--iterations",
         "30",
         "--checkpoint-every",
