@@ -336,9 +336,20 @@ mod tests {
     }
 
     /// The op against Burn's own convolution, values and every gradient, for the kernel sizes
-    /// and strides the network has (3×3 and 1×1, stride 1 and 2, odd sizes) and a 5×5.
+    /// and strides the network has (3×3 and 1×1, stride 1 and 2, odd sizes) and a 5×5; on one
+    /// thread and on three (a batch of two split by item, or each product on the threads).
     #[test]
     fn the_op_matches_burns_convolution_and_its_gradients() {
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(op_matches_burn);
+        }
+    }
+
+    fn op_matches_burn() {
         let device = Device::flex().autodiff();
         for (kernel, stride, input, output) in
             [(3, 1, 5, 7), (3, 2, 4, 6), (1, 2, 6, 3), (5, 1, 3, 4)]

@@ -18,6 +18,7 @@
 use std::cell::RefCell;
 
 use burn::tensor::ops::ConvOptions;
+use rayon::prelude::*;
 
 thread_local! {
     /// Scratch buffers kept between calls: fresh multi-megabyte buffers cost the kernel's page
@@ -64,22 +65,8 @@ struct Strided<P> {
     cs: usize,
 }
 
-/// `dst[m × n] = (accumulate ? dst : 0) + lhs[m × k] · rhs[k × n]`, parallel over rayon.
-///
-/// # Safety
-/// As [`gemm_on`].
-unsafe fn gemm(
-    mnk: [usize; 3],
-    dst: Strided<*mut f32>,
-    accumulate: bool,
-    lhs: Strided<*const f32>,
-    rhs: Strided<*const f32>,
-) {
-    // SAFETY: the caller's contract.
-    unsafe { gemm_on(gemm::Parallelism::Rayon(0), mnk, dst, accumulate, lhs, rhs) }
-}
-
-/// [`gemm`] with the given parallelism.
+/// `dst[m × n] = (accumulate ? dst : 0) + lhs[m × k] · rhs[k × n]`, on rayon's threads or on
+/// this one as `parallelism` says.
 ///
 /// # Safety
 /// Every element the strides reach (`m × n` of `dst`, `m × k` of `lhs`, `k × n` of `rhs`) must
@@ -288,38 +275,54 @@ impl Taps {
         let t = self;
         let n = t.pixels();
         let k = t.kh * t.kw;
-        for bi in 0..t.b {
-            let dst = &mut wide[bi * t.o * n..(bi + 1) * t.o * n];
-            for dy in 0..t.kh {
-                for dx in 0..t.kw {
-                    let at = t.tap(bi, dy, dx, phases.len());
-                    let lhs = &weight[t.tap_weight(dy, dx)..];
-                    // dst[O × n] (+)= W_tap[O × C] · phase[C × n]
-                    // SAFETY: `tap` checked the phase view; the weight view spans O·C·k values.
-                    unsafe {
-                        gemm(
-                            [t.o, n, t.c],
-                            Strided {
-                                ptr: dst.as_mut_ptr(),
-                                rs: n,
-                                cs: 1,
-                            },
-                            dy + dx > 0,
-                            Strided {
-                                ptr: lhs.as_ptr(),
-                                rs: t.c * k,
-                                cs: k,
-                            },
-                            Strided {
-                                ptr: phases[at..].as_ptr(),
-                                rs: t.plane,
-                                cs: 1,
-                            },
-                        );
+        let (items, parallelism) = t.batch_split(phases.len());
+        wide.par_chunks_mut(t.o * n)
+            .zip(phases.par_chunks(items))
+            .for_each(|(dst, phases)| {
+                for dy in 0..t.kh {
+                    for dx in 0..t.kw {
+                        let at = t.tap(0, dy, dx, phases.len());
+                        let lhs = &weight[t.tap_weight(dy, dx)..];
+                        // dst[O × n] (+)= W_tap[O × C] · phase[C × n]
+                        // SAFETY: `tap` checked the phase view; the weight view spans O·C·k
+                        // values.
+                        unsafe {
+                            gemm_on(
+                                parallelism,
+                                [t.o, n, t.c],
+                                Strided {
+                                    ptr: dst.as_mut_ptr(),
+                                    rs: n,
+                                    cs: 1,
+                                },
+                                dy + dx > 0,
+                                Strided {
+                                    ptr: lhs.as_ptr(),
+                                    rs: t.c * k,
+                                    cs: k,
+                                },
+                                Strided {
+                                    ptr: phases[at..].as_ptr(),
+                                    rs: t.plane,
+                                    cs: 1,
+                                },
+                            );
+                        }
                     }
                 }
-            }
-        }
+            });
+    }
+
+    /// Values of one batch item's phases, and the parallelism of each item's products: with at
+    /// least as many items as threads, one thread per item and single-threaded products (one
+    /// join per convolution instead of one per product), else the products' own threads.
+    fn batch_split(&self, phases_len: usize) -> (usize, gemm::Parallelism) {
+        let parallelism = if self.b >= rayon::current_num_threads() {
+            gemm::Parallelism::None
+        } else {
+            gemm::Parallelism::Rayon(0)
+        };
+        (phases_len / self.b, parallelism)
     }
 
     /// The output `[B, O, Ho, Wo]` and its shape: the widened rows cut to `Wo`, plus the bias.
@@ -362,38 +365,42 @@ impl Taps {
         let t = self;
         let n = t.pixels();
         let k = t.kh * t.kw;
-        for bi in 0..t.b {
-            let rhs = &wide[bi * t.o * n..(bi + 1) * t.o * n];
-            for dy in 0..t.kh {
-                for dx in 0..t.kw {
-                    let at = t.tap(bi, dy, dx, phases.len());
-                    let lhs = &weight[t.tap_weight(dy, dx)..];
-                    // dPhase[C × n] at the tap's shift += W_tapᵀ[C × O] · G[O × n]
-                    // SAFETY: `tap` checked the phase view; `rhs` holds O × n values.
-                    unsafe {
-                        gemm(
-                            [t.c, n, t.o],
-                            Strided {
-                                ptr: phases[at..].as_mut_ptr(),
-                                rs: t.plane,
-                                cs: 1,
-                            },
-                            true,
-                            Strided {
-                                ptr: lhs.as_ptr(),
-                                rs: k,
-                                cs: t.c * k,
-                            },
-                            Strided {
-                                ptr: rhs.as_ptr(),
-                                rs: n,
-                                cs: 1,
-                            },
-                        );
+        let (items, parallelism) = t.batch_split(phases.len());
+        phases
+            .par_chunks_mut(items)
+            .zip(wide.par_chunks(t.o * n))
+            .for_each(|(phases, rhs)| {
+                for dy in 0..t.kh {
+                    for dx in 0..t.kw {
+                        let at = t.tap(0, dy, dx, phases.len());
+                        let lhs = &weight[t.tap_weight(dy, dx)..];
+                        // dPhase[C × n] at the tap's shift += W_tapᵀ[C × O] · G[O × n]
+                        // SAFETY: `tap` checked the phase view; `rhs` holds O × n values.
+                        unsafe {
+                            gemm_on(
+                                parallelism,
+                                [t.c, n, t.o],
+                                Strided {
+                                    ptr: phases[at..].as_mut_ptr(),
+                                    rs: t.plane,
+                                    cs: 1,
+                                },
+                                true,
+                                Strided {
+                                    ptr: lhs.as_ptr(),
+                                    rs: k,
+                                    cs: t.c * k,
+                                },
+                                Strided {
+                                    ptr: rhs.as_ptr(),
+                                    rs: n,
+                                    cs: 1,
+                                },
+                            );
+                        }
                     }
                 }
-            }
-        }
+            });
     }
 }
 
@@ -434,7 +441,6 @@ impl Taps {
     /// across threads; the taps and batch items are split instead, one single-threaded product
     /// each, and the batch items summed after.
     fn weight_grad(&self, phases: &[f32], wide: &[f32]) -> Vec<f32> {
-        use rayon::prelude::*;
         let t = self;
         let n = t.pixels();
         let block = t.o * t.c;
