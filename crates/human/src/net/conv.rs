@@ -77,6 +77,12 @@ pub trait ConvKernels: Backend {
         grad: FloatTensor<Self>,
         options: ConvOptions<2>,
     ) -> FloatTensor<Self>;
+
+    fn conv_bias_grad(
+        x: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+    ) -> FloatTensor<Self>;
 }
 
 impl ConvKernels for Flex {
@@ -133,6 +139,19 @@ impl ConvKernels for Flex {
         let dw = super::conv_taps::weight_grad_host(&x, xs, &g, ws, &options);
         FlexTensor::from_data(TensorData::new(dw, Shape::new(ws)))
     }
+
+    /// The output gradient summed per channel, read in place (Burn's generic version
+    /// rearranges the gradient to channels first, a copy of the whole tensor).
+    fn conv_bias_grad(_x: FlexTensor, bias: FlexTensor, grad: FlexTensor) -> FlexTensor {
+        use burn::backend::TensorMetadata;
+        let [b, o, h, w]: [usize; 4] = grad.shape().dims();
+        let g = fewview_optim::flex_f32(&grad);
+        let mut db = vec![0.0f32; o];
+        for (i, plane) in g.chunks_exact(h * w).take(b * o).enumerate() {
+            db[i % o] += plane.iter().sum::<f32>();
+        }
+        FlexTensor::from_data(TensorData::new(db, bias.shape()))
+    }
 }
 
 impl ConvBackend for Flex {
@@ -180,6 +199,10 @@ mod cube {
         ) -> CubeTensor {
             Self::conv2d_weight_backward(x, weight, grad, options)
         }
+
+        fn conv_bias_grad(x: CubeTensor, bias: CubeTensor, grad: CubeTensor) -> CubeTensor {
+            Self::conv2d_bias_backward(x, bias, grad)
+        }
     }
 
     impl ConvBackend for Cube {
@@ -216,7 +239,7 @@ impl<B: ConvKernels> Backward<B, 3> for ConvBackwardStep {
         let s = ops.state;
         let [x_node, w_node, b_node] = ops.parents;
         if let Some(node) = b_node {
-            let g = B::conv2d_bias_backward(s.x.clone(), s.bias, grad.clone());
+            let g = B::conv_bias_grad(s.x.clone(), s.bias, grad.clone());
             grads.register::<B>(node.id, g);
         }
         if let Some(node) = w_node {
