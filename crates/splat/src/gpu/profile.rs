@@ -15,7 +15,9 @@ type Stages = Vec<(&'static str, Vec<f64>)>;
 static RECORDED: Mutex<Option<Stages>> = Mutex::new(None);
 
 fn recorded() -> std::sync::MutexGuard<'static, Option<Stages>> {
-    RECORDED.lock().unwrap_or_else(|e| e.into_inner())
+    RECORDED
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// Starts recording (clearing earlier records).

@@ -228,7 +228,7 @@ fn wide_scene(n: usize) -> ([Vec<f32>; 5], RenderView) {
     let scene = Scene::random_with_opacity(21, n, 16, (-3.0, 2.0));
     let mut host = scene.to_f32();
     // Shrink the Gaussians so that the crowd stays a few hundred deep per tile.
-    for s in host[1].iter_mut() {
+    for s in &mut host[1] {
         *s -= 1.5;
     }
     let base = camera();
