@@ -275,9 +275,9 @@ impl Taps {
         let t = self;
         let n = t.pixels();
         let k = t.kh * t.kw;
-        let (items, parallelism) = t.batch_split(phases.len());
+        let (item_len, parallelism) = t.batch_split(phases.len());
         wide.par_chunks_mut(t.o * n)
-            .zip(phases.par_chunks(items))
+            .zip(phases.par_chunks(item_len))
             .for_each(|(dst, phases)| {
                 for dy in 0..t.kh {
                     for dx in 0..t.kw {
@@ -365,9 +365,9 @@ impl Taps {
         let t = self;
         let n = t.pixels();
         let k = t.kh * t.kw;
-        let (items, parallelism) = t.batch_split(phases.len());
+        let (item_len, parallelism) = t.batch_split(phases.len());
         phases
-            .par_chunks_mut(items)
+            .par_chunks_mut(item_len)
             .zip(wide.par_chunks(t.o * n))
             .for_each(|(phases, rhs)| {
                 for dy in 0..t.kh {
