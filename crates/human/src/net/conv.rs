@@ -147,7 +147,8 @@ impl ConvKernels for Flex {
         let [b, o, h, w]: [usize; 4] = grad.shape().dims();
         let g = fewview_optim::flex_f32(&grad);
         let mut db = vec![0.0f32; o];
-        for (i, plane) in g.chunks_exact(h * w).take(b * o).enumerate() {
+        // A zero-sized output has no planes and a zero gradient (`chunks_exact(0)` would panic).
+        for (i, plane) in g.chunks_exact((h * w).max(1)).take(b * o).enumerate() {
             db[i % o] += plane.iter().sum::<f32>();
         }
         FlexTensor::from_data(TensorData::new(db, bias.shape()))
