@@ -265,11 +265,17 @@ pub struct LighterGlue {
 }
 
 impl LighterGlue {
-    /// Loads `xfeat-lighterglue.pt` (its `matcher.*` tensors) on the default CPU device.
+    /// Loads `xfeat-lighterglue.pt` (its `matcher.*` tensors) on the CPU (Burn's `flex`
+    /// backend, named explicitly: Burn's default device is a GPU in a build that enables one).
     pub fn load(path: &Path) -> Result<Self> {
         crate::weights::require(path)?;
         let w = StateDict::read(path)?;
-        Self::new(&w, &Device::default())
+        Self::new(&w, &Device::flex())
+    }
+
+    /// The device the matcher runs on.
+    pub fn device(&self) -> &Device {
+        &self.device
     }
 
     /// Loads the weights `scripts/setup.sh` fetched ([`crate::weights::lighterglue_weights`]).

@@ -6,6 +6,7 @@
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
+use burn::tensor::Device;
 use fewview_match::{DetectOptions, Features, GlueOptions, LighterGlue, XFeat};
 use fewview_scene::Image;
 use serde_json::Value;
@@ -206,6 +207,15 @@ fn semi_dense_star_matches_equal_the_reference() {
             ours.len()
         );
     }
+}
+
+/// The networks load on the CPU backend they were checked on, also in a build with the `gpu`
+/// feature of another crate, where Burn's default device is the GPU.
+#[test]
+fn the_networks_load_on_the_cpu() {
+    assert_eq!(xfeat().device(), &Device::flex());
+    let glue = LighterGlue::load_default().unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(glue.device(), &Device::flex());
 }
 
 #[test]

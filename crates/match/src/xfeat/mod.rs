@@ -50,9 +50,10 @@ pub struct XFeat {
 }
 
 impl XFeat {
-    /// Loads `xfeat.pt` (the reference's state dict) on the default CPU device.
+    /// Loads `xfeat.pt` (the reference's state dict) on the CPU (Burn's `flex` backend, named
+    /// explicitly: Burn's default device is a GPU in a build that enables one).
     pub fn load(path: &Path) -> Result<Self> {
-        Self::load_on(path, &Device::default())
+        Self::load_on(path, &Device::flex())
     }
 
     /// Loads the weights `scripts/setup.sh` fetched ([`crate::weights::xfeat_weights`]).
@@ -69,6 +70,11 @@ impl XFeat {
             fine: FineMatcher::new(&weights, device)?,
             device: device.clone(),
         })
+    }
+
+    /// The device the network runs on.
+    pub fn device(&self) -> &Device {
+        &self.device
     }
 
     /// Sparse keypoints and descriptors of one image (`detectAndCompute`).
