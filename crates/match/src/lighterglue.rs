@@ -273,14 +273,14 @@ impl LighterGlue {
         Self::new(&w, &Device::flex())
     }
 
-    /// The device the matcher runs on.
-    pub fn device(&self) -> &Device {
-        &self.device
-    }
-
     /// Loads the weights `scripts/setup.sh` fetched ([`crate::weights::lighterglue_weights`]).
     pub fn load_default() -> Result<Self> {
         Self::load(&crate::weights::lighterglue_weights())
+    }
+
+    /// The device the matcher runs on.
+    pub fn device(&self) -> &Device {
+        &self.device
     }
 
     fn new(w: &StateDict, dev: &Device) -> Result<Self> {
