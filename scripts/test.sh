@@ -14,33 +14,33 @@ cd "$(dirname "$0")/.."
 
 bash scripts/setup.sh
 
-gpu=0
-if [ -n "${FEWVIEW_DATA:-}" ] || [ "${FEWVIEW_GPU_TESTS:-0}" = 1 ]; then
-  gpu=1
-fi
-
+# Test arguments and build features of each tier.
+ignored=()
+features=()
 if [ -n "${FEWVIEW_DATA:-}" ]; then
   FEWVIEW_DATA=$(cd "$FEWVIEW_DATA" && pwd)
   export FEWVIEW_DATA
+  ignored=(--include-ignored)
   echo "data tests: on (FEWVIEW_DATA=$FEWVIEW_DATA)"
 else
   echo "data tests: off (set FEWVIEW_DATA to ../shared/data to run them)"
-fi
-
-if [ "$gpu" = 0 ]; then
-  echo "GPU tests: off (set FEWVIEW_DATA, or FEWVIEW_GPU_TESTS=1, to run them)"
-  exec cargo test --release --workspace --no-fail-fast -- "$@"
 fi
 
 # The GPU code runs on the first adapter wgpu finds (Mesa's lavapipe on a machine without a
 # GPU): the rasterizer's parity tests against the CPU rasterizer and a GPU training run (splat),
 # and the PoseGaussian network against the CPU (human). Every CPU test keeps its CPU device:
 # the code names its device, never Burn's default (a GPU in this build).
-echo "GPU tests: on (feature gpu of the splat and human crates, built with the workspace)"
-features=(--features fewview-splat/gpu,fewview-human/gpu)
-if [ -n "${FEWVIEW_DATA:-}" ]; then
-  exec cargo test --release --workspace "${features[@]}" --no-fail-fast -- --include-ignored "$@"
+if [ -n "${FEWVIEW_DATA:-}" ] || [ "${FEWVIEW_GPU_TESTS:-0}" = 1 ]; then
+  features=(--features fewview-splat/gpu,fewview-human/gpu)
+  echo "GPU tests: on (feature gpu of the splat and human crates, built with the workspace)"
+else
+  echo "GPU tests: off (set FEWVIEW_DATA, or FEWVIEW_GPU_TESTS=1, to run them)"
 fi
-cargo test --release --workspace "${features[@]}" --no-fail-fast -- "$@"
-# The GPU tests that wait for a full run (FEWVIEW_DATA runs them with every ignored test).
-cargo test --release --workspace "${features[@]}" --no-fail-fast -- --ignored gpu "$@"
+
+cargo test --release --workspace "${features[@]}" --no-fail-fast -- "${ignored[@]}" "$@"
+
+# Without the data, the GPU tests that wait for a full run (the data tier runs them with every
+# ignored test above).
+if [ -z "${FEWVIEW_DATA:-}" ] && [ "${FEWVIEW_GPU_TESTS:-0}" = 1 ]; then
+  cargo test --release --workspace "${features[@]}" --no-fail-fast -- --ignored gpu "$@"
+fi
