@@ -6,6 +6,7 @@
 //! step without a word.
 
 use std::borrow::Cow;
+use std::cell::Cell;
 
 use burn::backend::Flex;
 use burn::backend::flex::FlexTensor;
@@ -23,11 +24,28 @@ pub struct ReadbackError {
     pub reason: String,
 }
 
+thread_local! {
+    static READ_BACKS: Cell<u64> = const { Cell::new(0) };
+}
+
+/// Reads of tensor values to the host made on this thread: every [`f32_values`] and every read
+/// another crate reports through [`note_read_back`]. Each one waits for the device; a GPU
+/// training step should make as few as it can, and tests count them.
+pub fn read_backs() -> u64 {
+    READ_BACKS.get()
+}
+
+/// Counts one read to the host in [`read_backs`] (for reads made without [`f32_values`]).
+pub fn note_read_back() {
+    READ_BACKS.set(READ_BACKS.get() + 1);
+}
+
 /// The values of `tensor`, row-major, or an error naming it as `what`.
 pub fn f32_values<const D: usize>(
     tensor: Tensor<D>,
     what: &str,
 ) -> Result<Vec<f32>, ReadbackError> {
+    note_read_back();
     let (dtype, shape) = (tensor.dtype(), tensor.dims().to_vec());
     let error = |reason: String| ReadbackError {
         what: what.to_string(),

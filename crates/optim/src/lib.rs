@@ -9,6 +9,6 @@ pub mod rows;
 pub mod schedule;
 
 pub use adam::{AdamConfig, AdamState};
-pub use host::{ReadbackError, f32_values, flex_f32};
+pub use host::{ReadbackError, f32_values, flex_f32, note_read_back, read_backs};
 pub use rows::retain_rows;
 pub use schedule::ExpSchedule;

@@ -129,6 +129,10 @@ fn tile_range(ranges: &[u32], tile: usize) -> (u32, u32) {
 
 /// Renders `image` (`[H, W, 5]`: RGB + background, expected depth, alpha) and keeps, per pixel,
 /// the final transmittance and the 1-based rank of the last splat that contributed.
+///
+/// When the render's `pair_count[0]` pairs did not fit in its `capacity` slots, every image value is
+/// `unfit` instead (the host passes NaN, so that any loss of the image is NaN and the render
+/// cannot pass for a good one; see [`super::pairs`]).
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 pub fn blend_forward(
@@ -137,12 +141,15 @@ pub fn blend_forward(
     sorted_slots: &[u32],
     slot_gaussian: &[u32],
     background: &[f32],
+    pair_count: &[u32],
     image: &mut [f32],
     final_t: &mut [f32],
     last: &mut [u32],
     width: u32,
     height: u32,
     tiles_x: u32,
+    capacity: u32,
+    unfit: f32,
 ) {
     let (tile, px, py) = tile_and_pixel(tiles_x);
     let inside = px < width && py < height;
@@ -212,6 +219,12 @@ pub fn blend_forward(
         image[5 * p + 4] = 1.0 - t;
         final_t[p] = t;
         last[p] = last_rank;
+        if pair_count[0] > capacity {
+            #[unroll]
+            for c in 0..5 {
+                image[5 * p + c] = unfit;
+            }
+        }
     }
 }
 

@@ -30,7 +30,9 @@ pub fn alloc(client: &Client, len: usize) -> Handle {
 
 /// Reads the one `u32` at `index` back to the host (waits for the device), copying 4 bytes
 /// rather than the whole buffer.
+/// Counted in [`fewview_optim::read_backs`].
 pub fn read_u32_at(client: &Client, handle: &Handle, index: usize) -> u32 {
+    fewview_optim::note_read_back();
     let bytes = client.read_one_unchecked(handle.clone().offset_start(4 * index as u64));
     u32::from_bytes(&bytes)[0]
 }

@@ -5,7 +5,8 @@
 //! Stages, each in its own module, the twins of [`crate::raster`]'s:
 //! 1. [`project`]: per Gaussian, the EWA projection, conic, SH colour, opacity, tile rectangle;
 //! 2. [`sort`] (on [`scan`]) and [`tiles`]: a stable radix sort by depth, one pair per covered
-//!    tile, a stable radix sort of the pairs by tile, each tile's range;
+//!    tile, a stable radix sort of the pairs by tile, each tile's range, in buffers sized by
+//!    [`pairs`];
 //! 3. [`blend`]: per 16×16 tile, front-to-back blending with the same thresholds.
 //!
 //! The backward pass runs them in reverse with exact gradients and without floating-point
@@ -15,6 +16,7 @@
 
 pub mod blend;
 mod launch;
+pub mod pairs;
 pub mod profile;
 pub mod project;
 pub mod render;
@@ -26,4 +28,5 @@ pub mod tiles;
 #[cfg(test)]
 mod tests;
 
+pub use pairs::{PairCheck, deferred};
 pub use render::{GpuState, backward, forward};

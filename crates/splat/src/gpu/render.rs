@@ -1,7 +1,7 @@
 //! The device rasterizer's host side: the order of the kernel launches for one render and its
 //! backward pass, and the buffers the backward pass keeps (the twin of
-//! [`crate::raster::render`]). One value comes back to the host per render, the number of
-//! (tile, Gaussian) pairs, which sizes the pair buffers.
+//! [`crate::raster::render`]). Nothing comes back to the host inside [`super::pairs::deferred`];
+//! elsewhere one value does, the number of (tile, Gaussian) pairs, which sizes the pair buffers.
 
 use burn::backend::TensorMetadata;
 use burn::tensor::{DType, Shape};
@@ -14,11 +14,12 @@ use cubecl::server::Handle;
 
 use super::blend::{TILE_UNITS, blend_backward, blend_forward};
 use super::launch::{alloc, arg, cubes_for, read_u32_at, upload_f32};
+use super::pairs::{self, Pending};
 use super::profile::StageClock;
 use super::project::{CameraBuffer, GRAD_FLOATS, SPLAT_FLOATS, project_backward, project_forward};
 use super::scan::exclusive_scan;
-use super::sort::{bits_for, indices, sort_pairs};
-use super::tiles::{emit_pairs, gather_pair_grads, tile_counts, tile_ranges};
+use super::sort::{bits_for, indices, sort_counted_pairs, sort_pairs};
+use super::tiles::{emit_pairs, gather_pair_grads, pair_total, tile_counts, tile_ranges};
 use crate::op::RenderView;
 use crate::raster::render::OUT_CHANNELS;
 use crate::raster::{TILE, sh_degree_of};
@@ -64,7 +65,10 @@ pub struct GpuState {
     splats: Handle,
     order: Handle,
     offsets: Handle,
-    pairs: usize,
+    /// One `u32`: the number of pairs, which may exceed `capacity` (see [`super::pairs`]).
+    total: Handle,
+    /// Slots of the pair buffers.
+    capacity: usize,
     sorted_slots: Handle,
     slot_gaussian: Handle,
     ranges: Handle,
@@ -127,7 +131,8 @@ pub fn forward(tensors: [CubeTensor; 6], view: &RenderView) -> (CubeTensor, Cube
         splats: alloc(&client, SPLAT_FLOATS * n),
         order: alloc(&client, n),
         offsets: alloc(&client, n + 1),
-        pairs: 0,
+        total: alloc(&client, 1),
+        capacity: 0,
         sorted_slots: alloc(&client, 1),
         slot_gaussian: alloc(&client, 1),
         ranges: alloc(&client, 1),
@@ -180,7 +185,8 @@ fn project(s: &mut GpuState, radii: &Handle, clock: &mut StageClock) {
     clock.stage("depth sort");
 }
 
-/// Tile binning: pair offsets per depth rank, the pairs sorted by tile, and each tile's range.
+/// Tile binning: pair offsets per depth rank, the pairs sorted by tile, and each tile's range,
+/// in as many pair slots as [`pairs::capacity`] gives (or, read now, as there are pairs).
 fn bin(s: &mut GpuState, clock: &mut StageClock) {
     let (client, n) = (s.client.clone(), s.n);
     let (tiles_x, tiles_y) = s.tiles();
@@ -196,12 +202,34 @@ fn bin(s: &mut GpuState, clock: &mut StageClock) {
         n as u32,
     );
     s.offsets = exclusive_scan(&client, &counts, n + 1);
-    s.pairs = read_u32_at(&client, &s.offsets, n) as usize;
+    pair_total::launch(
+        &client,
+        CubeCount::Static(1, 1, 1),
+        CubeDim::new_1d(1),
+        arg(&s.offsets, n + 1),
+        arg(&s.total, 1),
+        n as u32,
+    );
+    s.capacity = match pairs::capacity() {
+        Some(capacity) => {
+            pairs::leave(Pending {
+                client: client.clone(),
+                total: s.total.clone(),
+                capacity,
+            });
+            capacity
+        }
+        None => {
+            let count = read_u32_at(&client, &s.total, 0) as usize;
+            pairs::needed(count);
+            count
+        }
+    };
     clock.stage("tile counts");
-    let pairs = s.pairs;
-    let (keys, slots) = (alloc(&client, pairs), alloc(&client, pairs));
-    s.slot_gaussian = alloc(&client, pairs);
-    if n > 0 && pairs > 0 {
+    let capacity = s.capacity;
+    let (keys, slots) = (alloc(&client, capacity), alloc(&client, capacity));
+    s.slot_gaussian = alloc(&client, capacity);
+    if n > 0 && capacity > 0 {
         emit_pairs::launch(
             &client,
             cubes_for(n, LINEAR_UNITS),
@@ -209,16 +237,23 @@ fn bin(s: &mut GpuState, clock: &mut StageClock) {
             arg(&s.order, n),
             arg(&s.rects, 4 * n),
             arg(&s.offsets, n + 1),
-            arg(&keys, pairs),
-            arg(&slots, pairs),
-            arg(&s.slot_gaussian, pairs),
+            arg(&keys, capacity),
+            arg(&slots, capacity),
+            arg(&s.slot_gaussian, capacity),
             n as u32,
             tiles_x as u32,
+            capacity as u32,
         );
     }
     clock.stage("pair emission");
-    let (sorted_keys, sorted_slots) =
-        sort_pairs(&client, &keys, &slots, pairs, bits_for(num_tiles));
+    let (sorted_keys, sorted_slots) = sort_counted_pairs(
+        &client,
+        &keys,
+        &slots,
+        capacity,
+        Some(&s.total),
+        bits_for(num_tiles),
+    );
     s.sorted_slots = sorted_slots;
     clock.stage("tile sort");
     s.ranges = alloc(&client, 2 * num_tiles);
@@ -226,9 +261,10 @@ fn bin(s: &mut GpuState, clock: &mut StageClock) {
         &client,
         cubes_for(num_tiles, LINEAR_UNITS),
         CubeDim::new_1d(LINEAR_UNITS as u32),
-        arg(&sorted_keys, pairs),
+        arg(&sorted_keys, capacity),
+        arg(&s.total, 1),
         arg(&s.ranges, 2 * num_tiles),
-        pairs as u32,
+        capacity as u32,
         num_tiles as u32,
     );
     clock.stage("tile ranges");
@@ -244,7 +280,7 @@ fn tile_cubes(s: &GpuState) -> (CubeCount, CubeDim) {
 
 fn blend(s: &GpuState, image: &Handle) {
     let (count, dim) = tile_cubes(s);
-    let (n, pairs, pixels) = (s.n, s.pairs, s.width * s.height);
+    let (n, pairs, pixels) = (s.n, s.capacity, s.width * s.height);
     let (tiles_x, tiles_y) = s.tiles();
     blend_forward::launch(
         &s.client,
@@ -255,12 +291,15 @@ fn blend(s: &GpuState, image: &Handle) {
         arg(&s.sorted_slots, pairs),
         arg(&s.slot_gaussian, pairs),
         arg(&s.background, 3),
+        arg(&s.total, 1),
         arg(image, pixels * OUT_CHANNELS),
         arg(&s.final_t, pixels),
         arg(&s.last, pixels),
         s.width as u32,
         s.height as u32,
         tiles_x as u32,
+        pairs as u32,
+        f32::NAN,
     );
 }
 
@@ -288,7 +327,7 @@ fn reduction(client: &Client) -> (bool, bool) {
 pub fn backward(s: &GpuState, grad_image: CubeTensor) -> [CubeTensor; 6] {
     let client = &s.client;
     let grad_image = input(grad_image, "the image gradient");
-    let (n, pairs, pixels) = (s.n, s.pairs, s.width * s.height);
+    let (n, pairs, pixels) = (s.n, s.capacity, s.width * s.height);
     let (tiles_x, tiles_y) = s.tiles();
     let pair_grads = alloc(client, GRAD_FLOATS * pairs);
     let (plane, grouped) = reduction(client);
@@ -327,6 +366,7 @@ pub fn backward(s: &GpuState, grad_image: CubeTensor) -> [CubeTensor; 6] {
             arg(&pair_grads, GRAD_FLOATS * pairs),
             arg(&splat_grads, GRAD_FLOATS * n),
             n as u32,
+            pairs as u32,
             GRAD_FLOATS,
         );
         clock.stage("gradient gather");

@@ -24,15 +24,35 @@ const _: () = assert!(
     "the scatter kernel's out-of-range digit is 256, and its unit u scans digit u"
 );
 
+/// The number of elements a pass sorts: `len`, or, when `counted`, the smaller of `len` and the
+/// count the device holds in `count[0]` (the elements after it are left out).
+#[cube]
+fn sorted_len(len: u32, count: &[u32], #[comptime] counted: bool) -> u32 {
+    let mut active = len;
+    if counted {
+        active = count[0].min(len);
+    }
+    active
+}
+
 /// Counts each digit in each block into `hist[digit * blocks + block]`.
 #[cube(launch)]
-fn digit_histogram(keys: &[u32], hist: &mut [u32], len: u32, shift: u32, blocks: u32) {
+#[allow(clippy::too_many_arguments)]
+fn digit_histogram(
+    keys: &[u32],
+    count: &[u32],
+    hist: &mut [u32],
+    len: u32,
+    shift: u32,
+    blocks: u32,
+    #[comptime] counted: bool,
+) {
     let counts = Shared::<[Atomic<u32>]>::new_slice(BINS);
     let unit = UNIT_POS as usize;
     counts[unit].store(0u32);
     sync_cube();
     let i = ABSOLUTE_POS;
-    if i < len as usize {
+    if i < sorted_len(len, count, counted) as usize {
         let digit = (keys[i] >> shift) & (BINS as u32 - 1);
         counts[digit as usize].fetch_add(1u32);
     }
@@ -55,12 +75,14 @@ const SEGMENTS: usize = SORT_BLOCK / SEGMENT;
 fn stable_scatter(
     keys: &[u32],
     values: &[u32],
+    count: &[u32],
     starts: &[u32],
     keys_out: &mut [u32],
     values_out: &mut [u32],
     len: u32,
     shift: u32,
     blocks: u32,
+    #[comptime] counted: bool,
 ) {
     let mut digits = Shared::<[u32]>::new_slice(SORT_BLOCK);
     // `before[segment * BINS + digit]`: elements with the digit in the segment, then (after the
@@ -73,7 +95,7 @@ fn stable_scatter(
         before[s * BINS + unit].store(0u32);
     }
     let i = ABSOLUTE_POS;
-    let inside = i < len as usize;
+    let inside = i < sorted_len(len, count, counted) as usize;
     let mut key = 0u32;
     // Out-of-range units take a digit no element has, so they never count as "earlier".
     let mut digit = 256u32;
@@ -140,6 +162,25 @@ pub fn sort_pairs(
     len: usize,
     key_bits: u32,
 ) -> (Handle, Handle) {
+    sort_counted_pairs(client, keys, values, len, None, key_bits)
+}
+
+/// [`sort_pairs`] of the first `count[0]` pairs (at most `len`) where `count` is a one-element
+/// device buffer: the number of pairs need not come back to the host. The sorted pairs fill
+/// the first `count[0]` slots of the outputs; the slots after them hold nothing meaningful.
+pub fn sort_counted_pairs(
+    client: &Client,
+    keys: &Handle,
+    values: &Handle,
+    len: usize,
+    count: Option<&Handle>,
+    key_bits: u32,
+) -> (Handle, Handle) {
+    // Without a count the kernels never read it; the keys stand in for the binding.
+    let (count, counted) = match count {
+        Some(count) => (count, true),
+        None => (keys, false),
+    };
     let mut keys = keys.clone();
     let mut values = values.clone();
     if len <= 1 {
@@ -154,10 +195,12 @@ pub fn sort_pairs(
             cubes_for(len, SORT_BLOCK),
             CubeDim::new_1d(SORT_BLOCK as u32),
             arg(&keys, len),
+            arg(count, 1),
             arg(&hist, BINS * blocks),
             len as u32,
             shift,
             blocks as u32,
+            counted,
         );
         let starts = exclusive_scan(client, &hist, BINS * blocks);
         let (keys_out, values_out) = (alloc(client, len), alloc(client, len));
@@ -167,12 +210,14 @@ pub fn sort_pairs(
             CubeDim::new_1d(SORT_BLOCK as u32),
             arg(&keys, len),
             arg(&values, len),
+            arg(count, 1),
             arg(&starts, BINS * blocks),
             arg(&keys_out, len),
             arg(&values_out, len),
             len as u32,
             shift,
             blocks as u32,
+            counted,
         );
         keys = keys_out;
         values = values_out;

@@ -10,10 +10,11 @@ use cubecl::server::Handle;
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 
+use super::pairs;
 use super::scan::exclusive_scan;
-use super::sort::sort_pairs;
+use super::sort::{sort_counted_pairs, sort_pairs};
 use crate::op::tests::{paired_gradients, tensors, values};
-use crate::op::{RenderView, render};
+use crate::op::{GaussianTensors, RenderView, render, render_deferred};
 use crate::raster::render::{OUT_CHANNELS, backward, forward};
 use crate::raster::tests::{Scene, camera};
 use crate::raster::{GaussianRefs, RenderCamera, RenderSettings};
@@ -267,4 +268,113 @@ fn images_and_gradients_match_the_cpu_at_100k_gaussians() {
         gradient: 2e-3,
     };
     check_parity(&host, 16, &view, &tol);
+}
+
+#[test]
+fn a_counted_sort_sorts_the_pairs_the_device_counts_and_no_more() {
+    let client = client();
+    let (len, count) = (5000, 3001);
+    let keys = random_u32(17, len, 900);
+    let values: Vec<u32> = (0..len as u32).collect();
+    let (k, v) = sort_counted_pairs(
+        &client,
+        &upload_u32(&client, &keys),
+        &upload_u32(&client, &values),
+        len,
+        Some(&upload_u32(&client, &[count as u32])),
+        10,
+    );
+    let mut want: Vec<(u32, u32)> = keys[..count].iter().copied().zip(values).collect();
+    want.sort_by_key(|&(key, _)| key);
+    let got: Vec<(u32, u32)> = read_u32(&client, &k, count)
+        .into_iter()
+        .zip(read_u32(&client, &v, count))
+        .collect();
+    assert!(got == want, "not a stable sort of the first {count} pairs");
+}
+
+/// The demo-scene parity view and its Gaussians as tensors on the GPU.
+fn small_render_inputs() -> (GaussianTensors, RenderView, usize) {
+    let (n, k) = (30, 9);
+    let scene = Scene::random(11, n, k);
+    let view = RenderView {
+        camera: camera(),
+        settings: RenderSettings {
+            background: [0.1, 0.2, 0.3],
+            sh_degree: 2,
+            near_plane: 0.2,
+        },
+    };
+    (tensors(&scene.to_f32(), n, k, &gpu()), view, n)
+}
+
+#[test]
+fn a_deferred_render_reads_nothing_and_one_without_room_is_nan_until_made_again() {
+    let (g, view, n) = small_render_inputs();
+    let probe = || Tensor::<2>::zeros([n, 2], &gpu());
+    let exact = values(render(&g, probe(), &view).image);
+    assert!(exact.iter().all(|v| v.is_finite()));
+
+    pairs::set_capacity(1);
+    let before = fewview_optim::read_backs();
+    let (out, check) = render_deferred(&g, probe(), &view);
+    assert_eq!(
+        fewview_optim::read_backs(),
+        before,
+        "a deferred render waited"
+    );
+    assert!(values(out.image).iter().all(|v| v.is_nan()));
+    assert!(check.overflowed());
+
+    // The check raised this thread's capacity: the same render now fits without a read.
+    let before = fewview_optim::read_backs();
+    let (out, check) = render_deferred(&g, probe(), &view);
+    assert_eq!(
+        fewview_optim::read_backs(),
+        before,
+        "a deferred render waited"
+    );
+    assert_eq!(values(out.image), exact);
+    assert!(!check.overflowed());
+}
+
+#[test]
+fn a_gpu_training_step_reads_back_only_its_loss() {
+    use fewview_scene::synthetic::{DemoOptions, demo_dataset};
+
+    use crate::pipeline::{RunConfig, initial_model};
+    use crate::train::{TrainConfig, TrainView, Trainer};
+
+    let ds = demo_dataset(&DemoOptions {
+        width: 64,
+        height: 48,
+        views: 4,
+        train: vec![0, 2],
+        ..DemoOptions::default()
+    });
+    // Densification starts after these steps; opacity resets and SH growth stay on the device.
+    let mut cfg = RunConfig::new(TrainConfig::sparse_view(50));
+    cfg.init_points = 500;
+    let device = gpu();
+    let views = ds
+        .train_views()
+        .map(|v| TrainView::new(&v.name, RenderCamera::from(&v.camera), &v.image, &device))
+        .collect();
+    let model = initial_model(&ds, &cfg).unwrap();
+    let (_, extent) = ds.camera_extent();
+    let mut trainer = Trainer::new(cfg.train, model, views, extent as f32, device).unwrap();
+    let mut reads = Vec::new();
+    for step in 0..6 {
+        if step == 3 {
+            // Too few pair slots: the loss is NaN, the check reads the count, and the
+            // render made again reads its count and then the loss.
+            pairs::set_capacity(1);
+        }
+        let before = fewview_optim::read_backs();
+        let progress = trainer.step().unwrap();
+        assert!(progress.loss.is_finite());
+        reads.push(fewview_optim::read_backs() - before);
+    }
+    // The first step reads its pair count (no capacity yet) and its loss.
+    assert_eq!(reads, [2, 1, 1, 4, 1, 1]);
 }

@@ -19,7 +19,7 @@ use super::densify::{
 use super::resident::{Gradients, ResidentState, StepRates};
 use crate::loss::photometric_loss;
 use crate::model::{GaussianModel, inverse_sigmoid};
-use crate::op::{GaussianTensors, RenderTensors, RenderView, render};
+use crate::op::{GaussianTensors, RenderTensors, RenderView, render, render_deferred};
 use crate::raster::{RenderCamera, RenderSettings};
 
 /// A training image as the loop uses it.
@@ -444,7 +444,7 @@ impl Trainer {
         };
         let n = gaussians.opacity_logits.dims()[0];
         let probe = Tensor::<2>::zeros([n, 2], &self.device).require_grad();
-        let (loss, loss_value, radii, transform) = self.loss(it, &gaussians, &probe)?;
+        let (loss, loss_value, radii, transform) = self.loss(it, &gaussians, &probe, true)?;
         let grads = loss.backward();
         if let Some((view, m)) = transform {
             self.step_appearance(it, view, m.grad(&grads))?;
@@ -504,26 +504,33 @@ impl Trainer {
     /// The iteration's loss (photometric plus the terms), its value, the render's screen
     /// radii, and the trained view's colour transform when the run learns one. A loss that is
     /// not finite stops training.
+    ///
+    /// With `defer`, the render does not wait for its pair count on a GPU (see
+    /// [`render_deferred`]); the loss read-back is where a render that ran out of pair slots
+    /// shows (its loss is NaN), and the loss is then computed again with the count read at once.
     #[allow(clippy::type_complexity)]
     fn loss(
         &mut self,
         it: usize,
         gaussians: &GaussianTensors,
         probe: &Tensor<2>,
+        defer: bool,
     ) -> Result<(Tensor<1>, f32, Tensor<1>, Option<(usize, Tensor<2>)>), TrainError> {
         let view_index = self.view_of(it);
         let mut settings = self.settings(it);
         let (background, target) = self.background_and_target(it, &self.views[view_index]);
         settings.background = background;
         let view = &self.views[view_index];
-        let out = render(
-            gaussians,
-            probe.clone(),
-            &RenderView {
-                camera: view.camera.clone(),
-                settings: settings.clone(),
-            },
-        );
+        let render_view = RenderView {
+            camera: view.camera.clone(),
+            settings: settings.clone(),
+        };
+        let (out, pairs) = if defer {
+            let (out, pairs) = render_deferred(gaussians, probe.clone(), &render_view);
+            (out, Some(pairs))
+        } else {
+            (render(gaussians, probe.clone(), &render_view), None)
+        };
         let [h, w, _] = out.image.dims();
         let mut rgb = out.image.clone().slice([0..h, 0..w, 0..3]);
         let transform = self
@@ -566,6 +573,9 @@ impl Trainer {
             .copied()
             .unwrap_or(f32::NAN);
         if !loss_value.is_finite() {
+            if pairs.is_some_and(|p| p.overflowed()) {
+                return self.loss(it, gaussians, probe, false);
+            }
             return Err(TrainError::Diverged {
                 iteration: it,
                 loss: loss_value,
