@@ -210,21 +210,7 @@ fn bin(s: &mut GpuState, clock: &mut StageClock) {
         arg(&s.total, 1),
         n as u32,
     );
-    s.capacity = match pairs::capacity() {
-        Some(capacity) => {
-            pairs::leave(Pending {
-                client: client.clone(),
-                total: s.total.clone(),
-                capacity,
-            });
-            capacity
-        }
-        None => {
-            let count = read_u32_at(&client, &s.total, 0) as usize;
-            pairs::needed(count);
-            count
-        }
-    };
+    s.capacity = pair_capacity(s);
     clock.stage("tile counts");
     let capacity = s.capacity;
     let (keys, slots) = (alloc(&client, capacity), alloc(&client, capacity));
@@ -268,6 +254,26 @@ fn bin(s: &mut GpuState, clock: &mut StageClock) {
         num_tiles as u32,
     );
     clock.stage("tile ranges");
+}
+
+/// The render's pair slots: a deferred render's capacity (its count left on the device for the
+/// check), or the count of pairs, read now.
+fn pair_capacity(s: &GpuState) -> usize {
+    match pairs::capacity() {
+        Some(capacity) => {
+            pairs::leave(Pending {
+                client: s.client.clone(),
+                total: s.total.clone(),
+                capacity,
+            });
+            capacity
+        }
+        None => {
+            let count = read_u32_at(&s.client, &s.total, 0) as usize;
+            pairs::needed(count);
+            count
+        }
+    }
 }
 
 fn tile_cubes(s: &GpuState) -> (CubeCount, CubeDim) {

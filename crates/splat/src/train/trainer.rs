@@ -444,7 +444,7 @@ impl Trainer {
         };
         let n = gaussians.opacity_logits.dims()[0];
         let probe = Tensor::<2>::zeros([n, 2], &self.device).require_grad();
-        let (loss, loss_value, radii, transform) = self.loss(it, &gaussians, &probe, true)?;
+        let (loss, loss_value, radii, transform) = self.loss(it, &gaussians, &probe)?;
         let grads = loss.backward();
         if let Some((view, m)) = transform {
             self.step_appearance(it, view, m.grad(&grads))?;
@@ -505,32 +505,29 @@ impl Trainer {
     /// radii, and the trained view's colour transform when the run learns one. A loss that is
     /// not finite stops training.
     ///
-    /// With `defer`, the render does not wait for its pair count on a GPU (see
-    /// [`render_deferred`]); the loss read-back is where a render that ran out of pair slots
-    /// shows (its loss is NaN), and the loss is then computed again with the count read at once.
+    /// On a GPU the render does not wait for its pair count (see [`render_deferred`]): the loss
+    /// read-back is where a render that ran out of pair slots shows (its loss is NaN), and the
+    /// check that tells it from a divergence makes room, so the loss computed again fits.
     #[allow(clippy::type_complexity)]
     fn loss(
         &mut self,
         it: usize,
         gaussians: &GaussianTensors,
         probe: &Tensor<2>,
-        defer: bool,
     ) -> Result<(Tensor<1>, f32, Tensor<1>, Option<(usize, Tensor<2>)>), TrainError> {
         let view_index = self.view_of(it);
         let mut settings = self.settings(it);
         let (background, target) = self.background_and_target(it, &self.views[view_index]);
         settings.background = background;
         let view = &self.views[view_index];
-        let render_view = RenderView {
-            camera: view.camera.clone(),
-            settings: settings.clone(),
-        };
-        let (out, pairs) = if defer {
-            let (out, pairs) = render_deferred(gaussians, probe.clone(), &render_view);
-            (out, Some(pairs))
-        } else {
-            (render(gaussians, probe.clone(), &render_view), None)
-        };
+        let (out, pairs) = render_deferred(
+            gaussians,
+            probe.clone(),
+            &RenderView {
+                camera: view.camera.clone(),
+                settings: settings.clone(),
+            },
+        );
         let [h, w, _] = out.image.dims();
         let mut rgb = out.image.clone().slice([0..h, 0..w, 0..3]);
         let transform = self
@@ -573,8 +570,8 @@ impl Trainer {
             .copied()
             .unwrap_or(f32::NAN);
         if !loss_value.is_finite() {
-            if pairs.is_some_and(|p| p.overflowed()) {
-                return self.loss(it, gaussians, probe, false);
+            if pairs.overflowed() {
+                return self.loss(it, gaussians, probe);
             }
             return Err(TrainError::Diverged {
                 iteration: it,
