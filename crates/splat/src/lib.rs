@@ -28,7 +28,7 @@ pub mod train;
 
 pub use device::{ComputeDevice, DeviceError};
 pub use model::GaussianModel;
-pub use op::{GaussianTensors, PairCheck, RenderTensors, RenderView, render, render_deferred};
+pub use op::{GaussianTensors, PairCountCheck, RenderTensors, RenderView, render, render_deferred};
 pub use pipeline::{RunConfig, render_path, train_run};
 pub use ply::{read_ply, write_ply};
 pub use train::{TrainConfig, Trainer};

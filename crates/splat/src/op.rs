@@ -328,30 +328,30 @@ pub fn render(gaussians: &GaussianTensors, means2d: Tensor<2>, view: &RenderView
 
 /// [`render`] without waiting for the device: on the GPU the render's pair buffers take the
 /// size earlier renders on this thread needed, and the number of pairs stays on the device (see
-/// [`crate::gpu::pairs`]). A render whose pairs did not fit has a NaN image; when a value read
-/// from it is not finite, [`PairCheck::overflowed`] says whether that is why, and the render made
-/// again fits. On the CPU it is [`render`].
+/// the module `gpu::pairs`). A render whose pairs did not fit has a NaN image; when a value read
+/// from it is not finite, [`PairCountCheck::overflowed`] says whether that is why, and the
+/// render made again fits. On the CPU it is [`render`].
 pub fn render_deferred(
     gaussians: &GaussianTensors,
     means2d: Tensor<2>,
     view: &RenderView,
-) -> (RenderTensors, PairCheck) {
+) -> (RenderTensors, PairCountCheck) {
     #[cfg(feature = "gpu")]
     {
         let (out, check) = crate::gpu::deferred(|| render(gaussians, means2d, view));
-        (out, PairCheck(check))
+        (out, PairCountCheck(check))
     }
     #[cfg(not(feature = "gpu"))]
-    (render(gaussians, means2d, view), PairCheck(()))
+    (render(gaussians, means2d, view), PairCountCheck(()))
 }
 
 /// Whether a [`render_deferred`] ran out of pair slots on the GPU.
-pub struct PairCheck(
-    #[cfg(feature = "gpu")] crate::gpu::PairCheck,
+pub struct PairCountCheck(
+    #[cfg(feature = "gpu")] crate::gpu::PairCountCheck,
     #[cfg(not(feature = "gpu"))] (),
 );
 
-impl PairCheck {
+impl PairCountCheck {
     /// Whether the render's image is NaN because its pairs did not fit (reads the pair count
     /// back from the device; always `false` on the CPU).
     pub fn overflowed(&self) -> bool {

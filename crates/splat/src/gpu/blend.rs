@@ -130,9 +130,9 @@ fn tile_range(ranges: &[u32], tile: usize) -> (u32, u32) {
 /// Renders `image` (`[H, W, 5]`: RGB + background, expected depth, alpha) and keeps, per pixel,
 /// the final transmittance and the 1-based rank of the last splat that contributed.
 ///
-/// When the render's `pair_count[0]` pairs did not fit in its `capacity` slots, every image value is
-/// `unfit` instead (the host passes NaN, so that any loss of the image is NaN and the render
-/// cannot pass for a good one; see [`super::pairs`]).
+/// When the render's `pair_count[0]` pairs did not fit in its `capacity` slots, every image
+/// value is `unfit` instead (the host passes NaN, so that any loss of the image is NaN and the
+/// render cannot pass for a good one; see [`super::pairs`]).
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 pub fn blend_forward(

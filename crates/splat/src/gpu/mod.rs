@@ -28,5 +28,5 @@ pub mod tiles;
 #[cfg(test)]
 mod tests;
 
-pub use pairs::{PairCheck, deferred};
+pub use pairs::{PairCountCheck, deferred};
 pub use render::{GpuState, backward, forward};

@@ -7,8 +7,8 @@
 //! the renders before it on this thread (a quarter above the most pairs one needed), leaves the
 //! count on the device, and, when its pairs did not fit, fills its image with NaN. Its caller's
 //! next read-back (a trainer reads its loss every iteration) then sees a value that is not
-//! finite, and [`PairCheck::overflowed`] says whether that is the reason, raising the guess so
-//! that the render made again fits. Every other render reads its count at once and sizes its
+//! finite, and [`PairCountCheck::overflowed`] says whether that is the reason, raising the guess
+//! so that the render made again fits. Every other render reads its count at once and sizes its
 //! buffers exactly.
 
 use std::cell::RefCell;
@@ -49,7 +49,7 @@ fn with_headroom(pairs: usize) -> usize {
 
 /// Runs `render` with the renders it makes on this thread leaving their pair counts on the
 /// device; returns its result and the check of those renders.
-pub fn deferred<R>(render: impl FnOnce() -> R) -> (R, PairCheck) {
+pub fn deferred<R>(render: impl FnOnce() -> R) -> (R, PairCountCheck) {
     struct Restore {
         was_deferring: bool,
         first_pending: usize,
@@ -69,7 +69,7 @@ pub fn deferred<R>(render: impl FnOnce() -> R) -> (R, PairCheck) {
     let out = render();
     let pending = BUDGET.with_borrow_mut(|b| b.pending.split_off(restore.first_pending));
     drop(restore);
-    (out, PairCheck { pending })
+    (out, PairCountCheck { pending })
 }
 
 /// The slots of the next render's pairs: `Some(capacity)` when it is deferred and a guess exists,
@@ -83,7 +83,7 @@ pub(super) fn needed(pairs: usize) {
     BUDGET.with_borrow_mut(|b| b.capacity = b.capacity.max(with_headroom(pairs)));
 }
 
-/// Keeps a deferred render's count for its [`PairCheck`].
+/// Keeps a deferred render's count for its [`PairCountCheck`].
 pub(super) fn leave(pending: Pending) {
     BUDGET.with_borrow_mut(|b| b.pending.push(pending));
 }
@@ -95,11 +95,11 @@ pub(super) fn set_capacity(capacity: usize) {
 }
 
 /// The pair counts of the renders made inside one [`deferred`] call, still on the device.
-pub struct PairCheck {
+pub struct PairCountCheck {
     pending: Vec<Pending>,
 }
 
-impl PairCheck {
+impl PairCountCheck {
     /// Whether any of the renders ran out of pair slots (so its image is NaN). Reads each
     /// render's count back, so it is meant for when a read-back already showed a value that is
     /// not finite; raises this thread's guess to fit them.
