@@ -8,16 +8,18 @@
 # optionally xz-compressed, in BIN_DIR as `fewview`. DATA is a folder holding `human/` (the
 # repository's ../shared/data, or a copy of that capture).
 #
-#   tools/gpu_human_check.sh BIN_DIR DATA OUT_DIR [CPU_PRESET_MINUTES] [PAPER_PRESET_MINUTES]
+#   tools/gpu_human_check.sh BIN_DIR DATA OUT_DIR [CPU_PRESET_MINUTES] [PAPER_PRESET_MINUTES] [EVAL]
 #
-# The defaults (3 and 2 minutes, and about 3 for the evaluation) fit a 10-minute call. A run
-# stopped by its budget keeps a checkpoint that `human train --resume` continues.
+# The defaults (3 and 2 minutes, and about 3 for the evaluation) fit a 10-minute call; EVAL 0
+# skips the evaluation (the steps per second only). A run stopped by its budget keeps a
+# checkpoint that `human train --resume` continues.
 set -uo pipefail
 bin=$1
 data=$2
 out=$3
 cpu_minutes=${4:-3}
 paper_minutes=${5:-2}
+evaluate=${6:-1}
 mkdir -p "$out"
 for f in "$bin"/*.xz; do [ -e "$f" ] && xz -dkf "$f"; done
 chmod +x "$bin"/fewview
@@ -47,6 +49,10 @@ for preset in cpu paper; do
   cp "$run/train_log.jsonl" "$out/train_log_$preset.jsonl" 2>/dev/null
 done
 
+if [ "$evaluate" = 0 ]; then
+  log "done (no evaluation asked)"
+  exit 0
+fi
 log "human eval of the cpu-preset run (inference on the CPU)"
 timeout 300 "$bin/fewview" human eval --run /tmp/human_cpu --data "$data/human" \
   --out "$out/eval_cpu" >"$out/eval_cpu.out" 2>"$out/eval_cpu.log"
