@@ -314,27 +314,25 @@ fn a_deferred_render_reads_nothing_and_one_without_room_is_nan_until_made_again(
     let probe = || Tensor::<2>::zeros([n, 2], &gpu());
     let exact = values(render(&g, probe(), &view).image);
     assert!(exact.iter().all(|v| v.is_finite()));
+    let deferred = || {
+        let before = fewview_optim::read_backs();
+        let (out, check) = render_deferred(&g, probe(), &view);
+        assert_eq!(
+            fewview_optim::read_backs(),
+            before,
+            "a deferred render waited"
+        );
+        (values(out.image), check)
+    };
 
     pairs::set_capacity(1);
-    let before = fewview_optim::read_backs();
-    let (out, check) = render_deferred(&g, probe(), &view);
-    assert_eq!(
-        fewview_optim::read_backs(),
-        before,
-        "a deferred render waited"
-    );
-    assert!(values(out.image).iter().all(|v| v.is_nan()));
+    let (image, check) = deferred();
+    assert!(image.iter().all(|v| v.is_nan()));
     assert!(check.overflowed());
 
     // The check raised this thread's capacity: the same render now fits without a read.
-    let before = fewview_optim::read_backs();
-    let (out, check) = render_deferred(&g, probe(), &view);
-    assert_eq!(
-        fewview_optim::read_backs(),
-        before,
-        "a deferred render waited"
-    );
-    assert_eq!(values(out.image), exact);
+    let (image, check) = deferred();
+    assert_eq!(image, exact);
     assert!(!check.overflowed());
 }
 
