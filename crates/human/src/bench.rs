@@ -11,7 +11,7 @@ use fewview_scene::{Camera, Image, Intrinsics};
 use nalgebra::Vector3;
 use serde::Serialize;
 
-use crate::error::Result;
+use crate::error::{HumanError, Result};
 use crate::maps::{DepthMap, Mask};
 use crate::net::{PoseGaussianNet, Variant, forward_macs};
 use crate::tps::{Stabilizer, TpsConfig};
@@ -48,6 +48,8 @@ pub struct InferenceBench {
 #[derive(Clone, Debug, Serialize)]
 pub struct TrainingBench {
     pub preset: String,
+    /// Where it ran (`cpu` unless the caller names its device).
+    pub device: String,
     pub size: [usize; 2],
     pub steps: usize,
     /// Forward and backward, seconds per step (the mean over the timed steps).
@@ -63,9 +65,10 @@ pub struct TrainingBench {
 }
 
 /// Times `steps` forward and backward passes of `preset` (after one warm-up step) on two
-/// synthetic source views, on the CPU backend with autodiff.
-pub fn training_bench(preset: Preset, steps: usize) -> Result<TrainingBench> {
-    let device = Device::flex().autodiff();
+/// synthetic source views, on `device` (the CPU or a GPU) with autodiff, each pass waited for.
+pub fn training_bench(preset: Preset, steps: usize, device: &Device) -> Result<TrainingBench> {
+    let compute = device.clone();
+    let device = compute.clone().autodiff();
     let (net_cfg, framing, config) = bench_setup(preset);
     let parents = chain();
     let settings = forward_settings(&config, &framing, &parents);
@@ -79,9 +82,13 @@ pub fn training_bench(preset: Preset, steps: usize) -> Result<TrainingBench> {
         let h = net.forward(input)?;
         let loss = h.scale.sum() + h.rotation.sum() + h.opacity.sum() + h.depth.sum();
         let loss = loss + h.uncertainty.sum();
-        let _ = loss.clone().into_data();
+        let device_error = |e: &dyn std::fmt::Debug| {
+            HumanError::argument("training bench", format!("the device failed: {e:?}"))
+        };
+        loss.clone().try_into_data().map_err(|e| device_error(&e))?;
         let t_forward = clock.elapsed().as_secs_f64();
         let grads = loss.backward();
+        device.sync().map_err(|e| device_error(&e))?;
         drop(grads);
         if step > 0 {
             total += clock.elapsed().as_secs_f64();
@@ -92,9 +99,10 @@ pub fn training_bench(preset: Preset, steps: usize) -> Result<TrainingBench> {
     let size = framing.size;
     let macs = 3 * forward_macs(&net_cfg, size[1], size[0]) * views.len() as u64;
     let rate = macs as f64 / (total * k) / 1e9;
-    let matmul = matmul_rate(&Device::flex());
+    let matmul = matmul_rate(&compute);
     Ok(TrainingBench {
         preset: format!("{preset:?}").to_lowercase(),
+        device: "cpu".into(),
         size,
         steps,
         seconds_per_step: total * k,

@@ -52,9 +52,10 @@ pub struct Args {
     /// The NeuS-MLP reference runs one.
     #[arg(long, default_value_t = 10)]
     pub surface_steps: usize,
-    /// PoseGaussian inference frames timed.
+    /// PoseGaussian inference frames and training steps timed.
     ///
-    /// Frames timed for PoseGaussian inference with the CPU preset (the paper preset times one).
+    /// Frames timed for PoseGaussian inference with the CPU preset (the paper preset times one),
+    /// and the network's training steps timed per preset.
     #[arg(long, default_value_t = 3, value_parser = positive_count)]
     pub human_frames: usize,
     /// Repetitions of each rasterizer measurement.
@@ -65,7 +66,8 @@ pub struct Args {
     /// Where the rasterizer and training steps run.
     ///
     /// `cpu`, or `gpu` (builds with `--features gpu`; the rasterizer's CPU figures are then
-    /// measured on the same scene as the yardstick).
+    /// measured on the same scene as the yardstick, and PoseGaussian's inference, which runs on
+    /// the CPU, is left out).
     #[arg(long, value_enum, default_value_t)]
     pub device: fewview_splat::ComputeDevice,
     /// Image size of the rasterizer benchmark, `WIDTHxHEIGHT`.
@@ -103,7 +105,8 @@ pub enum Section {
     Blend,
     /// Semi-Global Matching.
     Stereo,
-    /// PoseGaussian inference per frame, both presets.
+    /// PoseGaussian: inference per frame, both presets, on the CPU; the network's training
+    /// steps on the device (on a GPU, both presets).
     Human,
     /// The learned matchers (XFeat, XFeat*, LighterGlue) on a 400×300 fern pair.
     Match,

@@ -11,7 +11,8 @@ pub use self::args::Args;
 use self::args::Section;
 use self::report::{Machine, Report, peak_memory_mib};
 use self::sections::{
-    fern_train_bench, match_bench, stereo_bench, surface_train_bench, write_scene,
+    fern_train_bench, human_training_bench, match_bench, stereo_bench, surface_train_bench,
+    write_scene,
 };
 use self::table::print_table;
 use super::output_paths::check_folder;
@@ -121,7 +122,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         false => None,
     };
     let mut human_inference = Vec::new();
-    if args.wants(Section::Human) {
+    if args.wants(Section::Human) && on_cpu {
         for (preset, frames) in [
             (fewview_human::train::Preset::Cpu, args.human_frames),
             (fewview_human::train::Preset::Paper, 1),
@@ -131,15 +132,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let human_training = match args.wants(Section::Human) {
-        true => {
-            eprintln!("PoseGaussian training steps: Cpu preset ...");
-            let preset = fewview_human::train::Preset::Cpu;
-            Some(fewview_human::bench::training_bench(
-                preset,
-                args.human_frames,
-            )?)
-        }
-        false => None,
+        true => human_training_bench(device, args.human_frames)?,
+        false => Vec::new(),
     };
     let matching = match args.wants(Section::Match) {
         true => match_bench(args.fern.clone(), args.runs)?,

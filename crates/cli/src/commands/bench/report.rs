@@ -32,9 +32,10 @@ pub(super) struct Report {
     /// PoseGaussian inference per frame, both presets (synthetic frame, random weights).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub(super) human_inference: Vec<fewview_human::bench::InferenceBench>,
-    /// PoseGaussian training steps (the network's forward and backward), CPU preset.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub(super) human_training: Option<fewview_human::bench::TrainingBench>,
+    /// PoseGaussian training steps (the network's forward and backward): the CPU preset, and
+    /// on a GPU the paper's as well.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub(super) human_training: Vec<fewview_human::bench::TrainingBench>,
     /// The learned matchers on one 400×300 pair (fern images 0 and 4, central crops).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub(super) matching: Option<fewview_match::bench::MatchBench>,

@@ -153,3 +153,29 @@ pub(super) fn match_bench(
     let bench = fewview_match::bench::match_bench(&xfeat, &glue, &crop(0)?, &crop(4)?, runs)?;
     Ok(Some(bench))
 }
+
+/// The PoseGaussian network's training steps on `device`: the CPU preset, and on a GPU the
+/// paper's preset as well.
+pub(super) fn human_training_bench(
+    device: fewview_splat::ComputeDevice,
+    steps: usize,
+) -> anyhow::Result<Vec<fewview_human::bench::TrainingBench>> {
+    use fewview_human::train::Preset;
+    let presets: &[Preset] = match device {
+        fewview_splat::ComputeDevice::Cpu => &[Preset::Cpu],
+        fewview_splat::ComputeDevice::Gpu => &[Preset::Cpu, Preset::Paper],
+    };
+    let opened = device.open()?;
+    presets
+        .iter()
+        .map(|&preset| {
+            eprintln!(
+                "PoseGaussian training steps: {preset:?} preset on the {} ...",
+                device.name()
+            );
+            let mut bench = fewview_human::bench::training_bench(preset, steps, &opened)?;
+            bench.device = device.name().to_string();
+            Ok(bench)
+        })
+        .collect()
+}

@@ -33,12 +33,12 @@ pub(super) fn print_table(r: &Report) {
             );
         }
     }
-    if let Some(t) = &r.human_training {
+    for t in &r.human_training {
         println!(
             "{:<46} {:>14.3} {:>14}",
             format!(
-                "PoseGaussian {} training s/step ({}x{})",
-                t.preset, t.size[0], t.size[1]
+                "PoseGaussian {} training s/step ({}x{}, {})",
+                t.preset, t.size[0], t.size[1], t.device
             ),
             t.seconds_per_step,
             format!("fwd {:.3}", t.forward_seconds)
