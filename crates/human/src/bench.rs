@@ -48,7 +48,7 @@ pub struct InferenceBench {
 #[derive(Clone, Debug, Serialize)]
 pub struct TrainingBench {
     pub preset: String,
-    /// Where it ran (`cpu` unless the caller names its device).
+    /// Where it ran: `cpu`, or `gpu` for any other device.
     pub device: String,
     pub size: [usize; 2],
     pub steps: usize,
@@ -69,6 +69,9 @@ pub struct TrainingBench {
 pub fn training_bench(preset: Preset, steps: usize, device: &Device) -> Result<TrainingBench> {
     let compute = device.clone();
     let device = compute.clone().autodiff();
+    let device_error = |e: &dyn std::fmt::Debug| {
+        HumanError::argument("training bench", format!("the device failed: {e:?}"))
+    };
     let (net_cfg, framing, config) = bench_setup(preset);
     let parents = chain();
     let settings = forward_settings(&config, &framing, &parents);
@@ -82,9 +85,6 @@ pub fn training_bench(preset: Preset, steps: usize, device: &Device) -> Result<T
         let h = net.forward(input)?;
         let loss = h.scale.sum() + h.rotation.sum() + h.opacity.sum() + h.depth.sum();
         let loss = loss + h.uncertainty.sum();
-        let device_error = |e: &dyn std::fmt::Debug| {
-            HumanError::argument("training bench", format!("the device failed: {e:?}"))
-        };
         loss.clone().try_into_data().map_err(|e| device_error(&e))?;
         let t_forward = clock.elapsed().as_secs_f64();
         let grads = loss.backward();
@@ -102,7 +102,12 @@ pub fn training_bench(preset: Preset, steps: usize, device: &Device) -> Result<T
     let matmul = matmul_rate(&compute);
     Ok(TrainingBench {
         preset: format!("{preset:?}").to_lowercase(),
-        device: "cpu".into(),
+        device: if compute == Device::flex() {
+            "cpu"
+        } else {
+            "gpu"
+        }
+        .into(),
         size,
         steps,
         seconds_per_step: total * k,

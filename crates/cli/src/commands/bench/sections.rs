@@ -173,9 +173,9 @@ pub(super) fn human_training_bench(
                 "PoseGaussian training steps: {preset:?} preset on the {} ...",
                 device.name()
             );
-            let mut bench = fewview_human::bench::training_bench(preset, steps, &opened)?;
-            bench.device = device.name().to_string();
-            Ok(bench)
+            Ok(fewview_human::bench::training_bench(
+                preset, steps, &opened,
+            )?)
         })
         .collect()
 }
