@@ -293,7 +293,8 @@ fn a_counted_sort_sorts_the_pairs_the_device_counts_and_no_more() {
     assert!(got == want, "not a stable sort of the first {count} pairs");
 }
 
-/// The demo-scene parity view and its Gaussians as tensors on the GPU.
+/// The first finite-difference scene of the parity test, its view, and its Gaussians as tensors
+/// on the GPU.
 fn small_render_inputs() -> (GaussianTensors, RenderView, usize) {
     let (n, k) = (30, 9);
     let scene = Scene::random(11, n, k);
