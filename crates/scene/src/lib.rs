@@ -31,6 +31,7 @@ mod load_options;
 mod load_report;
 pub mod numpy;
 pub mod photometric;
+pub mod ply;
 pub mod ply_scalar;
 pub mod pose_export;
 pub mod sealed;

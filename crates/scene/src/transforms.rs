@@ -148,6 +148,9 @@ struct FrameJson {
     file_path: String,
     transform_matrix: [[f64; 4]; 4],
     mask_path: Option<String>,
+    /// Near and far z-depth of the scene in this frame (a fewview extension that nerfstudio
+    /// ignores; `fewview poses` writes it from the points each photo sees).
+    depth_bounds: Option<[f64; 2]>,
     #[serde(flatten)]
     camera: CameraFields,
 }
@@ -157,6 +160,9 @@ struct TransformsJson {
     #[serde(flatten)]
     camera: CameraFields,
     frames: Vec<FrameJson>,
+    /// A PLY point cloud of the scene, relative to the file (nerfstudio's `ns-process-data`
+    /// writes its COLMAP points as `sparse_pc.ply` and names it here).
+    ply_file_path: Option<String>,
 }
 
 /// One frame of a transforms file, resolved against the file's folder.
@@ -168,28 +174,50 @@ pub struct Frame {
     pub mask: Option<PathBuf>,
     /// Camera-to-world in OpenCV axes.
     pub camera_to_world: Se3,
+    /// The frame's `depth_bounds`, when given.
+    pub depth_bounds: Option<(f64, f64)>,
     camera: CameraFields,
     /// The JSON file, for errors.
     source: PathBuf,
     index: usize,
 }
 
+/// A transforms file as read: its frames, and the point cloud it names.
+#[derive(Clone, Debug)]
+pub struct TransformsFile {
+    /// In file order, poses converted to OpenCV axes.
+    pub frames: Vec<Frame>,
+    /// `ply_file_path`, resolved against the file's folder.
+    pub ply_file: Option<PathBuf>,
+}
+
 /// Reads a transforms JSON file: frames in file order, poses converted to OpenCV axes.
 pub fn read_transforms(path: &Path) -> Result<Vec<Frame>> {
+    read_transforms_file(path).map(|f| f.frames)
+}
+
+/// Reads a transforms JSON file with the point cloud it names.
+pub fn read_transforms_file(path: &Path) -> Result<TransformsFile> {
     let text = std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))?;
     parse_transforms(&text, path)
 }
 
-/// The frames of a transforms JSON text read from `path` (named in errors, and the folder
-/// image paths are relative to).
-pub(crate) fn parse_transforms(text: &str, path: &Path) -> Result<Vec<Frame>> {
+/// A transforms JSON text read from `path` (named in errors, and the folder image paths are
+/// relative to).
+pub(crate) fn parse_transforms(text: &str, path: &Path) -> Result<TransformsFile> {
     let file: TransformsJson = serde_json::from_str(text)
         .map_err(|e| SceneError::format(path, format!("invalid transforms JSON: {e}")))?;
     let dir = path.parent().unwrap_or(Path::new("."));
     if file.frames.is_empty() {
         return Err(SceneError::format(path, "no frames"));
     }
-    file.frames
+    let ply_file = match file.ply_file_path.as_deref().map(str::trim) {
+        Some("") => return Err(SceneError::invalid(path, "empty ply_file_path")),
+        Some(p) => Some(dir.join(p)),
+        None => None,
+    };
+    let frames = file
+        .frames
         .into_iter()
         .enumerate()
         .map(|(i, f)| {
@@ -230,6 +258,21 @@ pub(crate) fn parse_transforms(text: &str, path: &Path) -> Result<Vec<Frame>> {
             camera
                 .check_model()
                 .map_err(|m| SceneError::invalid(path, format!("frame {i} ({}): {m}", f.file_path)))?;
+            let depth_bounds = match f.depth_bounds {
+                Some([near, far]) if near.is_finite() && far.is_finite() && 0.0 < near && near < far => {
+                    Some((near, far))
+                }
+                Some([near, far]) => {
+                    return Err(SceneError::invalid(
+                        path,
+                        format!(
+                            "frame {i} ({}): depth_bounds [{near}, {far}] are not 0 < near < far",
+                            f.file_path
+                        ),
+                    ));
+                }
+                None => None,
+            };
             let mut image = dir.join(&f.file_path);
             if image.extension().is_none() {
                 image.set_extension("png");
@@ -238,12 +281,14 @@ pub(crate) fn parse_transforms(text: &str, path: &Path) -> Result<Vec<Frame>> {
                 image,
                 mask: f.mask_path.map(|m| dir.join(m)),
                 camera_to_world: opengl_to_opencv(&gl),
+                depth_bounds,
                 camera,
                 source: path.to_owned(),
                 index: i,
             })
         })
-        .collect()
+        .collect::<Result<Vec<_>>>()?;
+    Ok(TransformsFile { frames, ply_file })
 }
 
 /// Loads one frame as a view: image (undistorted into a pinhole unless `opts` ignores
@@ -328,7 +373,7 @@ fn load_frame(
         mask,
         mask_is_alpha,
         valid,
-        depth_bounds: None,
+        depth_bounds: frame.depth_bounds,
         source_index: frame.index,
     };
     Ok((view, p.outcome))
@@ -410,7 +455,11 @@ pub fn load_nerfstudio(
     report: &mut LoadReport,
 ) -> Result<Dataset> {
     let path = root.join("transforms.json");
-    let mut frames = read_transforms(&path)?;
+    let TransformsFile {
+        mut frames,
+        ply_file,
+    } = read_transforms_file(&path)?;
+    let points = ply_file.as_deref().map(read_point_cloud).transpose()?;
     frames.sort_by(|a, b| a.image.cmp(&b.image));
     let listed = frames.len();
     let first_missing = frames
@@ -457,9 +506,33 @@ pub fn load_nerfstudio(
         views,
         train,
         test,
-        points: None,
+        points,
         background,
         to_source_world: None,
+    })
+}
+
+/// The vertices of a PLY file as a point cloud (grey where the file has no colours); a file
+/// without vertices is an error naming it.
+fn read_point_cloud(path: &Path) -> Result<crate::PointCloud> {
+    let ply = crate::ply::read(path)?;
+    if ply.vertices.is_empty() {
+        return Err(SceneError::invalid(path, "the point cloud has no points"));
+    }
+    if let Some(i) = ply
+        .vertices
+        .iter()
+        .position(|p| !p.iter().all(|v| v.is_finite()))
+    {
+        return Err(SceneError::invalid(
+            path,
+            format!("point {i} is not finite"),
+        ));
+    }
+    let n = ply.vertices.len();
+    Ok(crate::PointCloud {
+        colors: ply.colors.unwrap_or_else(|| vec![[0.5; 3]; n]),
+        positions: ply.vertices,
     })
 }
 

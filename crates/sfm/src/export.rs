@@ -1,5 +1,7 @@
 //! A [`PoseModel`] written as the tools of the field read it: a COLMAP text model
-//! (`sparse/0/cameras.txt`, `images.txt`, `points3D.txt`), nerfstudio's `transforms.json`,
+//! (`sparse/0/cameras.txt`, `images.txt`, `points3D.txt`), nerfstudio's `transforms.json`
+//! (with the points as `sparse_pc.ply`, named by its `ply_file_path` as nerfstudio's own
+//! `ns-process-data` writes them, and each frame's `depth_bounds`),
 //! `cameras.json` (the camera list `fewview pose-error` reads), `poses_report.json` and
 //! `cameras.png` (the cameras and points seen from above), with the
 //! registered photos placed in `images/` beside them so that the folder loads as a dataset.
@@ -11,6 +13,7 @@ use std::path::{Path, PathBuf};
 use fewview_scene::atomic::write_bytes;
 use fewview_scene::axes::opengl_to_opencv;
 use fewview_scene::colmap::text::image_line;
+use fewview_scene::ply::{PlyEncoding, PlyGeometry};
 use fewview_scene::{Image, Intrinsics};
 use nalgebra::Vector3;
 use serde_json::{Value, json};
@@ -39,6 +42,10 @@ pub fn write_model(model: &PoseModel, out: &Path) -> Result<Vec<PathBuf>> {
     for (path, text) in &files {
         write_bytes(path, text.as_bytes())?;
     }
+    let cloud = (!model.points.is_empty()).then(|| out.join(POINTS_PLY));
+    if let Some(path) = &cloud {
+        write_points_ply(model, path)?;
+    }
     let picture = out.join("cameras.png");
     top_view(model, 800).save_png(&picture)?;
     let (cameras_json, text) = json(out.join("cameras.json"), named_cameras(model))?;
@@ -47,8 +54,120 @@ pub fn write_model(model: &PoseModel, out: &Path) -> Result<Vec<PathBuf>> {
     let (report, text) = json(out.join("poses_report.json"), report_json(model))?;
     write_bytes(&report, text.as_bytes())?;
     let mut written: Vec<PathBuf> = files.into_iter().map(|(p, _)| p).collect();
+    written.extend(cloud);
     written.extend([cameras_json, picture, report]);
     Ok(written)
+}
+
+/// The file name of the model's points beside `transforms.json` (nerfstudio's own name).
+pub const POINTS_PLY: &str = "sparse_pc.ply";
+
+/// The model's points with their colours as a binary PLY point cloud.
+fn write_points_ply(model: &PoseModel, path: &Path) -> Result<()> {
+    let geometry = PlyGeometry {
+        vertices: model
+            .points
+            .iter()
+            .map(|p| p.xyz.map(|v| v as f32))
+            .collect(),
+        faces: Vec::new(),
+        colors: Some(
+            model
+                .points
+                .iter()
+                .map(|p| p.rgb.map(|c| c as f32 / 255.0))
+                .collect(),
+        ),
+        normals: None,
+    };
+    Ok(fewview_scene::ply::write(
+        path,
+        &geometry,
+        PlyEncoding::BinaryLittleEndian,
+    )?)
+}
+
+/// Near and far z-depth of the points each photo observes, as LLFF's `imgs2poses` bounds its
+/// COLMAP models from percentiles of the observed points' depths. LLFF takes the 0.1st and
+/// 99.9th percentile of a dense capture's many points; with the few hundred points of a few
+/// photos those are single points, so the 1st and 99th are taken, of the points triangulated
+/// from rays at least [`MIN_BOUND_ANGLE_DEG`] apart (COLMAP's own filter of uncertain points;
+/// a point near the epipole of a camera walking forward can land at any depth). `None` for a
+/// photo that observes fewer than [`MIN_BOUND_POINTS`] points in front of it.
+pub fn depth_bounds(model: &PoseModel) -> Vec<Option<(f64, f64)>> {
+    let centres: Vec<Vector3<f64>> = model.photos.iter().map(|p| p.camera.center()).collect();
+    // Per photo: the depths of all its points, and of the well triangulated ones.
+    let mut depths: Vec<[Vec<f64>; 2]> = vec![Default::default(); model.photos.len()];
+    for point in &model.points {
+        let x = Vector3::from(point.xyz);
+        let certain =
+            triangulation_angle_deg(&x, &point.observations, &centres) >= MIN_BOUND_ANGLE_DEG;
+        for &(photo, _) in &point.observations {
+            let z = model.photos[photo]
+                .camera
+                .world_to_camera
+                .transform_point(&x)
+                .z;
+            if z.is_finite() && z > 0.0 {
+                depths[photo][0].push(z);
+                if certain {
+                    depths[photo][1].push(z);
+                }
+            }
+        }
+    }
+    depths
+        .into_iter()
+        .map(|[all, certain]| {
+            let mut z = if certain.len() >= MIN_BOUND_POINTS {
+                certain
+            } else {
+                all
+            };
+            if z.len() < MIN_BOUND_POINTS {
+                return None;
+            }
+            z.sort_by(f64::total_cmp);
+            let (near, far) = (percentile(&z, 0.01), percentile(&z, 0.99));
+            (near < far).then_some((near, far))
+        })
+        .collect()
+}
+
+/// The fewest observed points from which a photo's depth bounds are taken.
+pub const MIN_BOUND_POINTS: usize = 8;
+
+/// The smallest angle (degrees) between two rays of a point whose depth bounds a photo
+/// (COLMAP's `filter_min_tri_angle`).
+pub const MIN_BOUND_ANGLE_DEG: f64 = 1.5;
+
+/// The largest angle (degrees) between the rays from the observing photos' centres to `x`.
+fn triangulation_angle_deg(
+    x: &Vector3<f64>,
+    observations: &[(usize, [f64; 2])],
+    centres: &[Vector3<f64>],
+) -> f64 {
+    let rays: Vec<Vector3<f64>> = observations
+        .iter()
+        .filter_map(|&(photo, _)| (x - centres[photo]).try_normalize(1e-12))
+        .collect();
+    let mut widest = 0.0f64;
+    for (i, a) in rays.iter().enumerate() {
+        for b in &rays[i + 1..] {
+            widest = widest.max(a.dot(b).clamp(-1.0, 1.0).acos().to_degrees());
+        }
+    }
+    widest
+}
+
+/// The `q`-quantile of sorted values, linearly interpolated (NumPy's default).
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    let at = q * (sorted.len() - 1) as f64;
+    let (i, t) = (at.floor() as usize, at.fract());
+    match sorted.get(i + 1) {
+        Some(next) => sorted[i] + t * (next - sorted[i]),
+        None => sorted[i],
+    }
 }
 
 /// The registered cameras as `fewview pose-error` reads them, each with its photo's file name
@@ -183,10 +302,12 @@ fn points_txt(model: &PoseModel) -> String {
 /// when one was adjusted) and OpenGL camera-to-world matrices, with the images expected under
 /// `images/`.
 fn transforms_json(model: &PoseModel) -> Value {
+    let bounds = depth_bounds(model);
     let frames: Vec<_> = model
         .photos
         .iter()
-        .map(|p| {
+        .zip(&bounds)
+        .map(|(p, bounds)| {
             let k = p.camera.intrinsics;
             let gl = opengl_to_opencv(&p.camera.camera_to_world()).to_matrix4();
             let rows: Vec<Vec<f64>> = (0..4)
@@ -197,10 +318,15 @@ fn transforms_json(model: &PoseModel) -> Value {
                 "fl_x": k.fx, "fl_y": k.fy, "cx": k.cx, "cy": k.cy, "w": k.width, "h": k.height,
                 "k1": model.report.bundle.radial_k1.unwrap_or(0.0), "k2": 0.0, "p1": 0.0, "p2": 0.0,
                 "transform_matrix": rows,
+                "depth_bounds": bounds.map(|(near, far)| [near, far]),
             })
         })
         .collect();
-    json!({ "camera_model": "OPENCV", "frames": frames })
+    let mut doc = json!({ "camera_model": "OPENCV", "frames": frames });
+    if !model.points.is_empty() {
+        doc["ply_file_path"] = Value::from(POINTS_PLY);
+    }
+    doc
 }
 
 fn report_json(model: &PoseModel) -> Value {
@@ -345,6 +471,91 @@ mod tests {
         };
         assert!(count([0.0, 0.0, 1.0]) > 100, "points drawn");
         assert!(count([0.8, 0.1, 0.1]) > 3 * 40, "cameras drawn");
+    }
+
+    /// Three photos of a cloud of points 2–6 units away, and one far point barely triangulated:
+    /// the written folder loads as a dataset whose points are the model's and whose views carry
+    /// the percentile bounds of the well triangulated points they observe.
+    #[test]
+    fn the_written_model_reads_back_with_its_points_and_bounds() {
+        let k = Intrinsics::centered(100.0, 80, 60);
+        let photos: Vec<RegisteredPhoto> = (0..3)
+            .map(|i| RegisteredPhoto {
+                name: format!("{i}.png"),
+                camera: Camera::look_at(
+                    k,
+                    Vector3::new(0.3 * i as f64, 0.0, 0.0),
+                    Vector3::new(0.3 * i as f64, 0.0, 1.0),
+                    -Vector3::y(),
+                ),
+                focal_from: FocalSource::AssumedFov,
+            })
+            .collect();
+        let points: Vec<ModelPoint> = (0..50)
+            .map(|i| {
+                let z = 2.0 + 4.0 * i as f64 / 49.0;
+                let x = 0.3 + 0.2 * ((i * 7 % 11) as f64 / 11.0 - 0.5);
+                // The last photo observes only the far half.
+                let observers = if z > 4.0 { 0..3 } else { 0..2 };
+                ModelPoint {
+                    xyz: [x, 0.1, z],
+                    rgb: [i as u8 * 5, 100, 200],
+                    observations: observers.map(|p| (p, [40.0, 30.0])).collect(),
+                    error_px: 0.5,
+                }
+            })
+            .collect();
+        let mut points = points;
+        // Seen by photos 0 and 1 under 0.02°: its depth is left out of the bounds.
+        points.push(ModelPoint {
+            xyz: [0.15, 0.0, 1000.0],
+            rgb: [0, 0, 0],
+            observations: vec![(0, [40.0, 30.0]), (1, [40.0, 30.0])],
+            error_px: 0.5,
+        });
+        let model = PoseModel {
+            photos,
+            unregistered: Vec::new(),
+            points,
+            report: PoseReport::default(),
+        };
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir(dir.path().join("images")).unwrap();
+        for p in &model.photos {
+            Image::filled(80, 60, &[0.5, 0.5, 0.5])
+                .save_png(&dir.path().join("images").join(&p.name))
+                .unwrap();
+        }
+        write_model(&model, dir.path()).unwrap();
+        let ds = fewview_scene::load_dataset(dir.path(), &Default::default()).unwrap();
+        let cloud = ds.points.as_ref().expect("the points come back");
+        assert_eq!(cloud.len(), 51);
+        for (got, want) in cloud.positions.iter().zip(&model.points) {
+            assert_eq!(*got, want.xyz.map(|v| v as f32));
+        }
+        assert_eq!(
+            cloud.colors[3],
+            [15.0 / 255.0, 100.0 / 255.0, 200.0 / 255.0]
+        );
+        // NumPy: np.percentile(z, [1, 99]) of the observed depths (camera z = world z; every
+        // point is seen under 2.9° or more).
+        let z: Vec<f64> = (0..50).map(|i| 2.0 + 4.0 * i as f64 / 49.0).collect();
+        let far_half: Vec<f64> = z.iter().copied().filter(|&z| z > 4.0).collect();
+        let expect = |z: &[f64]| {
+            let at = 0.01 * (z.len() - 1) as f64;
+            let near = z[0] + at * (z[1] - z[0]);
+            let far = z[z.len() - 1] - at * (z[z.len() - 1] - z[z.len() - 2]);
+            (near, far)
+        };
+        let want = [expect(&z), expect(&z), expect(&far_half)];
+        for (view, want) in ds.views.iter().zip(want) {
+            let (near, far) = view.depth_bounds.expect("bounds come back");
+            assert!(
+                (near - want.0).abs() < 1e-9 && (far - want.1).abs() < 1e-9,
+                "{}: {near} {far} vs {want:?}",
+                view.name
+            );
+        }
     }
 
     /// A model with a radial coefficient says `SIMPLE_RADIAL` (one focal length) or `OPENCV`
