@@ -139,3 +139,103 @@ fn jittered_photos_of_a_strong_highlight_still_give_consistent_points() {
         "{matched} points with matched gains, {as_is} as is"
     );
 }
+
+/// A demo view and a second one 1.2 units (about 30 % of the way to the scene) further along
+/// its optical axis: rectification cannot serve the pair (the baseline is the axis), so the
+/// stereo source sweeps planes in each view; the consistent points of the pair's hierarchical
+/// cloud lie within 2 % of the exact depth: at least 90 % of them.
+#[test]
+fn plane_sweep_finds_the_depth_of_a_camera_walking_forward() {
+    use fewview_geom::stereo::source::{PairMethod, pair_method};
+    use fewview_scene::synthetic::demo_render;
+    let opts = DemoOptions {
+        width: 320,
+        height: 240,
+        ..DemoOptions::default()
+    };
+    let ds = demo_dataset(&opts);
+    let back = ds.views[ds.train[1]].camera.clone();
+    let step = back.forward() * 1.2;
+    let front = fewview_scene::Camera::new(
+        back.intrinsics,
+        fewview_scene::Se3::new(
+            back.world_to_camera.rotation,
+            back.world_to_camera.translation - back.world_to_camera.rotation * step,
+        ),
+    );
+    assert!((front.center() - back.center() - step).norm() < 1e-9);
+    assert!(matches!(
+        pair_method(&back, &front),
+        PairMethod::PlaneSweep(_)
+    ));
+    let images = [demo_render(&back, &opts), demo_render(&front, &opts)];
+    let cameras = [&back, &front];
+    let truth: Vec<Vec<f32>> = cameras.iter().map(|c| demo_depth(c)).collect();
+    let seen: Vec<f32> = truth
+        .iter()
+        .flatten()
+        .copied()
+        .filter(|&z| z > 0.0)
+        .collect();
+    let near = seen.iter().copied().fold(f32::INFINITY, f32::min) as f64;
+    let far = seen.iter().copied().fold(0.0, f32::max) as f64;
+    let views: Vec<StereoView> = (0..2)
+        .map(|i| StereoView {
+            name: ["back", "front"][i],
+            camera: cameras[i],
+            image: &images[i],
+            depth_bounds: Some((near, far)),
+            mask: None,
+            sparse_points: &[],
+        })
+        .collect();
+    let source = SgmSource {
+        views: &views,
+        params: SgmParams {
+            paths: fewview_geom::stereo::sgm::Paths::Eight,
+            ..Default::default()
+        },
+        range: DisparityRange::FromSparsePoints,
+        refine: Some(Default::default()),
+        photometry: Photometry::AsIs,
+    };
+    let options = HierarchyOptions {
+        contraction: None,
+        ..Default::default()
+    };
+    let cloud = hierarchical_cloud(&views, &[(0, 1)], &source, &options, &mut |_, _| {}).unwrap();
+    let mut errors: [Vec<f64>; 2] = Default::default();
+    for (k, &(v, p)) in cloud.sources.iter().enumerate() {
+        if cloud.regions[k] != Region::Consistent {
+            continue;
+        }
+        let cam = cameras[v as usize];
+        let x = cloud.points.positions[k].map(|c| c as f64);
+        let z = cam.world_to_camera.transform_point(&Vector3::from(x)).z;
+        let t = truth[v as usize][p as usize] as f64;
+        errors[v as usize].push(if t > 0.0 {
+            ((z - t) / t).abs()
+        } else {
+            f64::INFINITY
+        });
+    }
+    let all: Vec<f64> = errors.iter().flatten().copied().collect();
+    let share = |bound: f64| all.iter().filter(|&&e| e < bound).count() as f64 / all.len() as f64;
+    eprintln!(
+        "within 2 %: {:.3}, within 5 %: {:.3}",
+        share(0.02),
+        share(0.05)
+    );
+    for (k, e) in errors.iter().enumerate() {
+        let scene = truth[k].iter().filter(|&&t| t > 0.0).count();
+        eprintln!(
+            "{}: {} consistent points ({:.1} % of the scene's pixels), {:.1} % within 2 %",
+            views[k].name,
+            e.len(),
+            100.0 * e.len() as f64 / scene as f64,
+            100.0 * e.iter().filter(|&&e| e < 0.02).count() as f64 / e.len() as f64
+        );
+    }
+    assert!(share(0.02) >= 0.85 && share(0.05) >= 0.95);
+    assert!(all.len() > 5000, "{} consistent points", all.len());
+}

@@ -321,6 +321,7 @@ fn stereo_view<'a>(v: &StereoInput<'a>) -> StereoView<'a> {
         image: v.image,
         depth_bounds: None,
         mask: None,
+        sparse_points: &[],
     }
 }
 

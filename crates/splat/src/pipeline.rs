@@ -220,8 +220,12 @@ pub struct ResolvedConfig {
 #[derive(Clone, Debug, Serialize)]
 pub struct RunSummary {
     pub dataset: String,
-    /// The initialisation used (`auto` resolved).
+    /// The initialisation used (`auto` resolved, a fallback taken).
     pub init: String,
+    /// What the initialisation reports besides: stereo pairs skipped or swept and why, a
+    /// fallback taken.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub init_notes: Vec<String>,
     pub iterations: usize,
     pub gaussians: usize,
     pub train_seconds: f64,
@@ -308,13 +312,19 @@ pub fn default_iterations(ds: &Dataset) -> usize {
 /// Iterations per training view of the default run on scenes without depth bounds.
 const ITERATIONS_PER_VIEW: usize = 50;
 
-/// What [`InitStrategy::Auto`] means for `ds` (any other strategy is returned as it is).
+/// What [`InitStrategy::Auto`] means for `ds` (any other strategy is returned as it is): the
+/// fusion paper's stereo start where training views overlap (with at most
+/// [`MAX_STEREO_START_VIEWS`] of them; its pairs take their depth range from the dataset's
+/// sparse points, and a start whose pairs all fail falls back to those points), else the
+/// sparse points, else random points in the training frustums (views with depth bounds), else
+/// in a box where the cameras look.
 pub fn resolve_init(ds: &Dataset, init: &InitStrategy) -> InitStrategy {
+    let has_points = ds.points.as_ref().is_some_and(|p| !p.is_empty());
     match init {
-        InitStrategy::Auto if ds.points.as_ref().is_some_and(|p| !p.is_empty()) => {
-            InitStrategy::DatasetPoints
+        InitStrategy::Auto if ds.train.len() <= MAX_STEREO_START_VIEWS && views_overlap(ds) => {
+            InitStrategy::Stereo
         }
-        InitStrategy::Auto if views_overlap(ds) => InitStrategy::Stereo,
+        InitStrategy::Auto if has_points => InitStrategy::DatasetPoints,
         InitStrategy::Auto if ds.train_views().all(|v| v.depth_bounds.is_some()) => {
             InitStrategy::RandomFrustum
         }
@@ -322,6 +332,10 @@ pub fn resolve_init(ds: &Dataset, init: &InitStrategy) -> InitStrategy {
         s => s.clone(),
     }
 }
+
+/// The most training views [`InitStrategy::Auto`] starts from stereo: a dense capture has its
+/// structure-from-motion points, and its consecutive pairs would take long to match.
+pub const MAX_STEREO_START_VIEWS: usize = 40;
 
 /// Whether at least two training views overlap enough for stereo.
 fn views_overlap(ds: &Dataset) -> bool {
@@ -363,14 +377,49 @@ pub fn adopt_init_poses(
 
 /// The initial Gaussians for a dataset.
 pub fn initial_model(ds: &Dataset, cfg: &RunConfig) -> Result<GaussianModel, PipelineError> {
-    Ok(initial_model_and_start(ds, cfg)?.0)
+    Ok(initial_model_and_start(ds, cfg)?.model)
 }
 
-/// The initial Gaussians and, for [`InitStrategy::Stereo`], the stereo start they came from.
+/// The initial Gaussians of a run and how they came about.
+pub struct InitialModel {
+    pub model: GaussianModel,
+    /// The stereo start the Gaussians came from, for [`InitStrategy::Stereo`].
+    pub start: Option<StereoStart>,
+    /// The strategy that made them (`auto` resolved, a fallback taken).
+    pub used: InitStrategy,
+    /// Lines for the user: stereo pairs skipped and why, a fallback taken.
+    pub notes: Vec<String>,
+}
+
+/// The initial Gaussians of `ds`: [`initial_model_with`] of the resolved strategy; an automatic
+/// stereo start that fails on every pair falls back to the dataset's sparse points, saying so.
 pub fn initial_model_and_start(
     ds: &Dataset,
     cfg: &RunConfig,
-) -> Result<(GaussianModel, Option<StereoStart>), PipelineError> {
+) -> Result<InitialModel, PipelineError> {
+    let strategy = resolve_init(ds, &cfg.init);
+    let has_points = ds.points.as_ref().is_some_and(|p| !p.is_empty());
+    match initial_model_with(ds, cfg, &strategy) {
+        Err(e)
+            if cfg.init == InitStrategy::Auto && strategy == InitStrategy::Stereo && has_points =>
+        {
+            let mut init = initial_model_with(ds, cfg, &InitStrategy::DatasetPoints)?;
+            init.notes.push(format!(
+                "the stereo start failed ({e}); started from the dataset's sparse points instead"
+            ));
+            Ok(init)
+        }
+        found => found,
+    }
+}
+
+/// The initial Gaussians of `ds` from `strategy` (already resolved) and, for
+/// [`InitStrategy::Stereo`], the stereo start they came from.
+fn initial_model_with(
+    ds: &Dataset,
+    cfg: &RunConfig,
+    strategy: &InitStrategy,
+) -> Result<InitialModel, PipelineError> {
     let degree = cfg.train.sh_degree;
     let seed = cfg.train.seed;
     if cfg.init_points > MAX_INIT_POINTS {
@@ -379,12 +428,20 @@ pub fn initial_model_and_start(
             cfg.init_points
         )));
     }
-    let strategy = resolve_init(ds, &cfg.init);
     let mut start = None;
-    let model = match strategy {
+    let mut notes = Vec::new();
+    let model = match strategy.clone() {
         InitStrategy::Stereo => {
             let s = stereo_start(ds, &cfg.stereo, seed, &mut |_, _| {})
                 .map_err(|e| PipelineError::Init(e.to_string()))?;
+            notes.extend(
+                s.skipped
+                    .iter()
+                    .map(|(a, b, why)| format!("stereo start: views {a} and {b} skipped: {why}")),
+            );
+            notes.extend(s.swept.iter().map(|(a, b, why)| {
+                format!("stereo start: views {a} and {b} matched by plane sweep: {why}")
+            }));
             let model = from_points(&s.sample, degree);
             start = Some(s);
             model
@@ -454,7 +511,12 @@ pub fn initial_model_and_start(
     if model.is_empty() {
         return Err(PipelineError::Init("no initial Gaussians".into()));
     }
-    Ok((model, start))
+    Ok(InitialModel {
+        model,
+        start,
+        used: strategy.clone(),
+        notes,
+    })
 }
 
 /// Trains on `ds` in `dir` (resuming from its checkpoint when `resume`), writes the PLY, held-out
@@ -522,6 +584,8 @@ pub fn train_run_with(
         });
     }
     let mut start = None;
+    let mut init_used = resolve_init(ds, &cfg.init);
+    let mut init_notes = Vec::new();
     let (model, resumed) = if resume {
         let saved = load_checkpoint(&run.checkpoint())?;
         if let Some(difference) = saved.data.difference(&resolved.data) {
@@ -539,9 +603,9 @@ pub fn train_run_with(
         }
         (None, Some(saved.state))
     } else {
-        let (model, s) = initial_model_and_start(ds, cfg)?;
-        start = s;
-        (Some(model), None)
+        let init = initial_model_and_start(ds, cfg)?;
+        (start, init_used, init_notes) = (init.start, init.used, init.notes);
+        (Some(init.model), None)
     };
     // The run folder is made only now, once the initial Gaussians exist: an `--init` the
     // dataset cannot serve (a missing PLY, `points` without sparse points) fails with nothing
@@ -623,7 +687,8 @@ pub fn train_run_with(
     }
     let summary = RunSummary {
         dataset: ds.name.clone(),
-        init: resolve_init(ds, &cfg.init).name().to_string(),
+        init: init_used.name().to_string(),
+        init_notes,
         iterations,
         gaussians: model.len(),
         train_seconds,

@@ -105,7 +105,7 @@ impl PairInspection {
             ("right", &pair.right_disparity),
         ] {
             let values: Vec<f32> = disp
-                .to_f32()
+                .values
                 .iter()
                 .map(|v| if v.is_finite() { *v } else { 0.0 })
                 .collect();

@@ -222,6 +222,7 @@ mod tests {
                 image,
                 depth_bounds: Some((1.0, 4.0)),
                 mask: None,
+                sparse_points: &[],
             })
             .collect()
     }

@@ -18,7 +18,7 @@ use fewview_geom::stereo::pairs::{OverlapRule, StereoView, stereo_pairs, with_de
 use fewview_geom::stereo::refine::RefineOptions;
 use fewview_geom::stereo::sgm::{Paths, SgmParams};
 use fewview_geom::stereo::source::{
-    DepthMapSource, DepthSource, DisparityRange, Photometry, SgmSource,
+    DepthMapSource, DepthSource, DisparityRange, PairMethod, Photometry, SgmSource, pair_method,
 };
 use fewview_scene::{Dataset, PointCloud, SceneError};
 use serde::{Deserialize, Serialize};
@@ -67,7 +67,7 @@ impl Default for StereoInit {
                 paths: Paths::Eight,
                 ..SgmParams::default()
             },
-            range: DisparityRange::FromDepthBounds,
+            range: DisparityRange::FromSparsePoints,
             refine: Some(RefineOptions::default()),
             photometry: Photometry::default(),
             overlap: OverlapRule::default(),
@@ -89,6 +89,11 @@ pub struct StereoStart {
     pub sample_regions: Vec<Region>,
     /// The pairs' matches when [`StereoInit::pair_check`] names a matcher.
     pub pair_check: Option<PairCheckReport>,
+    /// Pairs whose depth could not be had: their views' names and the reason.
+    pub skipped: Vec<(String, String, String)>,
+    /// Pairs matched by plane sweep rather than on rectified rows: their views' names and why
+    /// rectification could not serve them.
+    pub swept: Vec<(String, String, String)>,
 }
 
 /// Errors of the stereo start, naming the views or the file.
@@ -104,10 +109,18 @@ pub enum StereoStartError {
     Other(String),
 }
 
-/// The training views of `ds` as the stereo code sees them (missing depth bounds guessed from
-/// where the cameras look, see [`with_depth_bounds`]).
+/// The training views of `ds` as the stereo code sees them, with the dataset's sparse points
+/// (missing depth bounds taken from those points or guessed from where the cameras look, see
+/// [`with_depth_bounds`]).
 pub fn stereo_views(ds: &Dataset) -> Vec<StereoView<'_>> {
-    let views: Vec<StereoView> = ds.train_views().map(StereoView::of).collect();
+    let points = ds.points.as_ref().map_or(&[][..], |p| &p.positions[..]);
+    let views: Vec<StereoView> = ds
+        .train_views()
+        .map(|v| StereoView {
+            sparse_points: points,
+            ..StereoView::of(v)
+        })
+        .collect();
     with_depth_bounds(&views)
 }
 
@@ -148,6 +161,30 @@ pub fn stereo_start(
             ds.name
         )));
     }
+    let names = |a: usize, b: usize| (views[a].name.to_string(), views[b].name.to_string());
+    let skipped = cloud
+        .skipped
+        .iter()
+        .map(|(a, b, why)| {
+            let (a, b) = names(*a, *b);
+            (a, b, why.clone())
+        })
+        .collect();
+    let swept = match init.depth {
+        DepthFrom::Sgm => pairs
+            .iter()
+            .filter_map(
+                |&(a, b)| match pair_method(views[a].camera, views[b].camera) {
+                    PairMethod::PlaneSweep(why) => {
+                        let (a, b) = names(a, b);
+                        Some((a, b, why))
+                    }
+                    PairMethod::Rectified => None,
+                },
+            )
+            .collect(),
+        DepthFrom::Maps(_) => Vec::new(),
+    };
     let (points, sample_regions) = cloud.sample(init.fraction, seed)?;
     let sample = PointCloud {
         positions: points.positions,
@@ -163,6 +200,8 @@ pub fn stereo_start(
         sample,
         sample_regions,
         pair_check: checked.report,
+        skipped,
+        swept,
     })
 }
 
@@ -182,6 +221,9 @@ pub struct StereoSummary<'a> {
     pub b_far: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pair_check: Option<&'a PairCheckReport>,
+    /// Pairs without depth, and pairs swept in their own cameras: views and reason.
+    pub skipped: &'a [(String, String, String)],
+    pub swept: &'a [(String, String, String)],
 }
 
 impl StereoStart {
@@ -199,6 +241,8 @@ impl StereoStart {
             b_near: c.map(|c| c.b_near),
             b_far: c.map(|c| c.b_far),
             pair_check: self.pair_check.as_ref(),
+            skipped: &self.skipped,
+            swept: &self.swept,
         }
     }
 

@@ -133,6 +133,9 @@ pub fn train_with_progress(
 pub fn print_summary(s: &RunSummary, out: &std::path::Path) {
     println!("dataset          {}", s.dataset);
     println!("initialisation   {}", s.init);
+    for note in &s.init_notes {
+        println!("                 {note}");
+    }
     println!(
         "iterations       {}{}",
         s.iterations,

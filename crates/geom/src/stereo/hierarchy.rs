@@ -123,6 +123,8 @@ pub struct HierarchicalCloud {
     pub contraction: Option<Contraction>,
     /// Per training view, the tier of the point accepted at each pixel.
     pub pixel_regions: Vec<Vec<Option<Region>>>,
+    /// The pairs whose depth could not be had (view indices), each with the reason.
+    pub skipped: Vec<(usize, usize, String)>,
 }
 
 /// A pixel's best class over its view's pairs, with the depth that gave it.
@@ -132,8 +134,10 @@ struct Candidate {
     depth: f32,
 }
 
-/// Builds the cloud for `views` from the depth `source` gives for each of `pairs`.
-/// `on_pair(done, total)` reports progress after each pair.
+/// Builds the cloud for `views` from the depth `source` gives for each of `pairs`; a pair whose
+/// depth cannot be had is skipped and listed with its reason ([`HierarchicalCloud::skipped`]),
+/// and an error only says that no pair gave depth. `on_pair(done, total)` reports progress
+/// after each pair.
 pub fn hierarchical_cloud(
     views: &[StereoView],
     pairs: &[(usize, usize)],
@@ -146,8 +150,16 @@ pub fn hierarchical_cloud(
         .map(|v| vec![None; pixel_count(v.camera)])
         .collect();
     let mut filtered: Vec<(Vec<f32>, usize)> = Vec::new();
+    let mut skipped = Vec::new();
     for (k, &(a, b)) in pairs.iter().enumerate() {
-        let PairDepths { first, second } = source.pair_depths(a, b)?;
+        let PairDepths { first, second } = match source.pair_depths(a, b) {
+            Ok(depths) => depths,
+            Err(e) => {
+                skipped.push((a, b, e.to_string()));
+                on_pair(k + 1, pairs.len());
+                continue;
+            }
+        };
         let da = edge_filtered(first, &views[a], options)?;
         let db = edge_filtered(second, &views[b], options)?;
         let mut ca = classify(&views[a], &da, &views[b], &db, options);
@@ -167,6 +179,13 @@ pub fn hierarchical_cloud(
         filtered.push((da.depth, a));
         filtered.push((db.depth, b));
         on_pair(k + 1, pairs.len());
+    }
+    if filtered.is_empty() {
+        let reasons: Vec<String> = skipped.iter().map(|(_, _, why)| why.clone()).collect();
+        return Err(GeomError::invalid(
+            "stereo pairs",
+            format!("no pair gave depth: {}", reasons.join("; ")),
+        ));
     }
     let cameras: Vec<&Camera> = views.iter().map(|v| v.camera).collect();
     let mut accepted = Accepted::new(&cameras);
@@ -197,7 +216,9 @@ pub fn hierarchical_cloud(
         Some(kind) => Some(contraction_of(&filtered, views, options, kind)?),
         None => None,
     };
-    Ok(accepted.into_cloud(views, counts, contraction))
+    let mut cloud = accepted.into_cloud(views, counts, contraction);
+    cloud.skipped = skipped;
+    Ok(cloud)
 }
 
 fn pixel_count(camera: &Camera) -> usize {
@@ -464,6 +485,7 @@ impl Accepted {
             counts,
             contraction,
             pixel_regions,
+            skipped: Vec::new(),
         }
     }
 }
@@ -586,6 +608,7 @@ mod tests {
             image,
             depth_bounds: Some((2.0, 10.0)),
             mask: None,
+            sparse_points: &[],
         }
     }
 

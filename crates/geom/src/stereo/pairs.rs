@@ -17,6 +17,10 @@ pub struct StereoView<'a> {
     /// Where the image shows the scene (1) and where only its background (0): the alpha of an
     /// RGBA capture. Pixels below 0.5 get no depth.
     pub mask: Option<&'a Image>,
+    /// The scene's sparse structure-from-motion points (all of them, empty when the dataset has
+    /// none), from which a pair's disparity range is taken
+    /// ([`super::range::DisparityRange::FromSparsePoints`]).
+    pub sparse_points: &'a [[f32; 3]],
 }
 
 impl<'a> StereoView<'a> {
@@ -29,6 +33,7 @@ impl<'a> StereoView<'a> {
             image: &view.image,
             depth_bounds: view.depth_bounds,
             mask: view.mask.as_ref().filter(|_| view.mask_is_alpha),
+            sparse_points: &[],
         }
     }
 }
@@ -69,8 +74,9 @@ pub fn typical_depth(view: &StereoView, look_at: &Vector3<f64>) -> f64 {
     }
 }
 
-/// `views` with every missing depth bound filled in as half to twice its [`typical_depth`] (the
-/// distance to the point the views look at): a wide guess for scenes whose loaders give no
+/// `views` with every missing depth bound filled in: from the sparse points the view sees
+/// ([`super::range::points_depth_bounds`]), else as half to twice its [`typical_depth`] (the
+/// distance to the point the views look at), a wide guess for scenes whose loaders give no
 /// bounds (NeRF-synthetic, DTU).
 pub fn with_depth_bounds<'a>(views: &[StereoView<'a>]) -> Vec<StereoView<'a>> {
     let poses: Vec<_> = views.iter().map(|v| v.camera.world_to_camera).collect();
@@ -80,7 +86,10 @@ pub fn with_depth_bounds<'a>(views: &[StereoView<'a>]) -> Vec<StereoView<'a>> {
         .map(|v| {
             let t = typical_depth(v, &look_at);
             StereoView {
-                depth_bounds: v.depth_bounds.or(Some((0.5 * t, 2.0 * t))),
+                depth_bounds: v
+                    .depth_bounds
+                    .or_else(|| super::range::points_depth_bounds(v))
+                    .or(Some((0.5 * t, 2.0 * t))),
                 ..*v
             }
         })
@@ -277,6 +286,7 @@ mod tests {
             image,
             depth_bounds: Some((3.0, 8.0)),
             mask: None,
+            sparse_points: &[],
         }
     }
 

@@ -8,9 +8,15 @@ use std::path::Path;
 use fewview_scene::{Camera, Image};
 
 use super::pairs::StereoView;
+pub use super::range::{
+    DisparityRange, MAX_DISPARITIES, disparity_range, exact_disparity_range, points_depth_range,
+    points_disparity_range,
+};
 use super::rectify::{Rectification, RectifiedImage, Side};
 use super::refine::{RefineOptions, grey, refine};
-use super::sgm::{self, Disparity, GrayOrRgb, SgmParams};
+use super::search_window::{match_window, window_start};
+use super::sgm::SgmParams;
+use super::sweep::sweep_pair;
 use crate::error::{GeomError, Result};
 use crate::io::read_depth;
 
@@ -44,16 +50,6 @@ pub trait DepthSource: Sync {
     fn name(&self) -> &str;
     /// The depth maps of views `first` and `second` as seen together.
     fn pair_depths(&self, first: usize, second: usize) -> Result<PairDepths>;
-}
-
-/// How the disparity search range of a pair is chosen.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum DisparityRange {
-    /// From the two views' depth bounds (10 % margin), rounded out to a multiple of 16.
-    FromDepthBounds,
-    /// Exactly these disparities, `min .. min + count`.
-    Fixed { min: i32, count: usize },
 }
 
 /// How the two photos of a pair are brought to one brightness before they are matched.
@@ -108,8 +104,31 @@ pub fn match_gains(left: &RectifiedImage, right: &mut RectifiedImage, shift: i32
     gains
 }
 
-/// The most disparities searched when the range comes from depth bounds.
-pub const MAX_DISPARITIES: usize = 256;
+/// A disparity map of a rectified image: `x_left − x_right` in pixels, row-major, NaN where the
+/// matcher found none.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DisparityMap {
+    pub width: usize,
+    pub height: usize,
+    pub values: Vec<f32>,
+}
+
+impl DisparityMap {
+    pub fn new(width: usize, height: usize, values: Vec<f32>) -> Self {
+        debug_assert_eq!(values.len(), width * height);
+        Self {
+            width,
+            height,
+            values,
+        }
+    }
+
+    /// The fraction of pixels with a disparity.
+    pub fn valid_fraction(&self) -> f64 {
+        let n = self.values.iter().filter(|v| v.is_finite()).count();
+        n as f64 / self.values.len().max(1) as f64
+    }
+}
 
 /// Everything two-view stereo computes for one pair.
 #[derive(Clone, Debug)]
@@ -122,27 +141,11 @@ pub struct PairStereo {
     pub right: RectifiedImage,
     /// The parameters used, with the pair's disparity range.
     pub params: SgmParams,
-    pub left_disparity: Disparity,
-    pub right_disparity: Disparity,
+    /// The matcher's disparities of each rectified image, before sub-pixel refinement.
+    pub left_disparity: DisparityMap,
+    pub right_disparity: DisparityMap,
     /// Depth maps of the pair's first and second view in their original cameras.
     pub depths: PairDepths,
-}
-
-/// The disparity range of rectified pair `rect` for scene depths `near..far`, with 10 % margins.
-pub fn disparity_range(rect: &Rectification, near: f64, far: f64) -> (i32, usize) {
-    exact_disparity_range(rect, near * 0.9, far * 1.1)
-}
-
-/// The disparity range of rectified pair `rect` for rectified z-depths exactly `near..far`:
-/// the first disparity and a count of 16 to [`MAX_DISPARITIES`], a multiple of 16.
-pub fn exact_disparity_range(rect: &Rectification, near: f64, far: f64) -> (i32, usize) {
-    let lo = rect
-        .depth_to_disparity(far)
-        .floor()
-        .max(rect.offset.floor()) as i32;
-    let hi = rect.depth_to_disparity(near).ceil() as i64;
-    let count = (hi - lo as i64 + 1).clamp(16, MAX_DISPARITIES as i64) as usize;
-    (lo, count.div_ceil(16) * 16)
 }
 
 /// The rectification [`match_pair`] uses for cameras `first` and `second`, and whether it
@@ -160,9 +163,10 @@ pub fn rectify_pair(first: &Camera, second: &Camera) -> Result<(Rectification, b
 }
 
 /// Rectifies `first` and `second`, brings them to one brightness (`photometry`), matches them
-/// both ways and maps the disparities back to depth in the original cameras. `range` picks the disparity search range (with
-/// [`DisparityRange::FromDepthBounds`] both views need depth bounds; see
-/// [`super::pairs::with_depth_bounds`]).
+/// both ways and maps the disparities back to depth in the original cameras. `range` picks the
+/// disparity search range (with [`DisparityRange::FromDepthBounds`], and with
+/// [`DisparityRange::FromSparsePoints`] when the views share too few points, both views need
+/// depth bounds; see [`super::pairs::with_depth_bounds`]).
 pub fn match_pair(
     first: &StereoView,
     second: &StereoView,
@@ -180,17 +184,23 @@ pub fn match_pair(
         (first, second)
     };
     let mut params = params.clone();
-    if let DisparityRange::Fixed { min, count } = range {
-        (params.min_disparity, params.num_disparities) = (min, count);
-    } else {
-        let (near, far) = pair_bounds(l, r).ok_or_else(|| {
-            GeomError::invalid(
-                pair_name(),
-                "no depth bounds to choose the disparity range from",
-            )
-        })?;
-        (params.min_disparity, params.num_disparities) = disparity_range(&rect, near, far);
-    }
+    let from_points = match range {
+        DisparityRange::FromSparsePoints => points_disparity_range(&rect, l, r, l.sparse_points),
+        _ => None,
+    };
+    (params.min_disparity, params.num_disparities) = match (range, from_points) {
+        (DisparityRange::Fixed { min, count }, _) => (min, count),
+        (_, Some(found)) => found,
+        _ => {
+            let (near, far) = pair_bounds(l, r).ok_or_else(|| {
+                GeomError::invalid(
+                    pair_name(),
+                    "no depth bounds to choose the disparity range from",
+                )
+            })?;
+            disparity_range(&rect, near, far)
+        }
+    };
     let (left, mut right) = rayon::join(
         || rect.rectify_image(Side::Left, l.image),
         || rect.rectify_image(Side::Right, r.image),
@@ -201,12 +211,15 @@ pub fn match_pair(
     }
     let (lu8, ru8) = (eight_bit_rgb(&left.image), eight_bit_rgb(&right.image));
     let (w, h) = (left.image.width, left.image.height);
-    let lg = GrayOrRgb::new(w, h, 3, &lu8)?;
-    let rg = GrayOrRgb::new(w, h, 3, &ru8)?;
-    let (mut ld, mut rd) = sgm::match_both(&lg, &rg, &params)?;
-    drop_outside(&mut ld, &left.inside, &right.inside, -1.0);
-    drop_outside(&mut rd, &right.inside, &left.inside, 1.0);
-    let (mut lf, mut rf) = (ld.to_f32(), rd.to_f32());
+    let shift = window_start(&params);
+    let (mut lf, mut rf) = match_window(&lu8, &ru8, (w, h, 3), &params, shift)
+        .map_err(|e| GeomError::invalid(pair_name(), e.to_string()))?;
+    drop_outside(&mut lf, w, &left.inside, &right.inside, -1.0);
+    drop_outside(&mut rf, w, &right.inside, &left.inside, 1.0);
+    let (ld, rd) = (
+        DisparityMap::new(w, h, lf.clone()),
+        DisparityMap::new(w, h, rf.clone()),
+    );
     // Without refinement every SGM disparity counts as verified.
     let (mut l_ok, mut r_ok) = (lf.clone(), rf.clone());
     if let Some(o) = refine_options {
@@ -272,19 +285,17 @@ fn pair_bounds(a: &StereoView, b: &StereoView) -> Option<(f64, f64)> {
     Some((na.min(nb), fa.max(fb)))
 }
 
-/// Drops disparities whose pixel, or whose match in the other image (at `x + sign·d`), lies
-/// where the rectified image has no source pixels.
-fn drop_outside(disp: &mut Disparity, inside: &[bool], other_inside: &[bool], sign: f32) {
-    let w = disp.width;
-    for (i, v) in disp.fixed.iter_mut().enumerate() {
-        if *v == disp.invalid {
+/// Drops disparities (pixels, NaN where none, rows `w` wide) whose pixel, or whose match in
+/// the other image (at `x + sign·d`), lies where the rectified image has no source pixels.
+fn drop_outside(disp: &mut [f32], w: usize, inside: &[bool], other_inside: &[bool], sign: f32) {
+    for (i, v) in disp.iter_mut().enumerate() {
+        if !v.is_finite() {
             continue;
         }
-        let x = (i % w) as f32 + sign * (*v as f32 / sgm::DISP_SCALE as f32);
-        let xm = x.round();
+        let xm = ((i % w) as f32 + sign * *v).round();
         let matched = xm >= 0.0 && (xm as usize) < w && other_inside[i - i % w + xm as usize];
         if !inside[i] || !matched {
-            *v = disp.invalid;
+            *v = f32::NAN;
         }
     }
 }
@@ -318,15 +329,80 @@ impl DepthSource for SgmSource<'_> {
     }
 
     fn pair_depths(&self, first: usize, second: usize) -> Result<PairDepths> {
-        let pair = match_pair(
-            &self.views[first],
-            &self.views[second],
-            &self.params,
-            self.range,
-            self.refine.as_ref(),
-            self.photometry,
-        )?;
-        Ok(pair.depths)
+        let (a, b) = (&self.views[first], &self.views[second]);
+        match pair_method(a.camera, b.camera) {
+            PairMethod::Rectified => {
+                let pair = match_pair(
+                    a,
+                    b,
+                    &self.params,
+                    self.range,
+                    self.refine.as_ref(),
+                    self.photometry,
+                )?;
+                Ok(pair.depths)
+            }
+            PairMethod::PlaneSweep(_) => {
+                let range = points_depth_range(a, b, a.sparse_points)
+                    .or_else(|| pair_bounds(a, b).map(|(n, f)| (0.9 * n, 1.1 * f)))
+                    .ok_or_else(|| {
+                        GeomError::invalid(
+                            format!("views {} and {}", a.name, b.name),
+                            "no depth bounds to place the sweep's planes",
+                        )
+                    })?;
+                sweep_pair(a, b, range, &self.params, self.refine.as_ref())
+            }
+        }
+    }
+}
+
+/// How the depth of a pair of views is matched.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PairMethod {
+    /// Rectified Semi-Global Matching ([`match_pair`]).
+    Rectified,
+    /// Plane sweep in each view ([`sweep_pair`]), with the reason rectification cannot serve.
+    PlaneSweep(String),
+}
+
+/// The largest turn (degrees) rectification may give either camera of a pair: beyond it the
+/// rectified images stretch so much along the rows (and, as the baseline nears the optical
+/// axis, towards the epipoles inside the images) that block matching on rows fails, and the
+/// pair is swept in its own cameras instead.
+pub const MAX_RECTIFYING_TURN_DEG: f64 = 30.0;
+
+/// Whether rectified matching serves cameras `first` and `second`, or plane sweep, and why.
+pub fn pair_method(first: &Camera, second: &Camera) -> PairMethod {
+    let rect = match rectify_pair(first, second) {
+        Ok((rect, _)) => rect,
+        Err(e) => return PairMethod::PlaneSweep(format!("rectification fails: {e}")),
+    };
+    let turn = [Side::Left, Side::Right]
+        .map(|side| {
+            let (original, rectified) = (rect.original(side), rect.rectified(side));
+            let r =
+                rectified.world_to_camera.rotation * original.world_to_camera.rotation.transpose();
+            ((r.trace() - 1.0) / 2.0)
+                .clamp(-1.0, 1.0)
+                .acos()
+                .to_degrees()
+        })
+        .into_iter()
+        .fold(0.0, f64::max);
+    if turn > MAX_RECTIFYING_TURN_DEG {
+        let axis = (first.forward() + second.forward()).normalize();
+        let along = (second.center() - first.center())
+            .normalize()
+            .dot(&axis)
+            .abs();
+        PairMethod::PlaneSweep(format!(
+            "rectification would turn a camera by {turn:.0}° (the baseline is {:.0}° from the \
+             optical axis; at most {MAX_RECTIFYING_TURN_DEG:.0}° is matched on rectified rows)",
+            along.acos().to_degrees()
+        ))
+    } else {
+        PairMethod::Rectified
     }
 }
 

@@ -98,6 +98,43 @@ pub fn match_both(
     Ok((l?, r?))
 }
 
+/// A cost volume built outside the rectified matcher (`height × width × d` saturating `i16`,
+/// hypothesis innermost; plane sweep, [`crate::stereo::sweep`]) aggregated along `params`'
+/// paths with the penalties `params` gives images of `channels` channels: the same Eq. 13 as
+/// the rectified matcher, with hypotheses in place of disparities.
+pub(crate) fn aggregate_volume(
+    cost: &[i16],
+    (width, height, d): (usize, usize, usize),
+    params: &SgmParams,
+    channels: usize,
+) -> Result<Vec<i16>> {
+    let window = SgmParams {
+        min_disparity: 0,
+        num_disparities: d,
+        border: Border::Partial,
+        ..params.clone()
+    };
+    let p = window.resolve(channels)?;
+    let layout = cost::Layout::new(width, &p)
+        .ok_or_else(|| GeomError::invalid("cost volume", "no column to aggregate"))?;
+    if cost.len() != height * layout.row_len() {
+        return Err(GeomError::invalid(
+            "cost volume",
+            format!("{} values for {width}×{height}×{d}", cost.len()),
+        ));
+    }
+    Ok(paths::aggregate(cost, height, &layout, &p))
+}
+
+/// The hypothesis a pixel's aggregated costs `sp` choose, in 1/[`DISP_SCALE`] steps (the
+/// parabola through the minimum and its neighbours), as the rectified matcher chooses a
+/// disparity; `None` when another hypothesis more than one step away comes within
+/// `uniqueness_ratio` percent of its cost.
+pub(crate) fn best_hypothesis(sp: &[i16], uniqueness_ratio: i32) -> Option<i32> {
+    let (best, min) = select::arg_min(sp);
+    select::is_unique(sp, best, min, uniqueness_ratio).then(|| select::sub_pixel(sp, best))
+}
+
 fn mirror(img: &GrayOrRgb) -> Vec<u8> {
     let cn = img.channels;
     let mut out = Vec::with_capacity(img.data.len());

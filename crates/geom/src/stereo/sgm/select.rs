@@ -65,7 +65,7 @@ fn claimable_columns(w: usize, p: &Resolved) -> (i64, i64) {
 
 /// The first disparity index of the smallest cost, and that cost.
 #[inline]
-fn arg_min(sp: &[i16]) -> (usize, i16) {
+pub(super) fn arg_min(sp: &[i16]) -> (usize, i16) {
     let mut best = (0, i16::MAX);
     for (k, &v) in sp.iter().enumerate() {
         if v < best.1 {
@@ -77,7 +77,7 @@ fn arg_min(sp: &[i16]) -> (usize, i16) {
 
 /// No disparity more than one away from `best` comes within `ratio` percent of its cost.
 #[inline]
-fn is_unique(sp: &[i16], best: usize, min: i16, ratio: i32) -> bool {
+pub(super) fn is_unique(sp: &[i16], best: usize, min: i16, ratio: i32) -> bool {
     sp.iter()
         .enumerate()
         .all(|(k, &v)| best.abs_diff(k) <= 1 || v as i32 * (100 - ratio) >= min as i32 * 100)
@@ -85,7 +85,7 @@ fn is_unique(sp: &[i16], best: usize, min: i16, ratio: i32) -> bool {
 
 /// `best` in 1/16 px, moved to the vertex of the parabola through its two neighbours' costs.
 #[inline]
-fn sub_pixel(sp: &[i16], best: usize) -> i32 {
+pub(super) fn sub_pixel(sp: &[i16], best: usize) -> i32 {
     let scaled = best as i32 * DISP_SCALE;
     if best == 0 || best + 1 >= sp.len() {
         return scaled;
