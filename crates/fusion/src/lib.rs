@@ -5,11 +5,13 @@
 //! alternatives (supplement §4), and the transition videos and metrics it is judged by.
 //!
 //! Entry points: [`fusion_run`] trains one variant ([`Variant`], [`FusionConfig`]);
-//! [`transition`] renders and scores the path through the training views.
+//! [`transition`] renders and scores the path through the training views; [`leave_one_out`]
+//! scores a capture whose every photo trains.
 
 pub mod bench;
 pub mod error;
 pub mod guidance;
+pub mod leave_one_out;
 pub mod losses;
 pub mod reproject;
 pub mod run;

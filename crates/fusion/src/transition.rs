@@ -298,7 +298,8 @@ pub fn score_transition(
 pub const POPPING_MAP_MAX: f32 = 0.1;
 
 /// Renders the trained run in `dir` along the transition path through `ds`'s training views
-/// (ordered along their baseline) and writes `transition.mp4`, `transition.json`, the popping
+/// (ordered along their baseline) and writes `transition.mp4`, `transition.json`,
+/// `midpath.jpg` ([`midpath_picture`]), the popping
 /// maps (`popping.mp4`, one frame per transition, 0 to [`POPPING_MAP_MAX`] on the ramp, black
 /// where the frames share nothing) and the worst transition's map (`popping_worst.png`), and
 /// returns the scores. `truth` renders the ground truth of any path frame (the demo scene's ray
@@ -342,7 +343,7 @@ pub fn transition_of_run(
         mut report,
         popping_maps,
     } = score_transition(&rendered, &at_keys, truth_frames.as_deref(), lpips)?;
-    if let Some(l) = lpips {
+    if let Some(l) = lpips.filter(|_| !ds.test.is_empty()) {
         let (raw, matched) = held_out_lpips(ds, &model, &settings, l)?;
         report.held_out_lpips = Some(raw);
         report.held_out_lpips_gain_matched = Some(matched);
@@ -354,10 +355,61 @@ pub fn transition_of_run(
         &VideoOptions::default(),
     )?;
     write_popping_maps(dir, &rendered, &popping_maps, &report.popping)?;
+    let ordered: Vec<&Camera> = order.iter().map(|&i| cameras[i]).collect();
+    midpath_picture(&model, &ordered, &settings).save_jpeg(&dir.join("midpath.jpg"))?;
     let json =
         serde_json::to_vec_pretty(&report).map_err(|e| FusionError::Invalid(e.to_string()))?;
     fewview_scene::atomic::write_bytes(&dir.join("transition.json"), &json)?;
     Ok(report)
+}
+
+/// Widest a frame of [`midpath_picture`] is drawn, and how many frames share a row.
+const MIDPATH_FRAME_WIDTH: usize = 480;
+const MIDPATH_COLUMNS: usize = 4;
+
+/// The frames halfway between neighbouring photos of the path (`keys` in path order), side by
+/// side, row after row, each at most [`MIDPATH_FRAME_WIDTH`] pixels wide: where floaters and
+/// seams show first, since no photo constrains those views.
+pub fn midpath_picture(
+    model: &GaussianModel,
+    keys: &[&Camera],
+    settings: &RenderSettings,
+) -> Image {
+    let mids: Vec<Camera> = keys
+        .windows(2)
+        .map(|pair| pair[0].interpolate(pair[1], 0.5))
+        .collect();
+    let frames: Vec<Image> = mids
+        .par_iter()
+        .map(|c| {
+            let frame = render_model(model, &RenderCamera::from(c), settings).rgb;
+            let scale = (MIDPATH_FRAME_WIDTH as f64 / frame.width as f64).min(1.0);
+            let w = ((frame.width as f64 * scale).round() as usize).max(1);
+            let h = ((frame.height as f64 * scale).round() as usize).max(1);
+            frame.resize(w, h)
+        })
+        .collect();
+    tile(&frames, MIDPATH_COLUMNS)
+}
+
+/// `frames` laid out `columns` to a row on a black canvas (each cell as large as the largest).
+fn tile(frames: &[Image], columns: usize) -> Image {
+    let cell_w = frames.iter().map(|f| f.width).max().unwrap_or(1);
+    let cell_h = frames.iter().map(|f| f.height).max().unwrap_or(1);
+    let cols = columns.min(frames.len()).max(1);
+    let rows = frames.len().div_ceil(cols).max(1);
+    let mut canvas = Image::new(cols * cell_w, rows * cell_h, 3);
+    for (k, f) in frames.iter().enumerate() {
+        let (x0, y0) = ((k % cols) * cell_w, (k / cols) * cell_h);
+        for y in 0..f.height {
+            for x in 0..f.width {
+                for c in 0..3 {
+                    canvas.set(x0 + x, y0 + y, c, f.pixel(x, y)[c.min(f.channels - 1)]);
+                }
+            }
+        }
+    }
+    canvas
 }
 
 /// `popping.mp4` and `popping_worst.png` (see [`transition_of_run`]).
@@ -423,6 +475,22 @@ mod tests {
             Vector3::zeros(),
             Vector3::z(),
         )
+    }
+
+    /// Five frames four to a row: two rows of cells as large as the largest frame, each frame
+    /// at its cell's corner, black elsewhere.
+    #[test]
+    fn midpath_frames_are_tiled_row_after_row() {
+        let frames: Vec<Image> = (0..5)
+            .map(|k| Image::filled(10 + k, 6, &[0.1 * (k + 1) as f32, 0.0, 1.0]))
+            .collect();
+        let canvas = tile(&frames, 4);
+        assert_eq!((canvas.width, canvas.height), (4 * 14, 2 * 6));
+        assert_eq!(canvas.pixel(14 * 2 + 11, 5), &[0.3, 0.0, 1.0]);
+        assert_eq!(canvas.pixel(9, 3), &[0.1, 0.0, 1.0]);
+        assert_eq!(canvas.pixel(11, 0), &[0.0, 0.0, 0.0]);
+        assert_eq!(canvas.pixel(13, 6), &[0.5, 0.0, 1.0]);
+        assert_eq!(canvas.pixel(14 + 1, 7), &[0.0, 0.0, 0.0]);
     }
 
     #[test]

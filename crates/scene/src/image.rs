@@ -235,6 +235,27 @@ impl Image {
             .collect()
     }
 
+    /// Writes a JPEG of quality 90 atomically (1 or 3 channels), for pictures a person looks
+    /// at rather than data read back.
+    pub fn save_jpeg(&self, path: &Path) -> Result<()> {
+        let color = match self.channels {
+            1 => image::ExtendedColorType::L8,
+            3 => image::ExtendedColorType::Rgb8,
+            c => {
+                return Err(SceneError::invalid(
+                    path,
+                    format!("cannot write a {c}-channel image as JPEG"),
+                ));
+            }
+        };
+        let bytes = self.to_u8();
+        crate::atomic::write_with(path, |file| {
+            image::codecs::jpeg::JpegEncoder::new_with_quality(file, 90)
+                .encode(&bytes, self.width as u32, self.height as u32, color)
+                .map_err(std::io::Error::other)
+        })
+    }
+
     /// Writes an 8-bit PNG atomically (temporary file in the same folder, then rename), so a
     /// crash never leaves a half-written image.
     pub fn save_png(&self, path: &Path) -> Result<()> {

@@ -99,6 +99,67 @@ pub fn llff_split(
     Ok((train, test))
 }
 
+/// Captures of at most this many photos train on every photo by default, and are scored by
+/// leave-one-out instead of a held-out split.
+pub const FEW_PHOTOS: usize = 8;
+
+/// The default split of a capture (nerfstudio, COLMAP) of `n_views` photos, given the views the
+/// user named: with no views named, at most [`FEW_PHOTOS`] photos all train and none is held
+/// out (score them by leave-one-out), more follow [`llff_split`]; held-out views named alone
+/// leave every other view (or `n_train` of them, spread evenly) to train; training views named
+/// alone hold out the other photos of a few, or every `every`-th view of more.
+pub fn capture_split(
+    n_views: usize,
+    (train_views, test_views): (Option<&[usize]>, Option<&[usize]>),
+    n_train: Option<usize>,
+    every: usize,
+    source: &Path,
+) -> Result<(Vec<usize>, Vec<usize>)> {
+    let (train, test) = match (train_views, test_views) {
+        (Some(train), Some(test)) => (train.to_vec(), test.to_vec()),
+        (Some(train), None) if n_views <= FEW_PHOTOS => {
+            let rest = (0..n_views).filter(|i| !train.contains(i)).collect();
+            (train.to_vec(), rest)
+        }
+        (Some(train), None) => (train.to_vec(), holdout_test_views(n_views, every)),
+        (None, Some(test)) => {
+            let rest: Vec<usize> = (0..n_views).filter(|i| !test.contains(i)).collect();
+            (spread(&rest, n_train, source)?, test.to_vec())
+        }
+        (None, None) if n_views <= FEW_PHOTOS && n_train.is_none() => {
+            ((0..n_views).collect(), Vec::new())
+        }
+        (None, None) => {
+            let (train, test) = llff_split(n_views, every, n_train, source)?;
+            (train, test)
+        }
+    };
+    validate_split(&train, n_views, "train", source)?;
+    // Few photos hold none out.
+    if !test.is_empty() {
+        validate_split(&test, n_views, "test", source)?;
+    }
+    Ok((train, test))
+}
+
+/// `n` of `views` spread evenly (all when `None`), as [`llff_split`] picks its training views.
+fn spread(views: &[usize], n: Option<usize>, source: &Path) -> Result<Vec<usize>> {
+    match n {
+        None => Ok(views.to_vec()),
+        Some(n) if n > views.len() => Err(SceneError::invalid(
+            source,
+            format!(
+                "asked for {n} training views but only {} views remain",
+                views.len()
+            ),
+        )),
+        Some(n) => Ok(linspace(0.0, views.len().saturating_sub(1) as f64, n)
+            .into_iter()
+            .map(|x| views[x.round_ties_even() as usize])
+            .collect()),
+    }
+}
+
 /// The first `n` frames of the seed-0 permutation (DietNeRF protocol) among `n_frames` training
 /// frames. The permutation is defined for exactly 100 frames; with another count only `n =
 /// n_frames` (all frames, in file order) is accepted.
@@ -205,6 +266,27 @@ pub fn check_disjoint(train: &[usize], test: &[usize], source: &Path) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn few_photos_all_train_and_named_views_split_the_rest() {
+        let src = Path::new("capture");
+        let split = |n, train: Option<&[usize]>, test: Option<&[usize]>, k| {
+            capture_split(n, (train, test), k, 8, src).unwrap()
+        };
+        assert_eq!(split(3, None, None, None), (vec![0, 1, 2], vec![]));
+        assert_eq!(split(8, None, None, None).1, Vec::<usize>::new());
+        // Nine photos: every 8th held out, as LLFF.
+        assert_eq!(
+            split(9, None, None, None),
+            (vec![1, 2, 3, 4, 5, 6, 7], vec![0, 8])
+        );
+        // Held-out views named alone leave the others to train.
+        assert_eq!(split(3, None, Some(&[1]), None), (vec![0, 2], vec![1]));
+        assert_eq!(split(5, None, Some(&[2]), Some(2)), (vec![0, 4], vec![2]));
+        assert_eq!(split(3, Some(&[0, 2]), None, None), (vec![0, 2], vec![1]));
+        assert_eq!(split(10, Some(&[1, 2]), None, None).1, vec![0, 8]);
+        assert!(capture_split(3, (None, Some(&[1])), Some(3), 8, src).is_err());
+    }
 
     #[test]
     fn overlapping_splits_are_refused_naming_both_lists() {

@@ -445,8 +445,9 @@ pub fn load_blender(root: &Path, opts: &LoadOptions, report: &mut LoadReport) ->
 }
 
 /// Loads a nerfstudio / instant-ngp `transforms.json`. Frames are sorted by `file_path` (as
-/// nerfstudio does) and all loaded; the split is LLFF-style ([`split::llff_split`]: every
-/// `holdout_every`-th frame is a test view, `n_train` spread evenly over the rest, default all).
+/// nerfstudio does) and all loaded; the split is a capture's ([`split::capture_split`]: at
+/// most [`split::FEW_PHOTOS`] frames all train; more are split LLFF-style, every
+/// `holdout_every`-th frame a test view and `n_train` spread evenly over the rest, default all).
 /// The poses are kept in the file's world frame: nerfstudio's automatic re-orientation and
 /// scaling are not applied.
 pub fn load_nerfstudio(
@@ -494,12 +495,12 @@ pub fn load_nerfstudio(
         report,
     )?;
     let n_views = views.len();
-    let (train, test) = view_files::choose_split(
-        opts,
+    let (train, test) = split::capture_split(
         n_views,
+        (opts.train_views.as_deref(), opts.test_views.as_deref()),
+        opts.n_train,
+        opts.holdout_every,
         &path,
-        |n| Ok(split::llff_split(n_views, opts.holdout_every, n, &path)?.0),
-        || split::holdout_test_views(n_views, opts.holdout_every),
     )?;
     Ok(Dataset {
         name: view_files::scene_name(root),

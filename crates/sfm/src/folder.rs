@@ -47,6 +47,27 @@ pub fn poses_for_folder(
     Ok(model)
 }
 
+/// The long side (pixels) photos are trained at by default: about 1,000 px, the size at which
+/// a few photos train in minutes on a CPU and which the sparse-view benchmarks use (LLFF at
+/// 1008×756 and 504×378, DTU at 800×600 and 400×300).
+pub const WORKING_LONG_SIDE: usize = 1000;
+
+/// The integer factor that brings photos whose longer side is `long_side` pixels closest to
+/// [`WORKING_LONG_SIDE`] (1 for photos of that size or smaller).
+pub fn working_downscale(long_side: usize) -> u32 {
+    ((long_side as f64 / WORKING_LONG_SIDE as f64).round() as u32).max(1)
+}
+
+/// The longest side (pixels) among the photos of `dir`, read from their headers.
+pub fn longest_photo_side(dir: &Path) -> Result<usize> {
+    let mut longest = 0;
+    for file in photo_files(dir)? {
+        let (w, h) = fewview_scene::Image::dimensions(&file)?;
+        longest = longest.max(w.max(h));
+    }
+    Ok(longest)
+}
+
 /// Whether `dir` holds photos but no cameras in any format a dataset loader reads.
 pub fn holds_only_photos(dir: &Path) -> bool {
     detect_format(dir).is_err() && photo_files(dir).is_ok_and(|f| !f.is_empty())
@@ -55,4 +76,23 @@ pub fn holds_only_photos(dir: &Path) -> bool {
 /// Whether `out` holds a model that [`poses_for_folder`] finished (its report is written last).
 pub fn has_model(out: &Path) -> bool {
     out.join("sparse/0/images.txt").is_file() && out.join("poses_report.json").is_file()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn photos_are_brought_to_about_a_thousand_pixels() {
+        for (side, k) in [
+            (504, 1),
+            (1024, 1),
+            (1400, 1),
+            (1920, 2),
+            (3264, 3),
+            (4032, 4),
+        ] {
+            assert_eq!(working_downscale(side), k, "{side}");
+        }
+    }
 }

@@ -34,8 +34,12 @@ pub struct DatasetArgs {
     #[arg(long, value_name = "NAME")]
     pub format: Option<DatasetFormat>,
     /// Downscale images by this integer factor on load (intrinsics follow).
-    #[arg(long, default_value_t = 1, value_name = "K")]
-    pub downscale: u32,
+    ///
+    /// Downscale images by this integer factor on load (intrinsics follow). Default 1; for a
+    /// folder of photos (`train`, `fusion`), the factor that brings them to about 1,000 px on
+    /// their longer side.
+    #[arg(long, value_name = "K")]
+    pub downscale: Option<u32>,
     /// Training views of the format's sparse split.
     ///
     /// Number of training views of the format's standard sparse split (LLFF 3, NeRF-synthetic 8,
@@ -80,7 +84,7 @@ impl DatasetArgs {
     pub fn load_options(&self) -> LoadOptions {
         LoadOptions {
             format: self.format,
-            downscale: self.downscale,
+            downscale: self.downscale.unwrap_or(1),
             n_train: self.n_train,
             train_views: self.train_views.clone().map(|v| v.0),
             test_views: self.test_views.clone().map(|v| v.0),

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
+use fewview_fusion::leave_one_out::EvalMode;
 use fewview_fusion::reproject::{Occlusion, ReprojectOptions};
 use fewview_fusion::{FusionConfig, Variant};
 use fewview_scene::Dataset;
@@ -16,6 +17,7 @@ use fewview_splat::pipeline::default_iterations;
 use super::dataset_args::{ViewList, object_only, parse_views};
 use super::fusion_outputs::{print_transition, train_with_progress, transition, write_gains};
 use super::fusion_study::write_study;
+use super::leave_one_out;
 use super::output_paths::check_folder;
 use super::photo_args::{DemoSceneArgs, JitterArgs};
 use super::poses_first;
@@ -54,8 +56,11 @@ pub struct Args {
     #[arg(long, default_value_t = 200, requires = "demo")]
     pub width: usize,
     /// Downscale images by this integer factor on load.
-    #[arg(long, default_value_t = 1, value_name = "K")]
-    pub downscale: u32,
+    ///
+    /// Downscale images by this integer factor on load (intrinsics follow). Default 1; for a
+    /// folder of photos, the factor that brings them to about 1,000 px on their longer side.
+    #[arg(long, value_name = "K")]
+    pub downscale: Option<u32>,
     /// Training views of the format's sparse split.
     ///
     /// Number of training views of the format's standard sparse split.
@@ -120,6 +125,14 @@ pub struct Args {
     /// loss; `meshes` ignores what the virtual view renders in front).
     #[arg(long, value_enum, default_value_t)]
     pub occlusion: Occlusion,
+    /// How the run is scored: leave-one-out or held-out.
+    ///
+    /// `leave-one-out` holds each of up to three interior photos out in turn and trains the
+    /// same way on the rest (in `OUT/leave_one_out/<photo>/`), then scores the held-out photo;
+    /// `held-out` scores the dataset's held-out views. Default: leave-one-out when no view is
+    /// held out (a capture of 8 photos or fewer), else held-out.
+    #[arg(long, value_enum, value_name = "MODE")]
+    pub eval: Option<EvalMode>,
     /// Skip the transition video and its scores.
     #[arg(long)]
     pub no_transition: bool,
@@ -167,8 +180,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return write_study(&args.study, &out);
     }
     let mut args = args;
-    if let Some(data) = &args.data {
-        args.data = Some(poses_first::dataset_folder(data, &out)?);
+    if let Some(data) = args.data.clone() {
+        let folder = poses_first::dataset_folder(&data, &out)?;
+        args.downscale = Some(poses_first::chosen_downscale(
+            args.downscale,
+            &folder,
+            &data,
+        ));
+        args.data = Some(folder.dir);
     }
     let (mut ds, demo, gains) = load(&args)?;
     let default = if demo.is_some() {
@@ -187,7 +206,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .data
                 .clone()
                 .expect("clap requires --data without --demo"),
-            downscale: args.downscale,
+            downscale: args.downscale.unwrap_or(1),
             train_views: args.train_views.clone().map(|v| v.0),
             test_views: args.test_views.clone().map(|v| v.0),
             n_train: args.n_train,
@@ -222,12 +241,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ds.test.len(),
         out.display()
     );
+    let eval = EvalMode::resolve(args.eval, &ds)?;
     let summary = train_with_progress(&ds, &cfg, &fusion, &out, args.resume)?;
     write_gains(&out, &gains)?;
     print_summary(&summary, &out);
     if !args.no_transition {
         let report = transition(&ds, demo.as_ref(), &out, !args.no_lpips)?;
         print_transition(&report);
+    }
+    if eval == EvalMode::LeaveOneOut {
+        let train = |ds: &Dataset, dir: &std::path::Path, resume: bool| {
+            train_with_progress(ds, &cfg, &fusion, dir, resume).map(|_| ())
+        };
+        if let Some(report) = leave_one_out::run(&ds, &out, !args.no_lpips, train)? {
+            leave_one_out::print(&report);
+        }
     }
     Ok(())
 }
@@ -264,7 +292,7 @@ fn load(args: &Args) -> anyhow::Result<(Dataset, Option<DemoOptions>, Vec<(Strin
         .as_deref()
         .expect("clap requires --data without --demo");
     let options = fewview_scene::load::LoadOptions {
-        downscale: args.downscale,
+        downscale: args.downscale.unwrap_or(1),
         n_train: args.n_train,
         train_views: args.train_views.clone().map(|v| v.0),
         test_views: args.test_views.clone().map(|v| v.0),

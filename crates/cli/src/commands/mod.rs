@@ -14,6 +14,7 @@ mod fusion_outputs;
 mod fusion_study;
 mod geom_common;
 mod human;
+mod leave_one_out;
 mod matching;
 mod mcubes;
 mod number_args;

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
+use fewview_fusion::leave_one_out::EvalMode;
 use fewview_scene::split;
 use fewview_splat::pipeline::adopt_init_poses;
 use fewview_splat::pipeline::{
@@ -11,6 +12,7 @@ use fewview_splat::pipeline::{
 };
 
 use super::dataset_args::DatasetArgs;
+use super::leave_one_out;
 use super::output_paths::check_folder;
 use super::poses_first;
 use super::progress;
@@ -31,6 +33,14 @@ pub struct Args {
     /// Run directory. Default: `runs/<dataset folder name>`.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// How the run is scored: leave-one-out or held-out.
+    ///
+    /// `leave-one-out` holds each of up to three interior photos out in turn and trains again
+    /// on the rest (in `OUT/leave_one_out/<photo>/`), then scores the held-out photo;
+    /// `held-out` scores the dataset's held-out views. Default: leave-one-out when no view is
+    /// held out (a capture of 8 photos or fewer), else held-out.
+    #[arg(long, value_enum, value_name = "MODE")]
+    pub eval: Option<EvalMode>,
     /// Continue the run in `--out`.
     ///
     /// From its last checkpoint, with the same flags as the first time. A checkpoint of another
@@ -52,14 +62,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     });
     check_folder(&out, "--out")?;
     let mut args = args;
-    let folder = poses_first::dataset_folder(args.dataset.folder()?, &out)?;
-    args.dataset.data = Some(folder);
+    let data = args.dataset.folder()?.to_path_buf();
+    let folder = poses_first::dataset_folder(&data, &out)?;
+    args.dataset.downscale = Some(poses_first::chosen_downscale(
+        args.dataset.downscale,
+        &folder,
+        &data,
+    ));
+    args.dataset.data = Some(folder.dir);
     let mut ds = args.dataset.load()?;
     // The standard splits are disjoint; explicit `--train-views` / `--test-views` could overlap
     // them or each other, and the held-out PSNR would then be measured on training views.
     if let Err(e) = split::check_disjoint(&ds.train, &ds.test, args.dataset.folder()?) {
         bail!("{e}; pass disjoint --train-views and --test-views");
     }
+    let eval = EvalMode::resolve(args.eval, &ds)?;
     let bare_surface = surface_first::take(&mut args.train.init, &out);
     let cfg = args
         .train
@@ -68,7 +85,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let first = || {
         Ok(surface_first::SurfaceFirst {
             data: d.folder()?.to_path_buf(),
-            downscale: d.downscale,
+            downscale: d.downscale.unwrap_or(1),
             train_views: d.train_views.clone().map(|v| v.0),
             test_views: d.test_views.clone().map(|v| v.0),
             n_train: d.n_train,
@@ -91,6 +108,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let summary = train_with_progress(&ds, &cfg, &out, args.resume)?;
     print_summary(&summary, &out);
+    if eval == EvalMode::LeaveOneOut {
+        let train = |ds: &fewview_scene::Dataset, dir: &std::path::Path, resume: bool| {
+            train_with_progress(ds, &cfg, dir, resume).map(|_| ())
+        };
+        if let Some(report) = leave_one_out::run(&ds, &out, true, train)? {
+            leave_one_out::print(&report);
+        }
+    }
     Ok(())
 }
 
@@ -146,6 +171,10 @@ pub fn print_summary(s: &RunSummary, out: &std::path::Path) {
     println!("Gaussians        {}", s.gaussians);
     println!("training time    {:.1} s", s.train_seconds);
     println!("held-out views   {}", s.test.views.len());
+    if s.test.views.is_empty() {
+        println!("outputs          {}", out.display());
+        return;
+    }
     println!("held-out PSNR    {:.3} dB", s.test.mean_psnr);
     println!("held-out SSIM    {:.4}", s.test.mean_ssim);
     println!(

@@ -121,9 +121,10 @@ pub fn read_points_in(dir: &Path) -> Result<Option<Vec<ColmapPoint>>> {
 }
 
 /// Loads a COLMAP scene: the model (see [`find_model_dir`]), photos from `images/` by name.
-/// Views are sorted by image name (as 3DGS does); the split is LLFF-style
-/// ([`split::llff_split`]: every `holdout_every`-th view is a test view, `n_train` spread evenly
-/// over the rest, default all). The model's points become [`Dataset::points`].
+/// Views are sorted by image name (as 3DGS does); the split is a capture's
+/// ([`split::capture_split`]: at most [`split::FEW_PHOTOS`] photos all train; more are split
+/// LLFF-style, every `holdout_every`-th view a test view and `n_train` spread evenly over the
+/// rest, default all). The model's points become [`Dataset::points`].
 pub fn load(root: &Path, opts: &LoadOptions, report: &mut LoadReport) -> Result<Dataset> {
     let dir = find_model_dir(root).ok_or_else(|| {
         SceneError::format(
@@ -195,12 +196,12 @@ pub fn load(root: &Path, opts: &LoadOptions, report: &mut LoadReport) -> Result<
         views.push(view);
     }
     let n_views = views.len();
-    let (train, test) = view_files::choose_split(
-        opts,
+    let (train, test) = split::capture_split(
         n_views,
+        (opts.train_views.as_deref(), opts.test_views.as_deref()),
+        opts.n_train,
+        opts.holdout_every,
         root,
-        |n| Ok(split::llff_split(n_views, opts.holdout_every, n, root)?.0),
-        || split::holdout_test_views(n_views, opts.holdout_every),
     )?;
     Ok(Dataset {
         name: view_files::scene_name(root),
@@ -267,7 +268,11 @@ pub(crate) mod tests {
             let d = crate::load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
             let names: Vec<&str> = d.views.iter().map(|v| v.name.as_str()).collect();
             assert_eq!(names, ["a", "b", "c", "d"], "{sub}");
-            assert_eq!((d.test.clone(), d.train.clone()), (vec![0], vec![1, 2, 3]));
+            // Four photos: all train, none held out (a capture of few photos).
+            assert_eq!(
+                (d.test.clone(), d.train.clone()),
+                (vec![], vec![0, 1, 2, 3])
+            );
             let points = d.points.as_ref().unwrap();
             let ref_points = reference["points"].as_array().unwrap();
             assert_eq!(points.len(), ref_points.len());
