@@ -298,7 +298,8 @@ pub fn score_transition(
 pub const POPPING_MAP_MAX: f32 = 0.1;
 
 /// Renders the trained run in `dir` along the transition path through `ds`'s training views
-/// (ordered along their baseline) and writes `transition.mp4`, `transition.json`,
+/// (ordered along their baseline; every frame the size of the first training view, photos of
+/// other sizes keeping their field of view) and writes `transition.mp4`, `transition.json`,
 /// `midpath.jpg` ([`midpath_picture`]), the popping
 /// maps (`popping.mp4`, one frame per transition, 0 to [`POPPING_MAP_MAX`] on the ramp, black
 /// where the frames share nothing) and the worst transition's map (`popping_worst.png`), and
@@ -316,7 +317,11 @@ pub fn transition_of_run(
         sh_degree: model.sh_degree(),
         ..RenderSettings::default()
     };
-    let cameras: Vec<&Camera> = ds.train_views().map(|v| &v.camera).collect();
+    // One frame size for the clip: photos of other sizes keep their field of view.
+    let first = &ds.views[ds.train[0]].camera;
+    let (w, h) = (first.width(), first.height());
+    let keys: Vec<Camera> = ds.train_views().map(|v| v.camera.resized(w, h)).collect();
+    let cameras: Vec<&Camera> = keys.iter().collect();
     let order = order_along_baseline(&cameras);
     let positions = transition_positions(order.len(), clip_frames());
     let path: Vec<Camera> = positions
@@ -324,7 +329,6 @@ pub fn transition_of_run(
         .map(|p| cameras[order[p.from]].interpolate(cameras[order[p.to]], p.t))
         .collect();
     let rendered = render_path(&model, &path, &settings);
-    let keys: Vec<Camera> = cameras.iter().map(|&c| c.clone()).collect();
     let at_keys = render_path(&model, &keys, &settings);
     let truth_frames: Option<Vec<Image>> = truth.map(|f| {
         path.par_iter()

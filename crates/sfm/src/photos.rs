@@ -40,18 +40,37 @@ pub struct Photo {
 
 /// The photo files of `dir` (`.jpg`, `.jpeg`, `.png`, any case), sorted by name.
 pub fn photo_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    Ok(files_of(dir)?.into_iter().filter(|p| is_photo(p)).collect())
+}
+
+/// The other files of `dir` (not hidden, not photos by their extension), sorted by name: what
+/// the poses step leaves out, for a warning.
+pub fn other_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let hidden = |p: &Path| {
+        p.file_name()
+            .is_some_and(|n| n.to_string_lossy().starts_with('.'))
+    };
+    Ok(files_of(dir)?
+        .into_iter()
+        .filter(|p| !is_photo(p) && !hidden(p))
+        .collect())
+}
+
+/// The regular files of `dir`, sorted by name.
+fn files_of(dir: &Path) -> Result<Vec<PathBuf>> {
     let entries = std::fs::read_dir(dir).map_err(|e| SfmError::io(dir, e))?;
     let mut files: Vec<PathBuf> = entries
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.is_file()
-                && p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
-                    matches!(e.to_ascii_lowercase().as_str(), "jpg" | "jpeg" | "png")
-                })
-        })
+        .filter(|p| p.is_file())
         .collect();
     files.sort();
     Ok(files)
+}
+
+fn is_photo(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "jpg" | "jpeg" | "png"))
 }
 
 /// Every photo of `dir` ([`photo_files`]) read by [`load_photo`]; a folder without photos, or a
@@ -121,6 +140,58 @@ pub fn focal_from_35mm(f35: f64, w: usize, h: usize) -> f64 {
     f35 * diagonal_px / 36f64.hypot(24.0)
 }
 
+/// Writes `image` as a JPEG photo (quality 95) with an EXIF `FocalLengthIn35mmFilm` of
+/// `focal_35mm` millimetres (rounded, as the tag is a whole number) when given: a camera's
+/// file as [`load_photo`] reads it, e.g. a rendered scene handed over as photos without poses.
+/// Written atomically.
+pub fn save_photo_jpeg(image: &Image, focal_35mm: Option<f64>, path: &Path) -> Result<()> {
+    use image::ImageEncoder;
+    let exif = match focal_35mm {
+        Some(f) => {
+            let field = exif::Field {
+                tag: exif::Tag::FocalLengthIn35mmFilm,
+                ifd_num: exif::In::PRIMARY,
+                value: exif::Value::Short(vec![f.round().clamp(1.0, 65535.0) as u16]),
+            };
+            let mut writer = exif::experimental::Writer::new();
+            writer.push_field(&field);
+            let mut tiff = std::io::Cursor::new(Vec::new());
+            writer
+                .write(&mut tiff, false)
+                .map_err(|e| SfmError::input(path, format!("cannot encode EXIF: {e}")))?;
+            tiff.into_inner()
+        }
+        None => Vec::new(),
+    };
+    let color = match image.channels {
+        1 => image::ExtendedColorType::L8,
+        3 => image::ExtendedColorType::Rgb8,
+        c => {
+            return Err(SfmError::input(
+                path,
+                format!("a {c}-channel image is not a photo"),
+            ));
+        }
+    };
+    let bytes = image.to_u8();
+    fewview_scene::atomic::write_with(path, |file| {
+        let mut encoder = image::codecs::jpeg::JpegEncoder::new_with_quality(file, 95);
+        encoder
+            .set_exif_metadata(exif)
+            .map_err(std::io::Error::other)?;
+        encoder
+            .write_image(&bytes, image.width as u32, image.height as u32, color)
+            .map_err(std::io::Error::other)
+    })?;
+    Ok(())
+}
+
+/// The 35 mm equivalent focal length (mm) of a camera whose `w × h` image has focal length
+/// `focal_px` pixels: the inverse of [`focal_from_35mm`].
+pub fn focal_35mm(focal_px: f64, w: usize, h: usize) -> f64 {
+    focal_px * 36f64.hypot(24.0) / (w as f64).hypot(h as f64)
+}
+
 /// EXIF `FocalLengthIn35mmFilm` of the file, when it has a positive one.
 fn exif_focal_35mm(path: &Path) -> Option<f64> {
     let file = std::fs::File::open(path).ok()?;
@@ -156,6 +227,43 @@ mod tests {
         assert_eq!(photo.focal_from, FocalSource::AssumedFov);
         let fov = 2.0 * (0.5 * 200.0 / photo.intrinsics.fx).atan();
         assert!((fov.to_degrees() - 50.0).abs() < 1e-9);
+    }
+
+    /// A photo written with a 35 mm focal reads back with that focal (to the whole millimetre
+    /// the tag holds) and its pixels within JPEG's loss.
+    #[test]
+    fn a_written_photo_reads_back_with_its_focal() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.jpg");
+        let mut image = Image::new(120, 80, 3);
+        for (i, v) in image.data.iter_mut().enumerate() {
+            *v = ((i / 3) % 120) as f32 / 120.0;
+        }
+        let f35 = focal_35mm(100.0, 120, 80);
+        save_photo_jpeg(&image, Some(f35), &path).unwrap();
+        let photo = load_photo(&path, 200, 50.0).unwrap();
+        assert_eq!(photo.focal_from, FocalSource::Exif35mm);
+        let want = focal_from_35mm(f35.round(), 120, 80);
+        assert!(
+            (photo.intrinsics.fx - want).abs() < 1e-9,
+            "{}",
+            photo.intrinsics.fx
+        );
+        assert!((photo.intrinsics.fx - 100.0).abs() < 100.0 * 0.5 / f35);
+        let worst = photo
+            .image
+            .data
+            .iter()
+            .zip(&image.data)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
+        assert!(worst < 0.05, "{worst}");
+        // Without a focal: the assumed field of view.
+        save_photo_jpeg(&image, None, &path).unwrap();
+        assert_eq!(
+            load_photo(&path, 200, 50.0).unwrap().focal_from,
+            FocalSource::AssumedFov
+        );
     }
 
     #[test]

@@ -89,6 +89,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     check_folder(&args.out, "--out")?;
     let options = folder_options(&args);
+    warn_other_files(&args.images)?;
     let model = with_progress(|on| poses_for_folder(&args.images, &args.out, &options, on))?;
     print_model(&model, args.fov);
     println!(
@@ -123,6 +124,17 @@ fn folder_options(args: &Args) -> FolderOptions {
 }
 
 /// What a person wants to know of a model: assumed focal lengths, photos left out, the fit.
+/// A warning line for each file of `dir` that the poses step leaves out (not a photo).
+pub fn warn_other_files(dir: &std::path::Path) -> anyhow::Result<()> {
+    for file in fewview_sfm::photos::other_files(dir)? {
+        eprintln!(
+            "warning: {}: skipped, not a photo (.jpg, .jpeg or .png)",
+            file.display()
+        );
+    }
+    Ok(())
+}
+
 pub fn print_model(model: &PoseModel, fov_deg: f64) {
     let assumed = model
         .photos

@@ -27,6 +27,7 @@ pub fn dataset_folder(data: &Path, run: &Path) -> anyhow::Result<DatasetFolder> 
             working_downscale: None,
         });
     }
+    super::poses::warn_other_files(data)?;
     let working_downscale = Some(working_downscale(longest_photo_side(data)?));
     let dir = run.join("poses");
     if has_model(&dir) {
