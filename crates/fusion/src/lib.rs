@@ -9,6 +9,7 @@
 //! scores a capture whose every photo trains.
 
 pub mod bench;
+pub mod budget;
 pub mod error;
 pub mod guidance;
 pub mod leave_one_out;

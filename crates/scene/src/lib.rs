@@ -29,6 +29,7 @@ pub mod llff;
 pub mod load;
 mod load_options;
 mod load_report;
+pub mod memory;
 pub mod numpy;
 pub mod photometric;
 pub mod ply;

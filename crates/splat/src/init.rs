@@ -54,6 +54,64 @@ pub fn from_points(cloud: &PointCloud, sh_degree: usize) -> GaussianModel {
     model
 }
 
+/// Gaussians at the points of a stereo start ([`crate::stereo_start::StereoStart`]), each
+/// point standing for a patch of `footprints[i]` scene units (`spacing` pixels wide) of the view
+/// it was seen in. They take kNN scales as [`from_points`], unless those would make a render
+/// cost more than [`OVERDRAW_BUDGET`] Gaussian–pixel pairs per pixel ([`start_overdraw`]): then
+/// each scale is capped at [`PATCH_SCALE_CAP`] patches, so that points whose neighbours lie far
+/// off (the sky, the unmatched parts of a view) start no wider than they were seen. Returns the
+/// model and, when capped, the overdraw before and after.
+pub fn from_stereo_points(
+    cloud: &PointCloud,
+    sh_degree: usize,
+    footprints: &[f32],
+    spacing: f32,
+) -> (GaussianModel, Option<(f64, f64)>) {
+    let mut scales = knn_scales(&cloud.positions);
+    let before = start_overdraw(&scales, footprints, spacing);
+    let capped = (before > OVERDRAW_BUDGET).then(|| {
+        for (s, f) in scales.iter_mut().zip(footprints) {
+            *s = s.min(PATCH_SCALE_CAP * f);
+        }
+        (before, start_overdraw(&scales, footprints, spacing))
+    });
+    let mut model = GaussianModel::new(sh_degree);
+    for ((p, c), s) in cloud.positions.iter().zip(&cloud.colors).zip(scales) {
+        model.push_isotropic(*p, s, *c, INITIAL_OPACITY);
+    }
+    (model, capped)
+}
+
+/// The most Gaussian–pixel pairs per pixel a stereo start may cost a render before its scales
+/// are capped ([`from_stereo_points`]): the demo scene's and fern's starts cost less and are left
+/// as they are; a street whose sky and road the stereo start covers sparsely costs three times
+/// as much.
+pub const OVERDRAW_BUDGET: f64 = 48.0;
+
+/// The largest initial scale of a capped stereo-start Gaussian, in patches: twice the patch, so
+/// that a point among regularly spaced neighbours keeps its kNN scale (about 1.15 patches).
+pub const PATCH_SCALE_CAP: f32 = 2.0;
+
+/// The pairs per pixel of one view that Gaussians of `scales` cost when each covers its 3σ disc
+/// in the view it was seen in (`footprints` and `spacing` as in [`from_stereo_points`]), every
+/// view seeing them all: `Σ π (3σ / pixel size)²` over one view's pixels.
+pub fn start_overdraw(scales: &[f32], footprints: &[f32], spacing: f32) -> f64 {
+    if footprints.is_empty() {
+        return 0.0;
+    }
+    let area: f64 = scales
+        .iter()
+        .zip(footprints)
+        .map(|(&s, &f)| {
+            let radius_px = 3.0 * s as f64 * spacing as f64 / f as f64;
+            std::f64::consts::PI * radius_px * radius_px
+        })
+        .sum();
+    // The points of one view cover its pixels once at the sample's spacing.
+    let pixels = footprints.len() as f64 * (spacing as f64).powi(2);
+    area / pixels
+}
+
 /// A view for frustum sampling: camera, image and the depth range to sample.
 pub struct FrustumView<'a> {
     pub camera: &'a Camera,

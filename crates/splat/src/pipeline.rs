@@ -22,7 +22,12 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::eval::{EvalReport, check_scorable, evaluate, render_model};
-use crate::init::{FrustumView, from_points, random_in_box, random_in_frustums};
+use fewview_scene::memory::StagePeaks;
+
+use crate::init::{
+    FrustumView, PATCH_SCALE_CAP, from_points, from_stereo_points, random_in_box,
+    random_in_frustums,
+};
 use crate::model::GaussianModel;
 use crate::ply::{read_ply, write_ply};
 use crate::raster::{RenderCamera, RenderSettings};
@@ -226,6 +231,8 @@ pub struct RunSummary {
     /// fallback taken.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub init_notes: Vec<String>,
+    /// The peak resident memory (MiB) of the initialisation and of training.
+    pub memory: StagePeaks,
     pub iterations: usize,
     pub gaussians: usize,
     pub train_seconds: f64,
@@ -442,7 +449,26 @@ fn initial_model_with(
             notes.extend(s.swept.iter().map(|(a, b, why)| {
                 format!("stereo start: views {a} and {b} matched by plane sweep: {why}")
             }));
-            let model = from_points(&s.sample, degree);
+            notes.extend(s.agreement.iter().filter_map(|a| {
+                let error = a.median_relative_error?;
+                Some(format!(
+                    "stereo start: view {}: depth at {:.0} % of its pixels; median error {:.1} % \
+                     against the {} sparse points it meets",
+                    a.view,
+                    100.0 * a.pixels_with_depth,
+                    100.0 * error,
+                    a.points_compared
+                ))
+            }));
+            let spacing = (1.0 / cfg.stereo.fraction.sqrt()) as f32;
+            let (model, capped) =
+                from_stereo_points(&s.sample, degree, &s.sample_footprints, spacing);
+            if let Some((before, after)) = capped {
+                notes.push(format!(
+                    "stereo start: initial scales capped at {PATCH_SCALE_CAP} patches (a render \
+                     would have cost {before:.0} Gaussian-pixel pairs per pixel, now {after:.0})"
+                ));
+            }
             start = Some(s);
             model
         }
@@ -583,6 +609,7 @@ pub fn train_run_with(
             },
         });
     }
+    let mut memory = StagePeaks::default();
     let mut start = None;
     let mut init_used = resolve_init(ds, &cfg.init);
     let mut init_notes = Vec::new();
@@ -603,7 +630,7 @@ pub fn train_run_with(
         }
         (None, Some(saved.state))
     } else {
-        let init = initial_model_and_start(ds, cfg)?;
+        let init = memory.measure("initialisation", || initial_model_and_start(ds, cfg))?;
         (start, init_used, init_notes) = (init.start, init.used, init.notes);
         (Some(init.model), None)
     };
@@ -660,8 +687,10 @@ pub fn train_run_with(
     let resumed_from = (trainer.iteration() > 0).then_some(trainer.iteration());
     let start = Instant::now();
     let ckpt_path = run.checkpoint();
-    trainer.run(on_progress, |state, config| {
-        save_checkpoint(&ckpt_path, config, &resolved.data, state).map_err(|e| e.to_string())
+    memory.measure("training", || {
+        trainer.run(on_progress, |state, config| {
+            save_checkpoint(&ckpt_path, config, &resolved.data, state).map_err(|e| e.to_string())
+        })
     })?;
     let train_seconds = start.elapsed().as_secs_f64();
     let iterations = trainer.iteration();
@@ -689,6 +718,7 @@ pub fn train_run_with(
         dataset: ds.name.clone(),
         init: init_used.name().to_string(),
         init_notes,
+        memory,
         iterations,
         gaussians: model.len(),
         train_seconds,

@@ -11,6 +11,7 @@
 
 use std::path::{Path, PathBuf};
 
+use fewview_geom::contract::sample_indices;
 use fewview_geom::stereo::hierarchy::{
     HierarchicalCloud, HierarchyOptions, Region, hierarchical_cloud,
 };
@@ -87,8 +88,13 @@ pub struct StereoStart {
     /// The sampled points (positions and pixel colours) and their regions.
     pub sample: PointCloud,
     pub sample_regions: Vec<Region>,
+    /// Per sampled point, the width (scene units) of the patch of its view it stands for: the
+    /// pixel's footprint at its depth times the sample's spacing in pixels (`1/√fraction`).
+    pub sample_footprints: Vec<f32>,
     /// The pairs' matches when [`StereoInit::pair_check`] names a matcher.
     pub pair_check: Option<PairCheckReport>,
+    /// How each training view's depth agrees with the dataset's sparse points.
+    pub agreement: Vec<PointAgreement>,
     /// Pairs whose depth could not be had: their views' names and the reason.
     pub skipped: Vec<(String, String, String)>,
     /// Pairs matched by plane sweep rather than on rectified rows: their views' names and why
@@ -185,7 +191,11 @@ pub fn stereo_start(
             .collect(),
         DepthFrom::Maps(_) => Vec::new(),
     };
-    let (points, sample_regions) = cloud.sample(init.fraction, seed)?;
+    let agreement = point_agreement(&cloud, &views);
+    let chosen = sample_indices(cloud.points.len(), init.fraction, seed)?;
+    let points = cloud.points.select(&chosen);
+    let sample_regions = chosen.iter().map(|&i| cloud.regions[i]).collect();
+    let sample_footprints = footprints(&cloud, &views, &chosen, init.fraction);
     let sample = PointCloud {
         positions: points.positions,
         colors: points.colors.unwrap_or_default(),
@@ -199,10 +209,83 @@ pub fn stereo_start(
         cloud,
         sample,
         sample_regions,
+        sample_footprints,
         pair_check: checked.report,
+        agreement,
         skipped,
         swept,
     })
+}
+
+/// How one view's stereo depth agrees with the structure-from-motion points it sees.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PointAgreement {
+    pub view: String,
+    /// The share of the view's pixels with an accepted point.
+    pub pixels_with_depth: f64,
+    /// Sparse points in front of the view and inside its image.
+    pub points_seen: usize,
+    /// Of those, the ones whose pixel has depth, and the median of `|z_stereo − z_point| / z_point`.
+    pub points_compared: usize,
+    pub median_relative_error: Option<f64>,
+}
+
+/// [`PointAgreement`] of every view of `cloud` with the views' sparse points.
+fn point_agreement(cloud: &HierarchicalCloud, views: &[StereoView]) -> Vec<PointAgreement> {
+    views
+        .iter()
+        .zip(&cloud.pixel_depths)
+        .map(|(view, depths)| {
+            let camera = view.camera;
+            let (w, h) = (camera.width() as usize, camera.height() as usize);
+            let mut seen = 0;
+            let mut errors: Vec<f64> = Vec::new();
+            for p in view.sparse_points {
+                let x = nalgebra::Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+                let Some((u, v, z)) = camera.project(&x) else {
+                    continue;
+                };
+                if !(u >= 0.0 && v >= 0.0 && (u as usize) < w && (v as usize) < h) {
+                    continue;
+                }
+                seen += 1;
+                let d = depths[v as usize * w + u as usize];
+                if d > 0.0 {
+                    errors.push((d as f64 - z).abs() / z);
+                }
+            }
+            errors.sort_by(f64::total_cmp);
+            PointAgreement {
+                view: view.name.to_string(),
+                pixels_with_depth: depths.iter().filter(|&&d| d > 0.0).count() as f64
+                    / depths.len().max(1) as f64,
+                points_seen: seen,
+                points_compared: errors.len(),
+                median_relative_error: errors.get(errors.len() / 2).copied(),
+            }
+        })
+        .collect()
+}
+
+/// The patch each chosen point of `cloud` stands for in the view it was seen in: its depth
+/// there over the focal length (a pixel's footprint), times `1/√fraction` (the sample's spacing
+/// in pixels).
+fn footprints(
+    cloud: &HierarchicalCloud,
+    views: &[StereoView],
+    chosen: &[usize],
+    fraction: f64,
+) -> Vec<f32> {
+    let spacing = 1.0 / fraction.sqrt();
+    chosen
+        .iter()
+        .map(|&i| {
+            let camera = views[cloud.sources[i].0 as usize].camera;
+            let x = cloud.points.positions[i].map(f64::from);
+            let z = camera.world_to_camera.transform_point(&x.into()).z;
+            (z.abs() / camera.intrinsics.fx * spacing) as f32
+        })
+        .collect()
 }
 
 /// A summary of a stereo start for `stereo.json`.
@@ -221,6 +304,8 @@ pub struct StereoSummary<'a> {
     pub b_far: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pair_check: Option<&'a PairCheckReport>,
+    /// Each view's depth against the sparse points it sees.
+    pub agreement: &'a [PointAgreement],
     /// Pairs without depth, and pairs swept in their own cameras: views and reason.
     pub skipped: &'a [(String, String, String)],
     pub swept: &'a [(String, String, String)],
@@ -241,6 +326,7 @@ impl StereoStart {
             b_near: c.map(|c| c.b_near),
             b_far: c.map(|c| c.b_far),
             pair_check: self.pair_check.as_ref(),
+            agreement: &self.agreement,
             skipped: &self.skipped,
             swept: &self.swept,
         }

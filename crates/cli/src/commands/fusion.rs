@@ -9,6 +9,7 @@ use fewview_fusion::leave_one_out::EvalMode;
 use fewview_fusion::reproject::{Occlusion, ReprojectOptions};
 use fewview_fusion::{FusionConfig, Variant};
 use fewview_scene::Dataset;
+use fewview_scene::memory::StagePeaks;
 use fewview_scene::photometric::{PhotoGain, jitter_training_photos, training_gains};
 use fewview_scene::synthetic::{DemoOptions, demo_dataset};
 use fewview_splat::pipeline::adopt_init_poses;
@@ -180,8 +181,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return write_study(&args.study, &out);
     }
     let mut args = args;
+    let mut poses_memory = StagePeaks::default();
     if let Some(data) = args.data.clone() {
         let folder = poses_first::dataset_folder(&data, &out)?;
+        poses_memory = folder.memory.clone();
         args.downscale = Some(poses_first::chosen_downscale(
             args.downscale,
             &folder,
@@ -242,13 +245,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         out.display()
     );
     let eval = EvalMode::resolve(args.eval, &ds)?;
+    fewview_fusion::budget::check_dataset_fits(
+        &ds,
+        !args.no_transition,
+        args.downscale.unwrap_or(1),
+    )
+    .map_err(anyhow::Error::msg)?;
     let summary = train_with_progress(&ds, &cfg, &fusion, &out, args.resume)?;
     write_gains(&out, &gains)?;
     print_summary(&summary, &out);
+    let mut after = StagePeaks::default();
     if !args.no_transition {
-        let report = transition(&ds, demo.as_ref(), &out, !args.no_lpips)?;
+        let report = after.measure("transition", || {
+            transition(&ds, demo.as_ref(), &out, !args.no_lpips)
+        })?;
         print_transition(&report);
     }
+    poses_first::record_memory(&out, &poses_memory, &summary.memory, &after)?;
     if eval == EvalMode::LeaveOneOut {
         let train = |ds: &Dataset, dir: &std::path::Path, resume: bool| {
             train_with_progress(ds, &cfg, &fusion, dir, resume).map(|_| ())

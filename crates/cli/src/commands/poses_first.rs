@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
+use fewview_scene::memory::StagePeaks;
 use fewview_sfm::folder::{
     WORKING_LONG_SIDE, has_model, holds_only_photos, longest_photo_side, working_downscale,
 };
@@ -16,6 +17,8 @@ pub struct DatasetFolder {
     pub dir: PathBuf,
     /// For a folder of photos: the factor that brings them to the working size.
     pub working_downscale: Option<u32>,
+    /// The peak memory of the poses step, when it ran now.
+    pub memory: StagePeaks,
 }
 
 /// The folder to load as the dataset: `data` itself, or `run/poses` when `data` holds only
@@ -25,6 +28,7 @@ pub fn dataset_folder(data: &Path, run: &Path) -> anyhow::Result<DatasetFolder> 
         return Ok(DatasetFolder {
             dir: data.to_path_buf(),
             working_downscale: None,
+            memory: StagePeaks::default(),
         });
     }
     super::poses::warn_other_files(data)?;
@@ -39,6 +43,7 @@ pub fn dataset_folder(data: &Path, run: &Path) -> anyhow::Result<DatasetFolder> 
         return Ok(DatasetFolder {
             dir,
             working_downscale,
+            memory: StagePeaks::default(),
         });
     }
     eprintln!(
@@ -46,13 +51,17 @@ pub fn dataset_folder(data: &Path, run: &Path) -> anyhow::Result<DatasetFolder> 
         data.display(),
         dir.display()
     );
-    let model = super::poses::with_progress(|on| {
-        poses_for_folder(data, &dir, &FolderOptions::default(), on)
+    let mut memory = StagePeaks::default();
+    let model = memory.measure("poses", || {
+        super::poses::with_progress(|on| {
+            poses_for_folder(data, &dir, &FolderOptions::default(), on)
+        })
     })?;
     super::poses::print_model(&model, DEFAULT_FOV_DEG);
     Ok(DatasetFolder {
         dir,
         working_downscale,
+        memory,
     })
 }
 
@@ -71,4 +80,31 @@ pub fn chosen_downscale(given: Option<u32>, folder: &DatasetFolder, data: &Path)
         }
         _ => 1,
     }
+}
+
+/// Writes the run's stage peaks (`before` the run's own, then `after`) into `run/metrics.json`
+/// under `memory` and prints them in one line.
+pub fn record_memory(
+    run: &Path,
+    before: &StagePeaks,
+    summary: &StagePeaks,
+    after: &StagePeaks,
+) -> anyhow::Result<()> {
+    let all = StagePeaks(
+        before
+            .0
+            .iter()
+            .chain(&summary.0)
+            .chain(&after.0)
+            .cloned()
+            .collect(),
+    );
+    fewview_fusion::leave_one_out::add_to_json(&run.join("metrics.json"), "memory", &all)?;
+    let stages: Vec<String> = all
+        .0
+        .iter()
+        .map(|(name, mib)| format!("{name} {:.2} GB", mib / 1024.0))
+        .collect();
+    println!("peak memory      {}", stages.join(", "));
+    Ok(())
 }

@@ -64,6 +64,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut args = args;
     let data = args.dataset.folder()?.to_path_buf();
     let folder = poses_first::dataset_folder(&data, &out)?;
+    let poses_memory = folder.memory.clone();
     args.dataset.downscale = Some(poses_first::chosen_downscale(
         args.dataset.downscale,
         &folder,
@@ -77,6 +78,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("{e}; pass disjoint --train-views and --test-views");
     }
     let eval = EvalMode::resolve(args.eval, &ds)?;
+    fewview_fusion::budget::check_dataset_fits(&ds, false, args.dataset.downscale.unwrap_or(1))
+        .map_err(anyhow::Error::msg)?;
     let bare_surface = surface_first::take(&mut args.train.init, &out);
     let cfg = args
         .train
@@ -108,6 +111,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let summary = train_with_progress(&ds, &cfg, &out, args.resume)?;
     print_summary(&summary, &out);
+    poses_first::record_memory(&out, &poses_memory, &summary.memory, &Default::default())?;
     if eval == EvalMode::LeaveOneOut {
         let train = |ds: &fewview_scene::Dataset, dir: &std::path::Path, resume: bool| {
             train_with_progress(ds, &cfg, dir, resume).map(|_| ())

@@ -123,6 +123,9 @@ pub struct HierarchicalCloud {
     pub contraction: Option<Contraction>,
     /// Per training view, the tier of the point accepted at each pixel.
     pub pixel_regions: Vec<Vec<Option<Region>>>,
+    /// Per training view, the z-depth (before any contraction) of the point accepted at each
+    /// pixel, 0 where none.
+    pub pixel_depths: Vec<Vec<f32>>,
     /// The pairs whose depth could not be had (view indices), each with the reason.
     pub skipped: Vec<(usize, usize, String)>,
 }
@@ -461,9 +464,16 @@ impl Accepted {
             .iter()
             .map(|v| vec![None; pixel_count(v.camera)])
             .collect();
+        let mut pixel_depths: Vec<Vec<f32>> = views
+            .iter()
+            .map(|v| vec![0.0; pixel_count(v.camera)])
+            .collect();
         let mut colors = Vec::with_capacity(self.positions.len());
-        for (&(v, p), &r) in self.sources.iter().zip(&self.regions) {
+        for ((&(v, p), &r), x) in self.sources.iter().zip(&self.regions).zip(&self.positions) {
+            let camera = views[v as usize].camera;
             pixel_regions[v as usize][p as usize] = Some(r);
+            pixel_depths[v as usize][p as usize] =
+                camera.world_to_camera.transform_point(x).z as f32;
             colors.push(pixel_color(views[v as usize].image, p as usize));
         }
         let positions = self
@@ -485,6 +495,7 @@ impl Accepted {
             counts,
             contraction,
             pixel_regions,
+            pixel_depths,
             skipped: Vec::new(),
         }
     }

@@ -366,11 +366,17 @@ pub enum PairMethod {
     PlaneSweep(String),
 }
 
-/// The largest turn (degrees) rectification may give either camera of a pair: beyond it the
-/// rectified images stretch so much along the rows (and, as the baseline nears the optical
-/// axis, towards the epipoles inside the images) that block matching on rows fails, and the
-/// pair is swept in its own cameras instead.
-pub const MAX_RECTIFYING_TURN_DEG: f64 = 30.0;
+/// The largest tilt (degrees) rectification may give the optical axis of either camera of a
+/// pair: beyond it the rectified images stretch so much along the rows (and, as the baseline
+/// nears the optical axis, towards the epipoles inside the images) that block matching on rows
+/// fails, and the pair is swept in its own cameras instead. (LLFF's fern has a pair tilted by
+/// 42° that rectified matching serves well.)
+pub const MAX_RECTIFYING_TILT_DEG: f64 = 45.0;
+
+/// The largest cost volume (bytes) rectified matching may build; a rectified canvas stretched
+/// beyond it (up to twice each image's side) is swept in the original cameras instead, whose
+/// volume the image size bounds.
+pub const MAX_RECTIFIED_VOLUME_BYTES: usize = 1 << 30;
 
 /// Whether rectified matching serves cameras `first` and `second`, or plane sweep, and why.
 pub fn pair_method(first: &Camera, second: &Camera) -> PairMethod {
@@ -378,27 +384,45 @@ pub fn pair_method(first: &Camera, second: &Camera) -> PairMethod {
         Ok((rect, _)) => rect,
         Err(e) => return PairMethod::PlaneSweep(format!("rectification fails: {e}")),
     };
+    // The tilt of each optical axis (a roll about it only turns the rows, which costs nothing).
     let turn = [Side::Left, Side::Right]
         .map(|side| {
             let (original, rectified) = (rect.original(side), rect.rectified(side));
-            let r =
-                rectified.world_to_camera.rotation * original.world_to_camera.rotation.transpose();
-            ((r.trace() - 1.0) / 2.0)
-                .clamp(-1.0, 1.0)
-                .acos()
-                .to_degrees()
+            let cos = original
+                .forward()
+                .dot(&rectified.forward())
+                .clamp(-1.0, 1.0);
+            cos.acos().to_degrees()
         })
         .into_iter()
         .fold(0.0, f64::max);
-    if turn > MAX_RECTIFYING_TURN_DEG {
+    let canvas = rect.intrinsics.width as usize * rect.intrinsics.height as usize;
+    let volume = canvas * MAX_DISPARITIES * std::mem::size_of::<i16>();
+    if volume > MAX_RECTIFIED_VOLUME_BYTES {
+        return PairMethod::PlaneSweep(format!(
+            "its rectified canvas ({}×{}) would need a {:.1} GB cost volume",
+            rect.intrinsics.width,
+            rect.intrinsics.height,
+            volume as f64 / (1u64 << 30) as f64
+        ));
+    }
+    if rect.offset.abs() > 0.5 {
+        return PairMethod::PlaneSweep(
+            "the two views are turned so far apart that each needs a rectified canvas of its \
+             own, which clips them"
+                .into(),
+        );
+    }
+    if turn > MAX_RECTIFYING_TILT_DEG {
         let axis = (first.forward() + second.forward()).normalize();
         let along = (second.center() - first.center())
             .normalize()
             .dot(&axis)
             .abs();
         PairMethod::PlaneSweep(format!(
-            "rectification would turn a camera by {turn:.0}° (the baseline is {:.0}° from the \
-             optical axis; at most {MAX_RECTIFYING_TURN_DEG:.0}° is matched on rectified rows)",
+            "rectification would tilt a camera's axis by {turn:.0}° (the baseline is {:.0}° \
+             from the optical axis; at most {MAX_RECTIFYING_TILT_DEG:.0}° is matched on \
+             rectified rows)",
             along.acos().to_degrees()
         ))
     } else {

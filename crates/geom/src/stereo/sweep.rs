@@ -21,7 +21,7 @@ use fewview_scene::{Camera, Image};
 
 use super::pairs::StereoView;
 use super::refine::{RefineOptions, grey};
-use super::sgm::{self, DISP_SCALE, SgmParams, median3x3, speckle_filter};
+use super::sgm::{self, DISP_SCALE, PARALLEL_VOLUME_BYTES, SgmParams, median3x3, speckle_filter};
 use super::source::{PairDepths, ViewDepth};
 use super::sweep_refine::{Rays, Textured, refine_inverse_depths};
 use crate::error::{GeomError, Result};
@@ -87,7 +87,8 @@ impl Planes {
     }
 }
 
-/// The depth maps of both views of a pair, each swept as the reference against the other.
+/// The depth maps of both views of a pair, each swept as the reference against the other (side
+/// by side, or one after the other for large images, as rectified matching does).
 pub fn sweep_pair(
     first: &StereoView,
     second: &StereoView,
@@ -95,10 +96,18 @@ pub fn sweep_pair(
     params: &SgmParams,
     refine: Option<&RefineOptions>,
 ) -> Result<PairDepths> {
-    let (a, b) = rayon::join(
-        || sweep_view(first, second, (near, far), params, refine),
-        || sweep_view(second, first, (near, far), params, refine),
-    );
+    let volume = first.image.width * first.image.height * MAX_PLANES * std::mem::size_of::<i16>();
+    let (a, b) = if volume > PARALLEL_VOLUME_BYTES {
+        (
+            sweep_view(first, second, (near, far), params, refine),
+            sweep_view(second, first, (near, far), params, refine),
+        )
+    } else {
+        rayon::join(
+            || sweep_view(first, second, (near, far), params, refine),
+            || sweep_view(second, first, (near, far), params, refine),
+        )
+    };
     let (mut a, mut b) = (a?, b?);
     let tolerance = 0.5 * params.disp12_max_diff.max(1) as f64;
     let a_agrees = agreeing(first.camera, &a, second.camera, &b, tolerance);

@@ -85,18 +85,30 @@ pub fn match_right(left: &GrayOrRgb, right: &GrayOrRgb, params: &SgmParams) -> R
     Ok(match_left(&ml, &mr, params)?.mirrored())
 }
 
-/// Both disparity maps of a pair, computed side by side.
+/// Both disparity maps of a pair, computed side by side, or one after the other when a cost
+/// volume is larger than [`PARALLEL_VOLUME_BYTES`] (the matcher holds three volumes at once).
 pub fn match_both(
     left: &GrayOrRgb,
     right: &GrayOrRgb,
     params: &SgmParams,
 ) -> Result<(Disparity, Disparity)> {
+    let volume = left.width * left.height * params.num_disparities * std::mem::size_of::<i16>();
+    if volume > PARALLEL_VOLUME_BYTES {
+        return Ok((
+            match_left(left, right, params)?,
+            match_right(left, right, params)?,
+        ));
+    }
     let (l, r) = rayon::join(
         || match_left(left, right, params),
         || match_right(left, right, params),
     );
     Ok((l?, r?))
 }
+
+/// The largest cost volume (bytes) two matchers build at once: above it, the two directions of
+/// a pair run one after the other, so that a large pair needs half the memory.
+pub const PARALLEL_VOLUME_BYTES: usize = 256 << 20;
 
 /// A cost volume built outside the rectified matcher (`height × width × d` saturating `i16`,
 /// hypothesis innermost; plane sweep, [`crate::stereo::sweep`]) aggregated along `params`'
