@@ -45,7 +45,6 @@ METHOD_COMMANDS = [
 OWN_DEFAULTS = {
     "surface/args.rs:match_downscale",
     "fusion.rs:width",
-    "fusion.rs:downscale",
     "human/train.rs:checkpoint_every",
     "train_args.rs:checkpoint_every",
 }

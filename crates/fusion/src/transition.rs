@@ -368,8 +368,8 @@ pub fn transition_of_run(
 }
 
 /// Widest a frame of [`midpath_picture`] is drawn, and how many frames share a row.
-const MIDPATH_FRAME_WIDTH: usize = 480;
-const MIDPATH_COLUMNS: usize = 4;
+pub const MIDPATH_FRAME_WIDTH: usize = 480;
+pub const MIDPATH_COLUMNS: usize = 4;
 
 /// The frames halfway between neighbouring photos of the path (`keys` in path order), side by
 /// side, row after row, each at most [`MIDPATH_FRAME_WIDTH`] pixels wide: where floaters and

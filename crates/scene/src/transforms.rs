@@ -515,7 +515,7 @@ pub fn load_nerfstudio(
 
 /// The vertices of a PLY file as a point cloud (grey where the file has no colours); a file
 /// without vertices is an error naming it.
-fn read_point_cloud(path: &Path) -> Result<crate::PointCloud> {
+fn read_point_cloud(path: &Path) -> Result<crate::dataset::PointCloud> {
     let ply = crate::ply::read(path)?;
     if ply.vertices.is_empty() {
         return Err(SceneError::invalid(path, "the point cloud has no points"));
@@ -531,7 +531,7 @@ fn read_point_cloud(path: &Path) -> Result<crate::PointCloud> {
         ));
     }
     let n = ply.vertices.len();
-    Ok(crate::PointCloud {
+    Ok(crate::dataset::PointCloud {
         colors: ply.colors.unwrap_or_else(|| vec![[0.5; 3]; n]),
         positions: ply.vertices,
     })

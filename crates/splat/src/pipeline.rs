@@ -398,7 +398,7 @@ pub struct InitialModel {
     pub notes: Vec<String>,
 }
 
-/// The initial Gaussians of `ds`: [`initial_model_with`] of the resolved strategy; an automatic
+/// The initial Gaussians of `ds` from the resolved strategy; an automatic
 /// stereo start that fails on every pair falls back to the dataset's sparse points, saying so.
 pub fn initial_model_and_start(
     ds: &Dataset,

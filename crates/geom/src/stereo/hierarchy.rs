@@ -27,7 +27,8 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 
 use super::pairs::StereoView;
-use super::source::{DepthSource, PairDepths, ViewDepth};
+use super::source::DepthSource;
+use super::view_depth::{PairDepths, ViewDepth};
 use crate::contract::{Contraction, ContractionKind, contraction_reference, sample_indices};
 use crate::depth::{DepthOptions, valid_pixels};
 use crate::error::{GeomError, Result};

@@ -24,4 +24,5 @@ pub mod search_window;
 pub mod sgm;
 pub mod source;
 pub mod sweep;
-mod sweep_refine;
+pub mod sweep_refine;
+pub mod view_depth;

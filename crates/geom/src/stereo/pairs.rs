@@ -75,7 +75,7 @@ pub fn typical_depth(view: &StereoView, look_at: &Vector3<f64>) -> f64 {
 }
 
 /// `views` with every missing depth bound filled in: from the sparse points the view sees
-/// ([`super::range::points_depth_bounds`]), else as half to twice its [`typical_depth`] (the
+/// ([`points_depth_bounds`]), else as half to twice its [`typical_depth`] (the
 /// distance to the point the views look at), a wide guess for scenes whose loaders give no
 /// bounds (NeRF-synthetic, DTU).
 pub fn with_depth_bounds<'a>(views: &[StereoView<'a>]) -> Vec<StereoView<'a>> {
@@ -88,12 +88,45 @@ pub fn with_depth_bounds<'a>(views: &[StereoView<'a>]) -> Vec<StereoView<'a>> {
             StereoView {
                 depth_bounds: v
                     .depth_bounds
-                    .or_else(|| super::range::points_depth_bounds(v))
+                    .or_else(|| points_depth_bounds(v))
                     .or(Some((0.5 * t, 2.0 * t))),
                 ..*v
             }
         })
         .collect()
+}
+
+/// The fewest sparse points a view (or both views of a pair) must see for depth bounds or a
+/// disparity range to be taken from them.
+pub const MIN_RANGE_POINTS: usize = 20;
+
+/// The 1st and 99th percentile of the z-depths of the sparse points `view` sees (in front of it
+/// and inside its image): the scene's depth bounds in that view, as LLFF's `imgs2poses` takes
+/// them from the points a photo observes. `None` below [`MIN_RANGE_POINTS`] points.
+pub fn points_depth_bounds(view: &StereoView) -> Option<(f64, f64)> {
+    let mut depths: Vec<f64> = view
+        .sparse_points
+        .iter()
+        .filter_map(|p| {
+            let x = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            sees(view, &x).then(|| view.camera.world_to_camera.transform_point(&x).z)
+        })
+        .collect();
+    if depths.len() < MIN_RANGE_POINTS {
+        return None;
+    }
+    depths.sort_by(f64::total_cmp);
+    let at = |q: f64| depths[((depths.len() - 1) as f64 * q).round() as usize];
+    let (near, far) = (at(0.01), at(0.99));
+    (near > 0.0 && near < far).then_some((near, far))
+}
+
+/// Whether `x` lies in front of `view`'s camera and projects inside its image.
+pub fn sees(view: &StereoView, x: &Vector3<f64>) -> bool {
+    let (w, h) = (view.camera.width() as f64, view.camera.height() as f64);
+    view.camera
+        .project(x)
+        .is_some_and(|(u, v, z)| z > 0.0 && (0.0..w).contains(&u) && (0.0..h).contains(&v))
 }
 
 /// The fraction of `a`'s pixels (on a 32×24 grid) whose point at z-depth `depth` lands inside

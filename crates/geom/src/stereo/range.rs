@@ -6,7 +6,8 @@
 
 use nalgebra::Vector3;
 
-use super::pairs::StereoView;
+pub use super::pairs::MIN_RANGE_POINTS;
+use super::pairs::{StereoView, sees};
 use super::rectify::{Rectification, Side};
 
 /// How the disparity search range of a pair is chosen.
@@ -25,9 +26,6 @@ pub enum DisparityRange {
 
 /// The most disparities searched when the range comes from depth bounds or points.
 pub const MAX_DISPARITIES: usize = 256;
-
-/// The fewest points both views must see for [`DisparityRange::FromSparsePoints`].
-pub const MIN_RANGE_POINTS: usize = 20;
 
 /// The disparity range of rectified pair `rect` for scene depths `near..far`, with 10 % margins.
 pub fn disparity_range(rect: &Rectification, near: f64, far: f64) -> (i32, usize) {
@@ -90,27 +88,6 @@ pub fn points_disparity_range(
     ))
 }
 
-/// The 1st and 99th percentile of the z-depths of the sparse points `view` sees (in front of it
-/// and inside its image): the scene's depth bounds in that view, as LLFF's `imgs2poses` takes
-/// them from the points a photo observes. `None` below [`MIN_RANGE_POINTS`] points.
-pub fn points_depth_bounds(view: &StereoView) -> Option<(f64, f64)> {
-    let mut depths: Vec<f64> = view
-        .sparse_points
-        .iter()
-        .filter_map(|p| {
-            let x = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-            sees(view, &x).then(|| view.camera.world_to_camera.transform_point(&x).z)
-        })
-        .collect();
-    if depths.len() < MIN_RANGE_POINTS {
-        return None;
-    }
-    depths.sort_by(f64::total_cmp);
-    let at = |q: f64| depths[((depths.len() - 1) as f64 * q).round() as usize];
-    let (near, far) = (at(0.01), at(0.99));
-    (near > 0.0 && near < far).then_some((near, far))
-}
-
 /// The depths of the sparse points both views see, in either camera: the 1st to 99th
 /// percentile with a 10 % margin on either side (the depth range of a plane sweep over the
 /// pair). `None` below [`MIN_RANGE_POINTS`] points.
@@ -137,14 +114,6 @@ pub fn points_depth_range(
     let at = |q: f64| depths[((depths.len() - 1) as f64 * q).round() as usize];
     let (near, far) = (at(0.01) * 0.9, at(0.99) * 1.1);
     (near > 0.0 && near < far).then_some((near, far))
-}
-
-/// Whether `x` lies in front of `view`'s camera and projects inside its image.
-fn sees(view: &StereoView, x: &Vector3<f64>) -> bool {
-    let (w, h) = (view.camera.width() as f64, view.camera.height() as f64);
-    view.camera
-        .project(x)
-        .is_some_and(|(u, v, z)| z > 0.0 && (0.0..w).contains(&u) && (0.0..h).contains(&v))
 }
 
 #[cfg(test)]

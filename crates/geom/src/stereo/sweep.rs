@@ -22,8 +22,8 @@ use fewview_scene::{Camera, Image};
 use super::pairs::StereoView;
 use super::refine::{RefineOptions, grey};
 use super::sgm::{self, DISP_SCALE, PARALLEL_VOLUME_BYTES, SgmParams, median3x3, speckle_filter};
-use super::source::{PairDepths, ViewDepth};
 use super::sweep_refine::{Rays, Textured, refine_inverse_depths};
+use super::view_depth::{PairDepths, ViewDepth};
 use crate::error::{GeomError, Result};
 
 /// The most depth planes a sweep tests.
