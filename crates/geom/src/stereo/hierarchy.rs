@@ -681,6 +681,63 @@ mod tests {
         }
     }
 
+    /// Depth maps for every pair but one, which fails as a pair without overlap would.
+    struct OnePairFails(DepthMapSource);
+
+    impl DepthSource for OnePairFails {
+        fn name(&self) -> &str {
+            "test"
+        }
+        fn pair_depths(&self, first: usize, second: usize) -> Result<PairDepths> {
+            if (first, second) == (1, 2) {
+                return Err(GeomError::invalid("views b and c", "they share nothing"));
+            }
+            self.0.pair_depths(first, second)
+        }
+    }
+
+    /// A pair that gives no depth is skipped and listed with its reason; the other pair's points
+    /// stay. When no pair gives depth, the error lists every reason.
+    #[test]
+    fn a_pair_without_depth_is_skipped_with_its_reason() {
+        let cameras = [camera(0.0), camera(0.4), camera(30.0)];
+        let image = Image::new(80, 60, 3);
+        let views = [
+            view("a", &cameras[0], &image),
+            view("b", &cameras[1], &image),
+            view("c", &cameras[2], &image),
+        ];
+        let source = OnePairFails(DepthMapSource {
+            maps: vec![vec![5.0f32; 80 * 60]; 3],
+        });
+        let options = HierarchyOptions {
+            contraction: None,
+            ..Default::default()
+        };
+        let mut reported = Vec::new();
+        let cloud =
+            hierarchical_cloud(&views, &[(0, 1), (1, 2)], &source, &options, &mut |d, n| {
+                reported.push((d, n))
+            })
+            .unwrap();
+        assert_eq!(cloud.skipped.len(), 1);
+        let (a, b, why) = &cloud.skipped[0];
+        assert_eq!((*a, *b), (1, 2));
+        assert!(
+            why.contains("views b and c") && why.contains("share nothing"),
+            "{why}"
+        );
+        assert!(cloud.counts.accepted[0] > 1000, "{:?}", cloud.counts);
+        assert_eq!(reported, [(1, 2), (2, 2)]);
+        let e = hierarchical_cloud(&views, &[(1, 2)], &source, &options, &mut |_, _| {})
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("no pair gave depth") && e.contains("share nothing"),
+            "{e}"
+        );
+    }
+
     #[test]
     fn a_pixel_keeps_its_most_confident_class_over_pairs() {
         let mut best = vec![None; 3];
