@@ -48,6 +48,13 @@ pub struct BundleOptions {
     /// factor (photos of one camera; the surface method's calibrated views keep theirs).
     #[serde(default)]
     pub refine_focal: bool,
+    /// With [`Self::refine_focal`]: the standard deviation, in log scale, of a Gaussian prior
+    /// holding the shared focal factor near its start (`None`: free). OpenSfM's bundle holds
+    /// EXIF focal lengths so (its `exif_focal_sd`, 0.01), weighed against reprojection errors
+    /// of [`REPROJECTION_SD`] of the image's long side. Photos of a camera walking forward
+    /// need it: moving along the axis and zooming look alike, and a free focal drifts.
+    #[serde(default)]
+    pub focal_prior_sd: Option<f64>,
     /// Also adjust one radial distortion coefficient shared by all views, COLMAP's
     /// `SIMPLE_RADIAL` model: normalised coordinates `x` are seen at `x (1 + k1 |x|²)`
     /// (photos of one camera whose lens bends straight lines; started at 0).
@@ -69,11 +76,16 @@ impl Default for BundleOptions {
             tolerance: 1e-9,
             min_tracks: 30,
             refine_focal: false,
+            focal_prior_sd: None,
             refine_radial: false,
             refine_principal_point: false,
         }
     }
 }
+
+/// The standard deviation of a reprojection error as a fraction of the image's long side, the
+/// unit a prior on the lens is weighed in (OpenSfM's `reprojection_error_sd`).
+pub const REPROJECTION_SD: f64 = 0.004;
 
 /// What [`bundle_adjust`] did.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -380,6 +392,14 @@ impl Lens {
         }
     }
 
+    /// The prior's residual on the focal factor, in pixels (0 without a prior).
+    fn prior_residual(&self, prior: Option<FocalPrior>) -> f64 {
+        match (self.log_focal, prior) {
+            (Some(f), Some(p)) => p.pixels_per_log * f,
+            _ => 0.0,
+        }
+    }
+
     /// What this lens adds to a report: the adjusted parameters.
     fn report_into(&self, report: &mut BundleReport) {
         report.focal_scale = self.log_focal.map(f64::exp);
@@ -392,6 +412,26 @@ impl Lens {
         let scale = self.log_focal.unwrap_or(0.0).exp();
         let intrinsics = shifted_and_scaled(base, scale, self.principal);
         Cameras::with_radial(&intrinsics, self.k1.unwrap_or(0.0))
+    }
+}
+
+/// A Gaussian prior on the logarithm of the shared focal factor, as a residual in pixels:
+/// `pixels_per_log · log f` (the reprojection errors' standard deviation over the prior's).
+#[derive(Clone, Copy, Debug)]
+struct FocalPrior {
+    pixels_per_log: f64,
+}
+
+impl FocalPrior {
+    fn new(options: &BundleOptions, intrinsics: &[Intrinsics]) -> Option<Self> {
+        let sd = options.focal_prior_sd.filter(|_| options.refine_focal)?;
+        let long_side = intrinsics
+            .iter()
+            .map(|k| 2.0 * k.cx.max(k.cy))
+            .fold(0.0, f64::max);
+        (sd > 0.0).then(|| Self {
+            pixels_per_log: REPROJECTION_SD * long_side / sd,
+        })
     }
 }
 
@@ -506,7 +546,7 @@ fn track_system(
 /// one lowers the weighted cost (the damping rising ten-fold each time it does not) or the
 /// damping exceeds 10⁶.
 fn iterate(
-    base: &[Intrinsics],
+    (base, prior): (&[Intrinsics], Option<FocalPrior>),
     lens: Lens,
     (tracks, points): (&[Track], &[Vector3<f64>]),
     poses: &[Se3],
@@ -536,7 +576,8 @@ fn iterate(
         .iter()
         .zip(&weights)
         .map(|(r, w)| weighted_cost(r, w))
-        .sum();
+        .sum::<f64>()
+        + lens.prior_residual(prior).powi(2);
     let pose_parameters = 6 * (poses.len() - 1);
     let columns = lens.columns(pose_parameters);
     let systems: Vec<BlockSystem> = tracks
@@ -546,7 +587,10 @@ fn iterate(
         .map(|((t, x), (r, w))| track_system(&cameras, poses, t, x, (r, w), columns))
         .collect();
     let free = pose_parameters + columns.count();
-    let system = CameraSystem::new(free, &systems);
+    let mut system = CameraSystem::new(free, &systems);
+    if let (Some(p), Some(column)) = (prior, columns.focal) {
+        system.add_prior(column, p.pixels_per_log, lens.prior_residual(prior));
+    }
     damped_step(
         &system,
         &systems,
@@ -555,7 +599,8 @@ fn iterate(
         (lambda, 1e-9),
         |x, step| x + step,
         |new_poses, new_points, step| {
-            let Some(cameras) = lens.stepped(&columns, step.as_slice()).cameras(base) else {
+            let stepped = lens.stepped(&columns, step.as_slice());
+            let Some(cameras) = stepped.cameras(base) else {
                 return f64::INFINITY;
             };
             // Summed in order after the parallel part, so that a run repeats bit for bit.
@@ -568,7 +613,7 @@ fn iterate(
                         .map_or(f64::INFINITY, |r| weighted_cost(&r, w))
                 })
                 .collect();
-            costs.iter().sum()
+            costs.iter().sum::<f64>() + stepped.prior_residual(prior).powi(2)
         },
     )
 }
@@ -647,6 +692,7 @@ pub fn bundle_adjust_with(
         k1: options.refine_radial.then_some(0.0),
         principal: options.refine_principal_point.then_some([0.0; 2]),
     };
+    let prior = FocalPrior::new(options, intrinsics);
     let mut lambda = 1e-3;
     // The Cauchy scale is set once, from the residuals at the start: recomputed every
     // iteration it would shrink with the fit and keep re-deciding which tracks count.
@@ -659,7 +705,7 @@ pub fn bundle_adjust_with(
     let columns = lens.columns(6 * (poses.len() - 1));
     for iteration in 0..options.max_iterations {
         let step = iterate(
-            intrinsics,
+            (intrinsics, prior),
             lens,
             (&tracks, &points),
             &current,
@@ -1070,6 +1116,33 @@ mod tests {
             let error = rotation_angle_deg(&adjusted[v].rotation, &truth[v].rotation);
             assert!(error < 1e-3, "view {v}: {error}°");
         }
+    }
+
+    /// The same focal 3 % off under a prior: a tight one holds it where it started, a loose
+    /// one lets the matches bring it back.
+    #[test]
+    fn a_focal_prior_holds_the_focal_by_its_width() {
+        let (intrinsics, truth, points) = rig();
+        let matches = exact_matches(&intrinsics, &truth, &points);
+        let long = scaled_focal(&intrinsics, 1.03);
+        let factor = |sd: f64| {
+            let options = BundleOptions {
+                refine_focal: true,
+                focal_prior_sd: Some(sd),
+                ..BundleOptions::default()
+            };
+            bundle_adjust(&long, &truth, &matches, &options)
+                .1
+                .focal_scale
+                .unwrap()
+        };
+        let held = factor(1e-6);
+        assert!((held - 1.0).abs() < 1e-4, "tight prior: factor {held}");
+        let loose = factor(10.0);
+        assert!(
+            (loose * 1.03 - 1.0).abs() < 1e-3,
+            "loose prior: factor {loose}"
+        );
     }
 
     /// Matches seen through a lens (`k1` = −0.12) and adjusted from a pinhole start with the

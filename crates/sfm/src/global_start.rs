@@ -9,6 +9,7 @@
 //! where the matches still sit well off their epipolar lines and the rotations stay far off.
 //! The relative poses need no initial poses at all, so they cannot inherit that basin.
 
+use fewview_geom::epipolar::averaging::LENGTH_PRIOR_WEIGHT;
 use fewview_geom::epipolar::{
     Baseline, RelativePoseOptions, RelativeRotation, average_rotations, centres_from_baselines,
     project_to_rotation, relative_pose,
@@ -17,6 +18,7 @@ use fewview_scene::{Intrinsics, Se3};
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
+use crate::baseline_lengths::{PairPixels, baseline_lengths};
 use fewview_match::Match;
 
 /// One pair's relative pose as the five-point step found it.
@@ -118,7 +120,11 @@ pub fn global_start(
     let rotations: Vec<Matrix3<f64>> = rotations.iter().map(|r| r * g).collect();
     let initial_centres: Vec<Vector3<f64>> =
         initial.iter().map(|p| p.inverse().translation).collect();
-    let prior = |i: usize, j: usize| (initial_centres[j] - initial_centres[i]).norm();
+    let prior = |k: usize| {
+        let (i, j) = (pairs[k].view_a, pairs[k].view_b);
+        let length = (initial_centres[j] - initial_centres[i]).norm();
+        (length, LENGTH_PRIOR_WEIGHT)
+    };
     let poses = poses_from_baselines(n, &pairs, &rotations, prior)?;
     Ok(GlobalStart {
         poses: crate::se3::into_frame_of(&poses, initial),
@@ -127,8 +133,9 @@ pub fn global_start(
 }
 
 /// The poses the matches imply with no poses to start from, as structure from motion starts:
-/// view 0 at the origin with the identity rotation, and every baseline whose length the
-/// directions leave free (a pair outside any triangle of pairs) one unit long. Pairs whose
+/// view 0 at the origin with the identity rotation, each baseline as long as the points it
+/// shares with other pairs measure it ([`crate::baseline_lengths`]), and one unit long where
+/// neither they nor the directions (a triangle of pairs) fix it. Pairs whose
 /// matches give no relative pose, or whose rotation disagrees with the averaged ones by more
 /// than [`MAX_PAIR_DISAGREEMENT_DEG`] (dropped worst first while the rest connect the views),
 /// are left out; `Err` says why there is no start when the
@@ -174,8 +181,42 @@ pub fn relative_start_with(
     }
     let g = rotations[0].transpose();
     let rotations: Vec<Matrix3<f64>> = rotations.iter().map(|r| r * g).collect();
-    let poses = poses_from_baselines(n, &pairs, &rotations, |_, _| 1.0)?;
+    let lengths = measured_lengths(&pairs, &overlapping, intrinsics);
+    let poses = poses_from_baselines(n, &pairs, &rotations, |k| match lengths[k] {
+        Some(length) => (length, MEASURED_LENGTH_WEIGHT),
+        None => (1.0, LENGTH_PRIOR_WEIGHT),
+    })?;
     Ok(GlobalStart { poses, pairs })
+}
+
+/// How much a baseline length measured by shared points counts beside the baseline's
+/// direction: as much (a guessed length counts [`LENGTH_PRIOR_WEIGHT`]).
+pub const MEASURED_LENGTH_WEIGHT: f64 = 1.0;
+
+/// The length of each pair's baseline measured by the points it shares with other pairs
+/// ([`crate::baseline_lengths`]), `None` where nothing measures it.
+fn measured_lengths(
+    pairs: &[PairPose],
+    matches: &[PairMatches],
+    intrinsics: &[Intrinsics],
+) -> Vec<Option<f64>> {
+    let pixels: Vec<PairPixels<'_>> = pairs
+        .iter()
+        .filter_map(|pose| {
+            let m = matches
+                .iter()
+                .find(|m| (m.a, m.b) == (pose.view_a, pose.view_b))?;
+            Some(PairPixels {
+                pose,
+                in_a: &m.in_a,
+                in_b: &m.in_b,
+            })
+        })
+        .collect();
+    if pixels.len() != pairs.len() {
+        return vec![None; pairs.len()];
+    }
+    baseline_lengths(&pixels, intrinsics)
 }
 
 /// A pair's relative rotation may disagree with the averaged rotations by at most this many
@@ -238,24 +279,27 @@ fn averaged_rotations(n: usize, pairs: &[PairPose]) -> Result<Vec<Matrix3<f64>>,
 }
 
 /// Poses from the `rotations` and the camera centres the pairs' baseline directions give,
-/// each baseline `(i, j)` with the prior length `prior(i, j)` where the directions leave it free.
+/// the `k`-th pair's baseline with the prior length and weight `prior(k)`.
 fn poses_from_baselines(
     n: usize,
     pairs: &[PairPose],
     rotations: &[Matrix3<f64>],
-    prior: impl Fn(usize, usize) -> f64,
+    prior: impl Fn(usize) -> (f64, f64),
 ) -> Result<Vec<Se3>, String> {
     let baselines: Vec<Baseline> = pairs
         .iter()
-        .map(|p| {
+        .enumerate()
+        .map(|(k, p)| {
             let t = Vector3::from(p.translation);
+            let (prior_length, prior_weight) = prior(k);
             Baseline {
                 i: p.view_a,
                 j: p.view_b,
                 // x_b = R x_a + t with t = −R_b (c_b − c_a).
                 direction: -(rotations[p.view_b].transpose() * t),
-                prior_length: prior(p.view_a, p.view_b),
+                prior_length,
                 weight: p.inliers as f64,
+                prior_weight,
             }
         })
         .collect();
@@ -331,5 +375,51 @@ mod tests {
             let dir_err = dir(sa, sb).angle(&dir(ta, tb)).to_degrees();
             assert!(dir_err < 0.05, "views {a}, {b}: baseline {dir_err}°");
         }
+    }
+
+    /// A camera walking forward: three centres on one line, 1 and then 3 units apart. The
+    /// directions alone leave the spacing free; the shared points measure it.
+    #[test]
+    fn a_walk_forward_keeps_its_spacing() {
+        let k = Intrinsics::centered(500.0, 400, 300);
+        let truth: Vec<Camera> = [0.0, 1.0, 4.0]
+            .iter()
+            .map(|&z| {
+                let centre = Vector3::new(0.02 * z, 0.0, z);
+                Camera::look_at(k, centre, Vector3::new(0.0, 0.0, 100.0), -Vector3::y())
+            })
+            .collect();
+        let mut matches = Vec::new();
+        for s in 0..300 {
+            let f = s as f64;
+            let p = Vector3::new(
+                3.0 * (0.37 * f).sin(),
+                2.0 * (0.71 * f).cos(),
+                10.0 + 10.0 * (1.0 + (0.13 * f).sin()),
+            );
+            for (a, b) in [(0, 1), (1, 2), (0, 2)] {
+                let (Some(pa), Some(pb)) = (truth[a].project(&p), truth[b].project(&p)) else {
+                    continue;
+                };
+                matches.push(Match {
+                    view_a: a,
+                    view_b: b,
+                    a: [pa.0 as f32, pa.1 as f32],
+                    b: [pb.0 as f32, pb.1 as f32],
+                    confidence: 1.0,
+                    b_covariance: None,
+                });
+            }
+        }
+        let start = relative_start(3, &[k; 3], &matches, 20, 0).unwrap();
+        let centre = |p: &Se3| p.inverse().translation;
+        let (c0, c1, c2) = (
+            centre(&start.poses[0]),
+            centre(&start.poses[1]),
+            centre(&start.poses[2]),
+        );
+        let ratio = (c2 - c1).norm() / (c1 - c0).norm();
+        assert!((ratio - 3.0).abs() < 0.01, "spacing ratio {ratio}");
+        assert!((c2 - c1).dot(&(c1 - c0)) > 0.0, "view 1 between 0 and 2");
     }
 }

@@ -1,5 +1,6 @@
 #![doc = include_str!("../README.md")]
 
+pub mod baseline_lengths;
 pub mod bundle;
 pub mod error;
 pub mod export;
@@ -17,6 +18,6 @@ pub use folder::{FolderOptions, poses_for_folder};
 pub use global_start::{GlobalStart, PairPose, global_start};
 pub use photos::{Photo, load_folder, load_photo, photo_files};
 pub use poses::{
-    MatchedPairs, PoseModel, PoseOptions, PoseProgress, PoseStage, estimate_poses,
+    EXIF_FOCAL_SD, MatchedPairs, PoseModel, PoseOptions, PoseProgress, PoseStage, estimate_poses,
     estimate_poses_with,
 };

@@ -9,8 +9,8 @@
 //!
 //! **Intrinsics** start from EXIF or an assumed field of view ([`crate::photos`]). When all
 //! photos share one camera, the bundle adjustment refines their common focal length (one
-//! factor on every `fx`, `fy`); the principal point stays at the centre, and lens distortion
-//! is not modelled yet.
+//! factor on every `fx`, `fy`), held near an EXIF focal by a prior as OpenSfM holds it
+//! ([`PoseOptions::exif_focal_sd`]); the principal point stays at the centre unless asked.
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -57,6 +57,10 @@ pub struct PoseOptions {
     /// share one camera (the same size and starting focal length), off otherwise, and so is
     /// its radial coefficient when [`BundleOptions::refine_radial`] asks for it.
     pub bundle: BundleOptions,
+    /// When every photo's focal length comes from EXIF: the standard deviation (log scale) of
+    /// the bundle's prior holding the shared focal near it ([`BundleOptions::focal_prior_sd`];
+    /// `None`: free). Photos without an EXIF focal start from a guess and refine it freely.
+    pub exif_focal_sd: Option<f64>,
     /// With more photos than this, each is matched only with the photos most like it
     /// ([`fewview_match::retrieval`]); up to this many, or with
     /// [`RetrievalOptions::neighbours`] 0, every pair is matched.
@@ -66,6 +70,10 @@ pub struct PoseOptions {
     /// Seed of RANSAC and of the retrieval's vocabulary.
     pub seed: u64,
 }
+
+/// OpenSfM's standard deviation of an EXIF focal length in log scale (`exif_focal_sd`): the
+/// default of [`PoseOptions::exif_focal_sd`].
+pub const EXIF_FOCAL_SD: f64 = 0.01;
 
 impl Default for PoseOptions {
     fn default() -> Self {
@@ -78,6 +86,7 @@ impl Default for PoseOptions {
             sift: SiftOptions::default(),
             matcher: MatcherKind::Classical,
             bundle: BundleOptions::default(),
+            exif_focal_sd: Some(EXIF_FOCAL_SD),
             retrieval_above: 20,
             retrieval: RetrievalOptions::default(),
             seed: 0,
@@ -217,8 +226,12 @@ pub fn estimate_poses_with(
     )
     .map_err(SfmError::NoModel)?;
     let one_camera = intrinsics.iter().all(|k| *k == intrinsics[0]);
+    let focal_from_exif = group
+        .iter()
+        .all(|&i| photos[i].focal_from == FocalSource::Exif35mm);
     let bundle_options = BundleOptions {
         refine_focal: one_camera,
+        focal_prior_sd: options.exif_focal_sd.filter(|_| focal_from_exif),
         refine_radial: one_camera && options.bundle.refine_radial,
         refine_principal_point: one_camera && options.bundle.refine_principal_point,
         ..options.bundle

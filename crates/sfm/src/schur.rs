@@ -54,6 +54,13 @@ impl CameraSystem {
         Self { u, gc }
     }
 
+    /// Adds a residual `r` on camera parameter `column` alone, with derivative `jacobian` (a
+    /// prior on a shared parameter).
+    pub fn add_prior(&mut self, column: usize, jacobian: f64, r: f64) {
+        self.u[(column, column)] += jacobian * jacobian;
+        self.gc[column] += jacobian * r;
+    }
+
     /// The step at Marquardt damping `lambda` (each diagonal entry raised by `lambda` times
     /// itself); `None` when the reduced camera system is not positive definite.
     pub fn step(&self, systems: &[BlockSystem], lambda: f64) -> Option<SchurStep> {

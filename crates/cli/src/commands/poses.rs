@@ -8,7 +8,8 @@ use fewview_match::retrieval::RetrievalOptions;
 use std::sync::Mutex;
 
 use fewview_sfm::{
-    BundleOptions, FolderOptions, PoseModel, PoseOptions, PoseProgress, PoseStage, poses_for_folder,
+    BundleOptions, EXIF_FOCAL_SD, FolderOptions, PoseModel, PoseOptions, PoseProgress, PoseStage,
+    poses_for_folder,
 };
 
 use super::output_paths::check_folder;
@@ -68,6 +69,13 @@ pub struct Args {
     /// in COLMAP: with few photos it trades off against their rotations.
     #[arg(long)]
     pub refine_principal_point: bool,
+    /// Let the bundle move an EXIF focal length freely.
+    ///
+    /// By default a focal length read from EXIF is held near its value by a prior of 1 % (in
+    /// log scale), as OpenSfM holds it: photos of a camera walking forward cannot tell zooming
+    /// from moving, and a free focal drifts. Photos without EXIF refine their guess freely.
+    #[arg(long)]
+    pub free_focal: bool,
     /// Neighbours each photo is matched with (0: all).
     ///
     /// With more than 20 photos, each is matched only with the K photos most like it (VLAD
@@ -109,6 +117,7 @@ fn folder_options(args: &Args) -> FolderOptions {
             min_matches: args.min_matches,
             matcher: args.matcher,
             seed: args.seed,
+            exif_focal_sd: (!args.free_focal).then_some(EXIF_FOCAL_SD),
             bundle: BundleOptions {
                 refine_radial: args.radial,
                 refine_principal_point: args.refine_principal_point,

@@ -117,6 +117,9 @@ pub struct Baseline {
     /// The length expected before the directions are known (e.g. from rough poses).
     pub prior_length: f64,
     pub weight: f64,
+    /// How much the prior length counts beside the direction: [`LENGTH_PRIOR_WEIGHT`] for a
+    /// rough guess (the directions decide wherever they can), about 1 for a measured length.
+    pub prior_weight: f64,
 }
 
 /// Weight of the length priors relative to the directions: small, so that the lengths the
@@ -124,8 +127,9 @@ pub struct Baseline {
 pub const LENGTH_PRIOR_WEIGHT: f64 = 1e-6;
 
 /// Camera centres of `n` views (view 0 at the origin) from baseline directions: least squares
-/// over the centres and the baselines' lengths `s` of `Σ w ‖c_j − c_i − s d‖² + ε Σ w (s − s₀)²`
-/// with `ε` = [`LENGTH_PRIOR_WEIGHT`]. `None` when the baselines do not connect the views.
+/// over the centres and the baselines' lengths `s` of `Σ w ‖c_j − c_i − s d‖² + Σ ε w (s − s₀)²`
+/// with `ε` each baseline's [`Baseline::prior_weight`]. `None` when the baselines do not
+/// connect the views.
 pub fn centres_from_baselines(n: usize, baselines: &[Baseline]) -> Option<Vec<Vector3<f64>>> {
     if n == 0 {
         return None;
@@ -151,7 +155,7 @@ pub fn centres_from_baselines(n: usize, baselines: &[Baseline]) -> Option<Vec<Ve
             a[(row, 3 * (n - 1) + k)] = -w * b.direction[d];
         }
         let row = 3 * baselines.len() + k;
-        let wp = (b.weight.max(0.0) * LENGTH_PRIOR_WEIGHT).sqrt();
+        let wp = (b.weight.max(0.0) * b.prior_weight.max(0.0)).sqrt();
         a[(row, 3 * (n - 1) + k)] = wp;
         rhs[(row, 0)] = wp * b.prior_length;
     }
@@ -235,6 +239,7 @@ mod tests {
             direction: (c[j] - c[i]).normalize(),
             prior_length: prior,
             weight: 1.0,
+            prior_weight: LENGTH_PRIOR_WEIGHT,
         };
         // Triangle with priors 30 % off: the directions fix the shape, the priors the scale.
         let tri = [
