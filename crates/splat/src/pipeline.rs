@@ -31,7 +31,7 @@ use crate::init::{
 use crate::model::GaussianModel;
 use crate::ply::{read_ply, write_ply};
 use crate::raster::{RenderCamera, RenderSettings};
-use crate::stereo_start::{StereoInit, StereoStart, stereo_start};
+use crate::stereo_start::{PointAgreement, StereoInit, StereoStart, stereo_start};
 use crate::train::{
     AlphaImage, LossTerm, Progress, TrainConfig, TrainError, TrainState, TrainView, Trainer,
 };
@@ -449,17 +449,7 @@ fn initial_model_with(
             notes.extend(s.swept.iter().map(|(a, b, why)| {
                 format!("stereo start: views {a} and {b} matched by plane sweep: {why}")
             }));
-            notes.extend(s.agreement.iter().filter_map(|a| {
-                let error = a.median_relative_error?;
-                Some(format!(
-                    "stereo start: view {}: depth at {:.0} % of its pixels; median error {:.1} % \
-                     against the {} sparse points it meets",
-                    a.view,
-                    100.0 * a.pixels_with_depth,
-                    100.0 * error,
-                    a.points_compared
-                ))
-            }));
+            notes.extend(s.agreement.iter().map(PointAgreement::note));
             let spacing = (1.0 / cfg.stereo.fraction.sqrt()) as f32;
             let (model, capped) =
                 from_stereo_points(&s.sample, degree, &s.sample_footprints, spacing);

@@ -217,17 +217,62 @@ pub fn stereo_start(
     })
 }
 
-/// How one view's stereo depth agrees with the structure-from-motion points it sees.
+/// How one view's stereo depth agrees with the structure-from-motion points it sees: over all
+/// its depth, and over the verified depth alone (R^c, consistent between the two views of a
+/// pair), the depth the fusion paper trusts.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct PointAgreement {
     pub view: String,
-    /// The share of the view's pixels with an accepted point.
-    pub pixels_with_depth: f64,
     /// Sparse points in front of the view and inside its image.
     pub points_seen: usize,
-    /// Of those, the ones whose pixel has depth, and the median of `|z_stereo − z_point| / z_point`.
+    /// Every pixel with a point of the cloud (R^c, R^o or R^s).
+    pub all: DepthAgreement,
+    /// The pixels in R^c only.
+    pub verified: DepthAgreement,
+}
+
+impl PointAgreement {
+    /// One line for the run's summary: depth and verified depth, each with its error.
+    pub fn note(&self) -> String {
+        let part = |a: &DepthAgreement| match a.median_relative_error {
+            Some(e) => format!(
+                "{:.0} % of its pixels (median error {:.1} % at {} sparse points)",
+                100.0 * a.pixels_with_depth,
+                100.0 * e,
+                a.points_compared
+            ),
+            None => format!(
+                "{:.0} % of its pixels (no sparse point there)",
+                100.0 * a.pixels_with_depth
+            ),
+        };
+        format!(
+            "stereo start: view {}: depth at {}, verified at {}",
+            self.view,
+            part(&self.all),
+            part(&self.verified)
+        )
+    }
+}
+
+/// The share of a view's pixels with depth, and how that depth meets the sparse points.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct DepthAgreement {
+    pub pixels_with_depth: f64,
+    /// Sparse points whose pixel has depth, and the median of `|z_stereo − z_point| / z_point`.
     pub points_compared: usize,
     pub median_relative_error: Option<f64>,
+}
+
+impl DepthAgreement {
+    fn new(pixels: usize, with_depth: usize, mut errors: Vec<f64>) -> Self {
+        errors.sort_by(f64::total_cmp);
+        Self {
+            pixels_with_depth: with_depth as f64 / pixels.max(1) as f64,
+            points_compared: errors.len(),
+            median_relative_error: errors.get(errors.len() / 2).copied(),
+        }
+    }
 }
 
 /// [`PointAgreement`] of every view of `cloud` with the views' sparse points.
@@ -235,33 +280,34 @@ fn point_agreement(cloud: &HierarchicalCloud, views: &[StereoView]) -> Vec<Point
     views
         .iter()
         .zip(&cloud.pixel_depths)
-        .map(|(view, depths)| {
-            let camera = view.camera;
-            let (w, h) = (camera.width() as usize, camera.height() as usize);
-            let mut seen = 0;
-            let mut errors: Vec<f64> = Vec::new();
-            for p in view.sparse_points {
+        .zip(&cloud.pixel_regions)
+        .map(|((view, depths), regions)| {
+            let verified = |p: usize| regions[p] == Some(Region::Consistent);
+            let pixels = view.sparse_points.iter().filter_map(|p| {
                 let x = nalgebra::Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-                let Some((u, v, z)) = camera.project(&x) else {
-                    continue;
-                };
-                if !(u >= 0.0 && v >= 0.0 && (u as usize) < w && (v as usize) < h) {
-                    continue;
-                }
+                let (u, v, z) = view.camera.project(&x)?;
+                let (w, h) = (view.camera.width() as f64, view.camera.height() as f64);
+                (u >= 0.0 && v >= 0.0 && u < w && v < h)
+                    .then(|| (v as usize * w as usize + u as usize, z))
+            });
+            let (mut seen, mut all, mut sure) = (0, Vec::new(), Vec::new());
+            for (p, z) in pixels {
                 seen += 1;
-                let d = depths[v as usize * w + u as usize];
-                if d > 0.0 {
-                    errors.push((d as f64 - z).abs() / z);
+                if depths[p] > 0.0 {
+                    let error = (depths[p] as f64 - z).abs() / z;
+                    all.push(error);
+                    if verified(p) {
+                        sure.push(error);
+                    }
                 }
             }
-            errors.sort_by(f64::total_cmp);
+            let with_depth = depths.iter().filter(|&&d| d > 0.0).count();
+            let with_verified = (0..depths.len()).filter(|&p| verified(p)).count();
             PointAgreement {
                 view: view.name.to_string(),
-                pixels_with_depth: depths.iter().filter(|&&d| d > 0.0).count() as f64
-                    / depths.len().max(1) as f64,
                 points_seen: seen,
-                points_compared: errors.len(),
-                median_relative_error: errors.get(errors.len() / 2).copied(),
+                all: DepthAgreement::new(depths.len(), with_depth, all),
+                verified: DepthAgreement::new(depths.len(), with_verified, sure),
             }
         })
         .collect()

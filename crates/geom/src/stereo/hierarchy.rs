@@ -717,7 +717,7 @@ mod tests {
         let mut reported = Vec::new();
         let cloud =
             hierarchical_cloud(&views, &[(0, 1), (1, 2)], &source, &options, &mut |d, n| {
-                reported.push((d, n))
+                reported.push((d, n));
             })
             .unwrap();
         assert_eq!(cloud.skipped.len(), 1);
