@@ -142,8 +142,9 @@ fn jittered_photos_of_a_strong_highlight_still_give_consistent_points() {
 
 /// A demo view and a second one 1.2 units (about 30 % of the way to the scene) further along
 /// its optical axis: rectification cannot serve the pair (the baseline is the axis), so the
-/// stereo source sweeps planes in each view; the consistent points of the pair's hierarchical
-/// cloud lie within 2 % of the exact depth: at least 90 % of them.
+/// stereo source sweeps planes in each view; of the consistent points of the pair's
+/// hierarchical cloud, at least 85 % lie within 2 % of the exact depth and 95 % within 5 %
+/// (the misses sit on the spheres' silhouettes and highlights).
 #[test]
 fn plane_sweep_finds_the_depth_of_a_camera_walking_forward() {
     use fewview_geom::stereo::source::{PairMethod, pair_method};
