@@ -181,7 +181,11 @@ pub fn relative_start_with(
     }
     let g = rotations[0].transpose();
     let rotations: Vec<Matrix3<f64>> = rotations.iter().map(|r| r * g).collect();
-    let lengths = measured_lengths(&pairs, &overlapping, intrinsics);
+    let lengths = if along_one_line(&pairs, &rotations) {
+        measured_lengths(&pairs, &overlapping, intrinsics)
+    } else {
+        vec![None; pairs.len()]
+    };
     let poses = poses_from_baselines(n, &pairs, &rotations, |k| match lengths[k] {
         Some(length) => (length, MEASURED_LENGTH_WEIGHT),
         None => (1.0, LENGTH_PRIOR_WEIGHT),
@@ -192,6 +196,25 @@ pub fn relative_start_with(
 /// How much a baseline length measured by shared points counts beside the baseline's
 /// direction: as much (a guessed length counts [`LENGTH_PRIOR_WEIGHT`]).
 pub const MEASURED_LENGTH_WEIGHT: f64 = 1.0;
+
+/// Baselines within this many degrees of one line leave their lengths to the measured ones.
+pub const ONE_LINE_DEG: f64 = 10.0;
+
+/// Whether every pair's baseline direction lies within [`ONE_LINE_DEG`] of the first's line:
+/// a walk forward or along a row, whose triangles of directions are too flat to fix lengths.
+/// Elsewhere the directions fix them better than the shared points measure them (the points
+/// carry each pair's own pose error).
+fn along_one_line(pairs: &[PairPose], rotations: &[Matrix3<f64>]) -> bool {
+    let direction =
+        |p: &PairPose| -(rotations[p.view_b].transpose() * Vector3::from(p.translation));
+    let Some(first) = pairs.first().map(direction) else {
+        return false;
+    };
+    pairs.iter().map(direction).all(|d| {
+        let angle = d.angle(&first).to_degrees();
+        angle.min(180.0 - angle) <= ONE_LINE_DEG
+    })
+}
 
 /// The length of each pair's baseline measured by the points it shares with other pairs
 /// ([`crate::baseline_lengths`]), `None` where nothing measures it.
