@@ -10,7 +10,8 @@
 //! Moulon et al., "Global Fusion of Relative Motions for Robust, Accurate and Scalable
 //! Structure from Motion"): a point that two pairs with a common view both triangulate has one
 //! depth in that view, so the ratio of its two unit-baseline depths is the ratio of the two
-//! baselines' lengths.
+//! baselines' lengths. Each ratio inherits its two pairs' pose errors, so the poses use it only
+//! where the directions cannot fix the lengths (`global_start`'s line test).
 //!
 //! **Model.** Each pair's matches are triangulated with its relative pose and a unit baseline
 //! (midpoint of the two rays; points seen at less than [`MIN_PARALLAX_DEG`] are too uncertain

@@ -133,9 +133,10 @@ pub fn global_start(
 }
 
 /// The poses the matches imply with no poses to start from, as structure from motion starts:
-/// view 0 at the origin with the identity rotation, each baseline as long as the points it
-/// shares with other pairs measure it ([`crate::baseline_lengths`]), and one unit long where
-/// neither they nor the directions (a triangle of pairs) fix it. Pairs whose
+/// view 0 at the origin with the identity rotation; where all baselines lie along one line
+/// (a walk forward), each as long as the points it shares with other pairs measure it
+/// ([`crate::baseline_lengths`]); elsewhere the directions fix the lengths in triangles of
+/// pairs, and a length they leave free is one unit. Pairs whose
 /// matches give no relative pose, or whose rotation disagrees with the averaged ones by more
 /// than [`MAX_PAIR_DISAGREEMENT_DEG`] (dropped worst first while the rest connect the views),
 /// are left out; `Err` says why there is no start when the
