@@ -342,6 +342,24 @@ mod tests {
     use fewview_geom::similarity::rotation_angle_deg as angle_deg;
     use fewview_scene::Camera;
 
+    /// The exact matches of point `p` between every two of the three cameras that see it.
+    fn exact_matches_of(truth: &[Camera], p: &Vector3<f64>) -> Vec<Match> {
+        [(0, 1), (1, 2), (0, 2)]
+            .into_iter()
+            .filter_map(|(a, b)| {
+                let (pa, pb) = (truth[a].project(p)?, truth[b].project(p)?);
+                Some(Match {
+                    view_a: a,
+                    view_b: b,
+                    a: [pa.0 as f32, pa.1 as f32],
+                    b: [pb.0 as f32, pb.1 as f32],
+                    confidence: 1.0,
+                    b_covariance: None,
+                })
+            })
+            .collect()
+    }
+
     /// Three cameras around the origin with exact matches: the start equals the true poses
     /// up to the similarity it was placed with, from initial poses 10° and 30 % off.
     #[test]
@@ -357,19 +375,7 @@ mod tests {
         for s in 0..400 {
             let f = s as f64;
             let p = Vector3::new((0.37 * f).sin(), (0.71 * f).cos(), (0.13 * f).sin()) * 0.6;
-            for (a, b) in [(0, 1), (1, 2), (0, 2)] {
-                let (Some(pa), Some(pb)) = (truth[a].project(&p), truth[b].project(&p)) else {
-                    continue;
-                };
-                matches.push(Match {
-                    view_a: a,
-                    view_b: b,
-                    a: [pa.0 as f32, pa.1 as f32],
-                    b: [pb.0 as f32, pb.1 as f32],
-                    confidence: 1.0,
-                    b_covariance: None,
-                });
-            }
+            matches.extend(exact_matches_of(&truth, &p));
         }
         let initial: Vec<Se3> = truth
             .iter()
@@ -421,19 +427,7 @@ mod tests {
                 2.0 * (0.71 * f).cos(),
                 10.0 + 10.0 * (1.0 + (0.13 * f).sin()),
             );
-            for (a, b) in [(0, 1), (1, 2), (0, 2)] {
-                let (Some(pa), Some(pb)) = (truth[a].project(&p), truth[b].project(&p)) else {
-                    continue;
-                };
-                matches.push(Match {
-                    view_a: a,
-                    view_b: b,
-                    a: [pa.0 as f32, pa.1 as f32],
-                    b: [pb.0 as f32, pb.1 as f32],
-                    confidence: 1.0,
-                    b_covariance: None,
-                });
-            }
+            matches.extend(exact_matches_of(&truth, &p));
         }
         let start = relative_start(3, &[k; 3], &matches, 20, 0).unwrap();
         let centre = |p: &Se3| p.inverse().translation;
