@@ -25,17 +25,18 @@ use std::collections::HashMap;
 use fewview_scene::Intrinsics;
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x2, Vector3};
 
-use crate::global_start::PairPose;
-
 /// Least parallax (degrees) at which a pair's point counts in a ratio.
 pub const MIN_PARALLAX_DEG: f64 = 1.0;
 
 /// Fewest points two pairs must share for their length ratio to count.
 pub const MIN_SHARED_POINTS: usize = 5;
 
-/// One pair's matched pixels: in view `pose.view_a`, then in `pose.view_b`.
+/// One pair's relative pose and matched pixels: views `a` and `b`, `x_b = R x_a + t` with a
+/// unit `t`, the pixels in `a`, then in `b`.
 pub struct PairPixels<'a> {
-    pub pose: &'a PairPose,
+    pub views: (usize, usize),
+    pub rotation: Matrix3<f64>,
+    pub translation: Vector3<f64>,
     pub in_a: &'a [[f64; 2]],
     pub in_b: &'a [[f64; 2]],
 }
@@ -50,7 +51,7 @@ pub fn baseline_lengths(pairs: &[PairPixels<'_>], intrinsics: &[Intrinsics]) -> 
     let mut ratios: Vec<(usize, usize, f64, usize)> = Vec::new();
     for p in 0..pairs.len() {
         for q in p + 1..pairs.len() {
-            for (side_p, side_q) in shared_views(pairs[p].pose, pairs[q].pose) {
+            for (side_p, side_q) in shared_views(pairs[p].views, pairs[q].views) {
                 let (dp, dq) = (&depths[p][side_p], &depths[q][side_q]);
                 let mut logs: Vec<f64> = dp
                     .iter()
@@ -75,8 +76,8 @@ fn key(p: &[f64; 2]) -> PixelKey {
 }
 
 /// The sides (0: view a, 1: view b) by which two pairs share a view.
-fn shared_views(p: &PairPose, q: &PairPose) -> Vec<(usize, usize)> {
-    let (vp, vq) = ([p.view_a, p.view_b], [q.view_a, q.view_b]);
+fn shared_views(p: (usize, usize), q: (usize, usize)) -> Vec<(usize, usize)> {
+    let (vp, vq) = ([p.0, p.1], [q.0, q.1]);
     let mut out = Vec::new();
     for (i, a) in vp.iter().enumerate() {
         for (j, b) in vq.iter().enumerate() {
@@ -94,9 +95,8 @@ fn unit_baseline_depths(
     p: &PairPixels<'_>,
     intrinsics: &[Intrinsics],
 ) -> [HashMap<PixelKey, f64>; 2] {
-    let r = Matrix3::from_fn(|i, j| p.pose.rotation[i][j]);
-    let t = Vector3::from(p.pose.translation);
-    let (ka, kb) = (&intrinsics[p.pose.view_a], &intrinsics[p.pose.view_b]);
+    let (r, t) = (p.rotation, p.translation);
+    let (ka, kb) = (&intrinsics[p.views.0], &intrinsics[p.views.1]);
     let ray = |k: &Intrinsics, x: &[f64; 2]| {
         Vector3::new((x[0] - k.cx) / k.fx, (x[1] - k.cy) / k.fy, 1.0)
     };

@@ -231,7 +231,9 @@ fn measured_lengths(
                 .iter()
                 .find(|m| (m.a, m.b) == (pose.view_a, pose.view_b))?;
             Some(PairPixels {
-                pose,
+                views: (pose.view_a, pose.view_b),
+                rotation: Matrix3::from_fn(|i, j| pose.rotation[i][j]),
+                translation: Vector3::from(pose.translation),
                 in_a: &m.in_a,
                 in_b: &m.in_b,
             })
