@@ -133,10 +133,10 @@ pub fn global_start(
 }
 
 /// The poses the matches imply with no poses to start from, as structure from motion starts:
-/// view 0 at the origin with the identity rotation; where all baselines lie along one line
-/// (a walk forward), each as long as the points it shares with other pairs measure it
-/// ([`crate::baseline_lengths`]); elsewhere the directions fix the lengths in triangles of
-/// pairs, and a length they leave free is one unit. Pairs whose
+/// view 0 at the origin with the identity rotation; the baselines of wide triangles of pairs
+/// as their directions fix them, the others (flat triangles, as a walk forward makes, or no
+/// triangle) as long as the points they share with other pairs measure them
+/// ([`crate::baseline_lengths`]), and one unit where nothing measures them. Pairs whose
 /// matches give no relative pose, or whose rotation disagrees with the averaged ones by more
 /// than [`MAX_PAIR_DISAGREEMENT_DEG`] (dropped worst first while the rest connect the views),
 /// are left out; `Err` says why there is no start when the
@@ -182,10 +182,16 @@ pub fn relative_start_with(
     }
     let g = rotations[0].transpose();
     let rotations: Vec<Matrix3<f64>> = rotations.iter().map(|r| r * g).collect();
-    let lengths = if along_one_line(&pairs, &rotations) {
-        measured_lengths(&pairs, &overlapping, intrinsics)
-    } else {
+    let fixed = fixed_by_directions(&pairs, &rotations);
+    let lengths: Vec<Option<f64>> = if fixed.iter().all(|&f| f) {
         vec![None; pairs.len()]
+    } else {
+        let measured = measured_lengths(&pairs, &overlapping, intrinsics);
+        measured
+            .into_iter()
+            .zip(&fixed)
+            .map(|(length, &fixed)| length.filter(|_| !fixed))
+            .collect()
     };
     let poses = poses_from_baselines(n, &pairs, &rotations, |k| match lengths[k] {
         Some(length) => (length, MEASURED_LENGTH_WEIGHT),
@@ -198,23 +204,43 @@ pub fn relative_start_with(
 /// direction: as much (a guessed length counts [`LENGTH_PRIOR_WEIGHT`]).
 pub const MEASURED_LENGTH_WEIGHT: f64 = 1.0;
 
-/// Baselines within this many degrees of one line leave their lengths to the measured ones.
-pub const ONE_LINE_DEG: f64 = 10.0;
+/// A triangle of pairs fixes its baselines' lengths when each of its angles is at least this
+/// many degrees.
+pub const FLAT_TRIANGLE_DEG: f64 = 10.0;
 
-/// Whether every pair's baseline direction lies within [`ONE_LINE_DEG`] of the first's line:
-/// a walk forward or along a row, whose triangles of directions are too flat to fix lengths.
-/// Elsewhere the directions fix them better than the shared points measure them (the points
-/// carry each pair's own pose error).
-fn along_one_line(pairs: &[PairPose], rotations: &[Matrix3<f64>]) -> bool {
-    let direction =
-        |p: &PairPose| -(rotations[p.view_b].transpose() * Vector3::from(p.translation));
-    let Some(first) = pairs.first().map(direction) else {
-        return false;
+/// Per pair, whether the baseline directions fix its length: it belongs to a triangle of
+/// pairs whose angles are all at least [`FLAT_TRIANGLE_DEG`]. A walk forward or along a row
+/// makes every triangle flat, and a pair outside any triangle is free; their lengths are
+/// better measured by the shared points. Elsewhere the directions fix them better than the
+/// points measure them (the points carry each pair's own pose error).
+fn fixed_by_directions(pairs: &[PairPose], rotations: &[Matrix3<f64>]) -> Vec<bool> {
+    // c_b − c_a of views a and b, when they form a pair.
+    let baseline = |a: usize, b: usize| {
+        pairs.iter().find_map(|p| {
+            let d = -(rotations[p.view_b].transpose() * Vector3::from(p.translation));
+            match (p.view_a, p.view_b) {
+                (x, y) if (x, y) == (a, b) => Some(d),
+                (x, y) if (x, y) == (b, a) => Some(-d),
+                _ => None,
+            }
+        })
     };
-    pairs.iter().map(direction).all(|d| {
-        let angle = d.angle(&first).to_degrees();
-        angle.min(180.0 - angle) <= ONE_LINE_DEG
-    })
+    let wide = |i: usize, j: usize, m: usize| {
+        let (Some(ij), Some(im), Some(jm)) = (baseline(i, j), baseline(i, m), baseline(j, m))
+        else {
+            return false;
+        };
+        [ij.angle(&im), (-ij).angle(&jm), im.angle(&jm)]
+            .iter()
+            .all(|a| a.to_degrees() >= FLAT_TRIANGLE_DEG)
+    };
+    pairs
+        .iter()
+        .map(|p| {
+            let (i, j) = (p.view_a, p.view_b);
+            (0..rotations.len()).any(|m| m != i && m != j && wide(i, j, m))
+        })
+        .collect()
 }
 
 /// The length of each pair's baseline measured by the points it shares with other pairs
