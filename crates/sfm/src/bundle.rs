@@ -427,7 +427,7 @@ impl FocalPrior {
         let sd = options.focal_prior_sd.filter(|_| options.refine_focal)?;
         let long_side = intrinsics
             .iter()
-            .map(|k| 2.0 * k.cx.max(k.cy))
+            .map(|k| f64::from(k.width.max(k.height)))
             .fold(0.0, f64::max);
         (sd > 0.0).then(|| Self {
             pixels_per_log: REPROJECTION_SD * long_side / sd,

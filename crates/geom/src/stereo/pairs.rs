@@ -115,10 +115,16 @@ pub fn points_depth_bounds(view: &StereoView) -> Option<(f64, f64)> {
     if depths.len() < MIN_RANGE_POINTS {
         return None;
     }
-    depths.sort_by(f64::total_cmp);
-    let at = |q: f64| depths[((depths.len() - 1) as f64 * q).round() as usize];
-    let (near, far) = (at(0.01), at(0.99));
+    let (near, far) = central_span(&mut depths);
     (near > 0.0 && near < far).then_some((near, far))
+}
+
+/// The 1st and 99th percentiles (nearest rank) of `values`, which must not be empty: the span
+/// of a view's or a pair's points with their outliers left out.
+pub(crate) fn central_span(values: &mut [f64]) -> (f64, f64) {
+    values.sort_by(f64::total_cmp);
+    let at = |q: f64| values[((values.len() - 1) as f64 * q).round() as usize];
+    (at(0.01), at(0.99))
 }
 
 /// Whether `x` lies in front of `view`'s camera and projects inside its image.

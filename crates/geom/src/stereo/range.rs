@@ -7,7 +7,7 @@
 use nalgebra::Vector3;
 
 pub use super::pairs::MIN_RANGE_POINTS;
-use super::pairs::{StereoView, sees};
+use super::pairs::{StereoView, central_span, sees};
 use super::rectify::{Rectification, Side};
 
 /// How the disparity search range of a pair is chosen.
@@ -76,9 +76,7 @@ pub fn points_disparity_range(
     if disparities.len() < MIN_RANGE_POINTS {
         return None;
     }
-    disparities.sort_by(f64::total_cmp);
-    let at = |q: f64| disparities[((disparities.len() - 1) as f64 * q).round() as usize];
-    let (lo, hi) = (at(0.01), at(0.99));
+    let (lo, hi) = central_span(&mut disparities);
     // (d − offset) ∝ 1/z: a far bound 10 % farther, a near bound 10 % nearer.
     let off = rect.offset;
     Some(span_to_range(
@@ -110,9 +108,8 @@ pub fn points_depth_range(
     if seen < MIN_RANGE_POINTS {
         return None;
     }
-    depths.sort_by(f64::total_cmp);
-    let at = |q: f64| depths[((depths.len() - 1) as f64 * q).round() as usize];
-    let (near, far) = (at(0.01) * 0.9, at(0.99) * 1.1);
+    let (near, far) = central_span(&mut depths);
+    let (near, far) = (near * 0.9, far * 1.1);
     (near > 0.0 && near < far).then_some((near, far))
 }
 
