@@ -140,28 +140,36 @@ pub fn reproject_pair(
     own_depth: &[f32],
     options: &ReprojectOptions,
 ) -> Result<[Reference; 2], FusionError> {
+    // The two references are independent: each is built on its own core.
     if options.occlusion == Occlusion::OwnDepth {
-        return Ok([
-            reproject(meshes[0], camera, Some(own_depth), options)?,
-            reproject(meshes[1], camera, Some(own_depth), options)?,
-        ]);
+        let (f, g) = rayon::join(
+            || reproject(meshes[0], camera, Some(own_depth), options),
+            || reproject(meshes[1], camera, Some(own_depth), options),
+        );
+        return Ok([f?, g?]);
     }
     let (width, height) = (camera.width() as usize, camera.height() as usize);
-    let rasters = [
-        rasterize_mesh_colors(meshes[0], camera, NEAR)?,
-        rasterize_mesh_colors(meshes[1], camera, NEAR)?,
-    ];
+    let (f, g) = rayon::join(
+        || rasterize_mesh_colors(meshes[0], camera, NEAR),
+        || rasterize_mesh_colors(meshes[1], camera, NEAR),
+    );
+    let rasters = [f?, g?];
     let in_front = |a: &Rasterized, b: &Rasterized, p: usize| {
         !b.covered(p) || a.depth[p] <= b.depth[p] * (1.0 + options.depth_tolerance)
     };
-    Ok([
-        reference_where(&rasters[0], width, height, options, |p| {
-            in_front(&rasters[0], &rasters[1], p)
-        }),
-        reference_where(&rasters[1], width, height, options, |p| {
-            in_front(&rasters[1], &rasters[0], p)
-        }),
-    ])
+    let (f, g) = rayon::join(
+        || {
+            reference_where(&rasters[0], width, height, options, |p| {
+                in_front(&rasters[0], &rasters[1], p)
+            })
+        },
+        || {
+            reference_where(&rasters[1], width, height, options, |p| {
+                in_front(&rasters[1], &rasters[0], p)
+            })
+        },
+    );
+    Ok([f, g])
 }
 
 /// Nearer than this (camera z) nothing is rasterised.

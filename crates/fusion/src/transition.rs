@@ -31,7 +31,9 @@ use fewview_metrics::lpips::Lpips;
 use fewview_metrics::popping::{Popping, local_popping, local_popping_with, popping_of_maps};
 use fewview_metrics::psnr::{psnr, psnr_from_mse};
 use fewview_metrics::ssim::SsimOptions;
-use fewview_metrics::temporal::{MetricSeries, evaluate_sequence, warping_errors};
+use fewview_metrics::temporal::{
+    MetricSeries, evaluate_sequence, warping_errors, warping_errors_where_defined,
+};
 use std::path::Path;
 
 use fewview_geom::stereo::pairs::order_along_baseline;
@@ -237,7 +239,9 @@ pub fn score_transition(
     lpips: Option<&Lpips>,
 ) -> Result<ScoredPath, FusionError> {
     let flows = path_flows(&path.cameras, &path.depths)?;
-    let errors = warping_errors(&path.frames, &flows)?;
+    // A transition whose flow leaves the frame everywhere (the model shows nothing there) is
+    // not scored: NaN in the series, left out of its mean.
+    let errors = warping_errors_where_defined(&path.frames, &flows)?;
     let (popping, popping_maps) = local_popping(&path.frames, &flows)?;
     let popping_overlap = popping_of_maps(&popping_maps, Some(&overlap_masks(path, training)?))?;
     let popping_per_pixel = local_popping_with(&path.frames, &flows, 0.0)?.0;
@@ -278,8 +282,8 @@ pub fn score_transition(
     let report = TransitionReport {
         frames: path.frames.len(),
         fps: CLIP_FPS,
-        warping_error: MetricSeries::new("warping_error", errors),
-        warp_psnr: MetricSeries::new("warp_psnr", warp_psnr),
+        warping_error: MetricSeries::over_scored("warping_error", errors),
+        warp_psnr: MetricSeries::over_scored("warp_psnr", warp_psnr),
         popping,
         popping_per_pixel,
         popping_overlap,

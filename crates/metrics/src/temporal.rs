@@ -97,6 +97,22 @@ pub struct MetricSeries {
 }
 
 impl MetricSeries {
+    /// The series of `per_frame` with its mean over the values that are not `NaN` (frames or
+    /// transitions not scored) and its Δ over the neighbouring pairs that both are.
+    pub fn over_scored(name: impl Into<String>, per_frame: Vec<f64>) -> Self {
+        let scored: Vec<f64> = per_frame.iter().copied().filter(|v| !v.is_nan()).collect();
+        let deltas: Vec<f64> = frame_deltas(&per_frame)
+            .into_iter()
+            .filter(|v| !v.is_nan())
+            .collect();
+        Self {
+            name: name.into(),
+            mean: scored.iter().sum::<f64>() / scored.len().max(1) as f64,
+            delta: MeanStd::of(&deltas),
+            per_frame,
+        }
+    }
+
     pub fn new(name: impl Into<String>, per_frame: Vec<f64>) -> Self {
         let mean = per_frame.iter().sum::<f64>() / per_frame.len().max(1) as f64;
         let delta = MeanStd::of(&frame_deltas(&per_frame));
@@ -272,8 +288,40 @@ pub fn warping_errors(frames: &[Image], flows: &[Flow]) -> Result<Vec<f64>> {
         .collect()
 }
 
-/// Warping error between `previous` warped by `flow` and `current`.
+/// [`warping_errors`] along a rendered path, whose flows may leave the frame entirely (a
+/// model that shows nothing there, or a jump between far views): such a transition is `NaN`,
+/// not scored, instead of an error.
+pub fn warping_errors_where_defined(frames: &[Image], flows: &[Flow]) -> Result<Vec<f64>> {
+    if flows.len() + 1 != frames.len() {
+        return Err(MetricsError::ShapeMismatch(format!(
+            "{} flows for {} frames (need one per transition, {})",
+            flows.len(),
+            frames.len(),
+            frames.len().saturating_sub(1)
+        )));
+    }
+    (1..frames.len())
+        .map(|t| {
+            let e = mean_warped_error(&frames[t - 1], &frames[t], &flows[t - 1])
+                .map_err(|e| MetricsError::invalid(format!("transition {t}: {e}")))?;
+            Ok(e.unwrap_or(f64::NAN))
+        })
+        .collect()
+}
+
+/// Warping error between `previous` warped by `flow` and `current`; an error when no pixel
+/// of the flow is trusted and lands inside `previous`.
 pub fn warping_error(previous: &Image, current: &Image, flow: &Flow) -> Result<f64> {
+    mean_warped_error(previous, current, flow)?.ok_or_else(|| {
+        MetricsError::invalid(
+            "no valid pixel: the flow leaves the frame everywhere or the mask is empty",
+        )
+    })
+}
+
+/// The warping error over the pixels the flow carries into `previous`; `None` when there are
+/// none.
+fn mean_warped_error(previous: &Image, current: &Image, flow: &Flow) -> Result<Option<f64>> {
     let (mut sum, mut count) = (0.0f64, 0usize);
     for_each_warped_pixel(previous, current, flow, |_, now, before| {
         sum += now
@@ -283,12 +331,7 @@ pub fn warping_error(previous: &Image, current: &Image, flow: &Flow) -> Result<f
             .sum::<f64>();
         count += 1;
     })?;
-    if count == 0 {
-        return Err(MetricsError::invalid(
-            "no valid pixel: the flow leaves the frame everywhere or the mask is empty",
-        ));
-    }
-    Ok(sum / count as f64)
+    Ok((count > 0).then(|| sum / count as f64))
 }
 
 /// Calls `visit(i, current pixel, previous sampled at i + flow)` for every pixel `i` of
@@ -548,6 +591,37 @@ mod tests {
         }
         assert!(error_changes(&output[..1], &truth[..1]).is_err());
         assert!(error_changes(&output, &truth[..3]).is_err());
+    }
+
+    #[test]
+    fn a_transition_whose_flow_leaves_the_frame_is_not_scored() {
+        let frames = [
+            pattern(30, 16, 0.0),
+            pattern(30, 16, 0.0),
+            pattern(30, 16, 0.1),
+        ];
+        let flow = |dx: f32| Flow {
+            width: 30,
+            height: 16,
+            data: vec![[dx, 0.0]; 30 * 16],
+            valid: None,
+            source: None,
+        };
+        // Transition 1 is still and exact; transition 2's flow points 100 px off the frame.
+        let flows = [flow(0.0), flow(-100.0)];
+        let e = warping_errors_where_defined(&frames, &flows).unwrap();
+        assert_eq!(e[0], 0.0);
+        assert!(e[1].is_nan(), "{e:?}");
+        let err = warping_errors(&frames, &flows).unwrap_err().to_string();
+        assert!(
+            err.contains("transition 2:") && err.contains("no valid pixel"),
+            "{err}"
+        );
+        // The series' mean and Δ leave the unscored transition out.
+        let series = MetricSeries::over_scored("warping_error", vec![1.0, f64::NAN, 3.0, 4.0]);
+        assert_eq!(series.mean, 8.0 / 3.0);
+        assert_eq!(series.delta.mean, 1.0);
+        assert!(series.per_frame[1].is_nan());
     }
 
     #[test]

@@ -26,6 +26,21 @@ pub fn avx2_fma() -> bool {
     }
 }
 
+/// Whether the CPU has AVX-512 (foundation and vector-length extensions) besides AVX2 and FMA:
+/// 32 vector registers and mask registers for the same 8-wide loops.
+pub fn avx512() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        avx2_fma()
+            && std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512vl")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
 /// A raw pointer that may cross threads, for parallel loops whose tasks write disjoint
 /// elements of one buffer (each user states why in a SAFETY note where it writes).
 #[derive(Clone, Copy, Debug)]

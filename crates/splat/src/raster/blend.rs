@@ -138,6 +138,8 @@ fn prefetch<T>(value: &T) {
 
 /// Blends `list` (indices into `splats`, front to back) into `state`. Returns the number of
 /// splat–pixel pairs evaluated.
+// `&` between the per-lane tests keeps them vector masks (see the loop).
+#[allow(clippy::needless_bitwise_bool)]
 #[inline(always)]
 pub fn forward_tile<F: Real, M: MulAdd>(
     geo: &TileGeometry,
@@ -188,10 +190,12 @@ pub fn forward_tile<F: Real, M: MulAdd>(
                 for c in 0..BLOCK {
                     let dx = x[c] - s.mean[0];
                     let (power, _, alpha) = splat_alpha::<F, M>(s, row, dx);
-                    let valid = (al[c] > zero) && (power <= zero) && (alpha >= amin);
+                    // `&`, not `&&`: with no short circuit the three tests stay vector masks
+                    // instead of being turned into branches and packed booleans.
+                    let valid = (al[c] > zero) & (power <= zero) & (alpha >= amin);
                     let test_t = t[c] * (F::one() - alpha);
-                    let stop = valid && (test_t < tmin);
-                    let contrib = valid && !stop;
+                    let stop = valid & (test_t < tmin);
+                    let contrib = valid & !stop;
                     let w = if contrib { alpha * t[c] } else { zero };
                     cr[c] = M::madd(w, s.color[0], cr[c]);
                     cg[c] = M::madd(w, s.color[1], cg[c]);
@@ -251,6 +255,7 @@ impl<F: Real> Default for TileGrad<F> {
 /// Walks each pixel's list back to front, recovering `Tᵢ = Tᵢ₊₁ / (1 − αᵢ)` and the colour
 /// behind splat `i`, `Aᵢ = αᵢ₊₁ cᵢ₊₁ + (1 − αᵢ₊₁) Aᵢ₊₁` (starting from the background), so
 /// `∂C/∂αᵢ = Tᵢ (cᵢ − Aᵢ)`; depth (background 0) and alpha (colour 1, background 0) alike.
+#[allow(clippy::needless_bitwise_bool)]
 #[inline(always)]
 pub fn backward_tile<F: Real, M: MulAdd>(
     geo: &TileGeometry,
@@ -297,7 +302,7 @@ pub fn backward_tile<F: Real, M: MulAdd>(
             for c in 0..TILE {
                 let dx = px[c] - s.mean[0];
                 let (power, g, alpha) = splat_alpha::<F, M>(s, row, dx);
-                let valid = (rank < last[c]) && (power <= zero) && (alpha >= amin);
+                let valid = (rank < last[c]) & (power <= zero) & (alpha >= amin);
                 let one_minus = one - alpha;
                 let t_j = t[c] / one_minus;
                 let w = if valid { alpha * t_j } else { zero };
@@ -312,7 +317,7 @@ pub fn backward_tile<F: Real, M: MulAdd>(
                 lane[8][c] = M::madd(w, gb[c], lane[8][c]);
                 lane[9][c] = M::madd(w, gd[c], lane[9][c]);
                 // α = o·g unless clamped at 0.99, where it no longer depends on o or the shape.
-                let free = valid && (s.opacity * g < amax);
+                let free = valid & (s.opacity * g < amax);
                 let dl_dalpha = if free { dl_dalpha } else { zero };
                 let dpow = dl_dalpha * alpha;
                 lane[5][c] = M::madd(dl_dalpha, g, lane[5][c]);

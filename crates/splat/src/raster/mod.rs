@@ -6,7 +6,8 @@
 //! 2. [`tiles`]: 16×16 tile binning and front-to-back depth ordering.
 //! 3. [`blend`]: per tile, front-to-back alpha blending (α ≤ 0.99, skip α < 1/255, stop before
 //!    the transmittance would fall below 1e-4); outputs RGB (+ background), expected depth
-//!    `Σ wᵢ zᵢ` and alpha `1 − T`.
+//!    `Σ wᵢ zᵢ` and alpha `1 − T`; [`kernels`] picks the build of its loops the CPU runs best
+//!    (AVX-512, AVX2 + FMA, or portable).
 //!
 //! The backward pass runs the same stages in reverse with exact gradients (see
 //! [`backward`]). Every function is generic over [`Real`](crate::real::Real) so the `f64`
@@ -22,6 +23,7 @@
 
 pub mod blend;
 pub mod inputs;
+pub mod kernels;
 pub mod project;
 pub mod reference;
 pub mod render;

@@ -4,11 +4,12 @@
 
 use rayon::prelude::*;
 
-use super::blend::{TileGeometry, TileGrad, TileState, backward_tile, forward_tile};
+use super::blend::{TileGeometry, TileGrad, TileState};
 use super::inputs::{GaussianRefs, RenderCamera, RenderSettings, TILE};
+use super::kernels::{KernelBuild, backward_tile_with, forward_tile_with};
 use super::project::{CameraF, ParamGrad, Splat, SplatGrad, project_one, project_one_backward};
 use super::tiles::{TileBins, bin};
-use crate::real::{Fused, Real, Unfused};
+use crate::real::Real;
 
 /// Channels of the rasterizer's output image, interleaved per pixel: R, G, B, depth, alpha.
 pub const OUT_CHANNELS: usize = 5;
@@ -69,7 +70,7 @@ pub struct ParamGradients<F> {
     pub pairs: u64,
 }
 
-fn tile_geometry(cam: &RenderCamera, t: usize, tiles_x: usize) -> TileGeometry {
+pub(crate) fn tile_geometry(cam: &RenderCamera, t: usize, tiles_x: usize) -> TileGeometry {
     let (tx, ty) = (t % tiles_x, t / tiles_x);
     let (x0, y0) = (tx * TILE, ty * TILE);
     TileGeometry {
@@ -78,72 +79,6 @@ fn tile_geometry(cam: &RenderCamera, t: usize, tiles_x: usize) -> TileGeometry {
         width: TILE.min(cam.width - x0),
         height: TILE.min(cam.height - y0),
     }
-}
-
-/// Whether the CPU runs the AVX2 + FMA build of the tile kernels.
-#[cfg(target_arch = "x86_64")]
-fn has_avx2_fma() -> bool {
-    fewview_scene::cpu::avx2_fma()
-}
-
-/// Runs the tile kernel compiled for AVX2 + FMA when the CPU has them (the generic body is
-/// inlined into a `target_feature` function so its loops use 8-wide vectors and fused
-/// multiply-adds), else the baseline build.
-fn forward_tile_best<F: Real>(
-    geo: &TileGeometry,
-    list: &[u32],
-    splats: &[Splat<F>],
-    state: &mut TileState<F>,
-) -> u64 {
-    #[cfg(target_arch = "x86_64")]
-    {
-        #[target_feature(enable = "avx2,fma")]
-        fn avx2<F: Real>(
-            geo: &TileGeometry,
-            list: &[u32],
-            splats: &[Splat<F>],
-            state: &mut TileState<F>,
-        ) -> u64 {
-            forward_tile::<F, Fused>(geo, list, splats, state)
-        }
-        if has_avx2_fma() {
-            // SAFETY: the CPU supports AVX2 and FMA (checked just above).
-            return unsafe { avx2(geo, list, splats, state) };
-        }
-    }
-    forward_tile::<F, Unfused>(geo, list, splats, state)
-}
-
-#[allow(clippy::too_many_arguments)]
-fn backward_tile_best<F: Real>(
-    geo: &TileGeometry,
-    list: &[u32],
-    splats: &[Splat<F>],
-    state: &TileState<F>,
-    background: [F; 3],
-    grad: &TileGrad<F>,
-    out: &mut [F],
-) -> u64 {
-    #[cfg(target_arch = "x86_64")]
-    {
-        #[target_feature(enable = "avx2,fma")]
-        fn avx2<F: Real>(
-            geo: &TileGeometry,
-            list: &[u32],
-            splats: &[Splat<F>],
-            state: &TileState<F>,
-            background: [F; 3],
-            grad: &TileGrad<F>,
-            out: &mut [F],
-        ) -> u64 {
-            backward_tile::<F, Fused>(geo, list, splats, state, background, grad, out)
-        }
-        if has_avx2_fma() {
-            // SAFETY: the CPU supports AVX2 and FMA (checked just above).
-            return unsafe { avx2(geo, list, splats, state, background, grad, out) };
-        }
-    }
-    backward_tile::<F, Unfused>(geo, list, splats, state, background, grad, out)
 }
 
 /// Renders the Gaussians from `camera`.
@@ -170,12 +105,13 @@ pub fn forward<F: Real>(
     }
     let (tiles_x, tiles_y) = (camera.tiles_x(), camera.tiles_y());
     let bins = bin(&splats, tiles_x, tiles_y);
+    let build = KernelBuild::best();
     let tiles: Vec<(TileState<F>, u64)> = (0..bins.num_tiles())
         .into_par_iter()
         .map(|t| {
             let geo = tile_geometry(camera, t, tiles_x);
             let mut state = TileState::default();
-            let pairs = forward_tile_best(&geo, bins.tile_entries(t), &splats, &mut state);
+            let pairs = forward_tile_with(build, &geo, bins.tile_entries(t), &splats, &mut state);
             (state, pairs)
         })
         .collect();
@@ -235,6 +171,7 @@ pub fn backward<F: Real>(
     let bg = ctx.settings.background.map(|v| F::c(v as f64));
 
     // 1. Per tile: gradient of each (tile, splat) pair, into that pair's slot.
+    let build = KernelBuild::best();
     let mut slot_grads = vec![F::zero(); bins.entries.len() * L];
     let mut pieces = Vec::with_capacity(bins.num_tiles());
     let mut rest = slot_grads.as_mut_slice();
@@ -263,7 +200,8 @@ pub fn backward<F: Real>(
                     grad.alpha[r][c] = grad_out[o + 4];
                 }
             }
-            backward_tile_best(
+            backward_tile_with(
+                build,
                 &geo,
                 bins.tile_entries(t),
                 &ctx.splats,

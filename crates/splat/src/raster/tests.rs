@@ -94,7 +94,7 @@ pub(crate) fn camera() -> RenderCamera {
     }
 }
 
-fn settings() -> RenderSettings {
+pub(crate) fn settings() -> RenderSettings {
     RenderSettings {
         background: [0.2, 0.5, 0.9],
         sh_degree: 3,

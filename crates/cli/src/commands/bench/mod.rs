@@ -33,6 +33,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let machine = Machine {
         threads: rayon::current_num_threads(),
         avx2_fma,
+        raster_kernels: format!("{:?}", fewview_splat::raster::kernels::KernelBuild::best()),
     };
     let device = args.device;
     let (width, height) = args.raster_size;

@@ -46,6 +46,8 @@ pub(super) struct Report {
 pub(super) struct Machine {
     pub(super) threads: usize,
     pub(super) avx2_fma: bool,
+    /// The build of the rasterizer's tile kernels this CPU runs (`Avx512`, `Avx2`, `Portable`).
+    pub(super) raster_kernels: String,
 }
 
 /// Peak resident memory of this process (VmHWM), in MiB.
