@@ -68,6 +68,24 @@ fn fusion_writes_its_run_transition_table_and_study() {
     );
     assert!(t["warping_error"]["mean"].as_f64().unwrap() > 0.0);
 
+    // A run stopped after training (here: its transition removed) goes on with `--resume`
+    // from the stages after training, without training again.
+    std::fs::remove_file(plain.join("transition.json")).unwrap();
+    let trained = std::fs::metadata(plain.join("point_cloud.ply"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    let run = short_run("plain", &plain, &["--resume"]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(stderr.contains("training already finished"), "{stderr}");
+    assert!(plain.join("transition.json").exists());
+    let after = std::fs::metadata(plain.join("point_cloud.ply"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    assert_eq!(after, trained, "the model was written again");
+
     let table = fewview_ok(&["fusion", "--table", s(&gf), s(&plain)]);
     let table = String::from_utf8_lossy(&table.stdout);
     assert_eq!(table.lines().count(), 4, "{table}");

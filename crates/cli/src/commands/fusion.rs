@@ -23,7 +23,7 @@ use super::output_paths::check_folder;
 use super::photo_args::{DemoSceneArgs, JitterArgs};
 use super::poses_first;
 use super::surface_first;
-use super::train::print_summary;
+use super::train::{print_summary, training_finished};
 use super::train_args::TrainArgs;
 
 /// Train Gaussians whose colours change smoothly between the input views ("Splat-based
@@ -156,7 +156,9 @@ pub struct Args {
     pub table: Vec<PathBuf>,
     /// Continue the run in `--out`.
     ///
-    /// From its last checkpoint, with the same flags.
+    /// From its last checkpoint, with the same flags. A run trained to its end (say, stopped
+    /// while its transition was scored) goes on with the transition and the leave-one-out runs
+    /// it has not finished.
     #[arg(long)]
     pub resume: bool,
     /// Only re-render and re-score the run in `--out`.
@@ -251,9 +253,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.downscale.unwrap_or(1),
     )
     .map_err(anyhow::Error::msg)?;
-    let summary = train_with_progress(&ds, &cfg, &fusion, &out, args.resume)?;
-    write_gains(&out, &gains)?;
-    print_summary(&summary, &out);
+    let summary = if training_finished(&out, args.resume) {
+        None
+    } else {
+        let summary = train_with_progress(&ds, &cfg, &fusion, &out, args.resume)?;
+        write_gains(&out, &gains)?;
+        print_summary(&summary, &out);
+        Some(summary)
+    };
     let mut after = StagePeaks::default();
     if !args.no_transition {
         let report = after.measure("transition", || {
@@ -261,7 +268,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         })?;
         print_transition(&report);
     }
-    poses_first::record_memory(&out, &poses_memory, &summary.memory, &after)?;
+    if let Some(summary) = &summary {
+        poses_first::record_memory(&out, &poses_memory, &summary.memory, &after)?;
+    }
     if eval == EvalMode::LeaveOneOut {
         let train = |ds: &Dataset, dir: &std::path::Path, resume: bool| {
             train_with_progress(ds, &cfg, &fusion, dir, resume).map(|_| ())

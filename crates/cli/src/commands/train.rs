@@ -44,7 +44,8 @@ pub struct Args {
     /// Continue the run in `--out`.
     ///
     /// From its last checkpoint, with the same flags as the first time. A checkpoint of another
-    /// dataset, split or image size is refused.
+    /// dataset, split or image size is refused. A run trained to its end goes on with the
+    /// leave-one-out runs it has not finished.
     #[arg(long)]
     pub resume: bool,
 }
@@ -109,9 +110,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ds.views[ds.train[0]].image.height,
         out.display()
     );
-    let summary = train_with_progress(&ds, &cfg, &out, args.resume)?;
-    print_summary(&summary, &out);
-    poses_first::record_memory(&out, &poses_memory, &summary.memory, &Default::default())?;
+    if !training_finished(&out, args.resume) {
+        let summary = train_with_progress(&ds, &cfg, &out, args.resume)?;
+        print_summary(&summary, &out);
+        poses_first::record_memory(&out, &poses_memory, &summary.memory, &Default::default())?;
+    }
     if eval == EvalMode::LeaveOneOut {
         let train = |ds: &fewview_scene::Dataset, dir: &std::path::Path, resume: bool| {
             train_with_progress(ds, &cfg, dir, resume).map(|_| ())
@@ -157,6 +160,21 @@ pub fn train_with_progress(
     .with_context(|| format!("training run in {}", out.display()))?;
     bar.finish_and_clear();
     Ok(summary)
+}
+
+/// Whether `--resume` finds the run in `out` trained to its end (its model written, no
+/// checkpoint left), so only the stages after training remain (the transition, leave-one-out);
+/// says so when it does.
+pub fn training_finished(out: &std::path::Path, resume: bool) -> bool {
+    let finished =
+        resume && out.join("point_cloud.ply").is_file() && !out.join("checkpoint.bin").is_file();
+    if finished {
+        eprintln!(
+            "{}: training already finished; going on with the stages after it",
+            out.display()
+        );
+    }
+    finished
 }
 
 pub fn print_summary(s: &RunSummary, out: &std::path::Path) {
