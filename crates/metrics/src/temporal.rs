@@ -267,8 +267,8 @@ pub fn tlp_per_transition<D: PerceptualDistance + ?Sized>(
         .collect()
 }
 
-/// Lai et al.'s warping error of each transition `t = 1..T−1` (see the module doc).
-pub fn warping_errors(frames: &[Image], flows: &[Flow]) -> Result<Vec<f64>> {
+/// An error unless there is one flow per transition of `frames`.
+fn check_one_flow_per_transition(frames: &[Image], flows: &[Flow]) -> Result<()> {
     if flows.len() + 1 != frames.len() {
         return Err(MetricsError::ShapeMismatch(format!(
             "{} flows for {} frames (need one per transition, {})",
@@ -277,6 +277,12 @@ pub fn warping_errors(frames: &[Image], flows: &[Flow]) -> Result<Vec<f64>> {
             frames.len().saturating_sub(1)
         )));
     }
+    Ok(())
+}
+
+/// Lai et al.'s warping error of each transition `t = 1..T−1` (see the module doc).
+pub fn warping_errors(frames: &[Image], flows: &[Flow]) -> Result<Vec<f64>> {
+    check_one_flow_per_transition(frames, flows)?;
     (1..frames.len())
         .map(|t| {
             let flow = &flows[t - 1];
@@ -292,14 +298,7 @@ pub fn warping_errors(frames: &[Image], flows: &[Flow]) -> Result<Vec<f64>> {
 /// model that shows nothing there, or a jump between far views): such a transition is `NaN`,
 /// not scored, instead of an error.
 pub fn warping_errors_where_defined(frames: &[Image], flows: &[Flow]) -> Result<Vec<f64>> {
-    if flows.len() + 1 != frames.len() {
-        return Err(MetricsError::ShapeMismatch(format!(
-            "{} flows for {} frames (need one per transition, {})",
-            flows.len(),
-            frames.len(),
-            frames.len().saturating_sub(1)
-        )));
-    }
+    check_one_flow_per_transition(frames, flows)?;
     (1..frames.len())
         .map(|t| {
             let e = mean_warped_error(&frames[t - 1], &frames[t], &flows[t - 1])

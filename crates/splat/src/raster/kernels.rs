@@ -42,6 +42,20 @@ impl KernelBuild {
     }
 }
 
+/// Defines `$name`: `$kernel` with fused multiply-adds, compiled with `$features` enabled (the
+/// kernel is `#[inline(always)]`, so this build gets its own code generation). Calling it is
+/// unsafe: the CPU must have the features.
+#[cfg(target_arch = "x86_64")]
+macro_rules! compiled_for {
+    ($features:literal, $name:ident, $kernel:ident($($arg:ident: $ty:ty),* $(,)?)) => {
+        #[target_feature(enable = $features)]
+        #[allow(clippy::too_many_arguments)]
+        fn $name<F: Real>($($arg: $ty),*) -> u64 {
+            $kernel::<F, Fused>($($arg),*)
+        }
+    };
+}
+
 /// [`forward_tile`] in `build`, which must be [`KernelBuild::available`] (checked; an
 /// unavailable build runs the portable one).
 pub fn forward_tile_with<F: Real>(
@@ -53,24 +67,12 @@ pub fn forward_tile_with<F: Real>(
 ) -> u64 {
     #[cfg(target_arch = "x86_64")]
     {
-        #[target_feature(enable = "avx2,fma")]
-        fn avx2<F: Real>(
-            geo: &TileGeometry,
-            list: &[u32],
-            splats: &[Splat<F>],
-            state: &mut TileState<F>,
-        ) -> u64 {
-            forward_tile::<F, Fused>(geo, list, splats, state)
-        }
-        #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
-        fn avx512<F: Real>(
-            geo: &TileGeometry,
-            list: &[u32],
-            splats: &[Splat<F>],
-            state: &mut TileState<F>,
-        ) -> u64 {
-            forward_tile::<F, Fused>(geo, list, splats, state)
-        }
+        compiled_for!("avx2,fma", avx2, forward_tile(
+            geo: &TileGeometry, list: &[u32], splats: &[Splat<F>], state: &mut TileState<F>,
+        ));
+        compiled_for!("avx512f,avx512vl,avx2,fma", avx512, forward_tile(
+            geo: &TileGeometry, list: &[u32], splats: &[Splat<F>], state: &mut TileState<F>,
+        ));
         if build.available() {
             match build {
                 // SAFETY: the CPU runs this build (checked just above).
@@ -98,30 +100,14 @@ pub fn backward_tile_with<F: Real>(
 ) -> u64 {
     #[cfg(target_arch = "x86_64")]
     {
-        #[target_feature(enable = "avx2,fma")]
-        fn avx2<F: Real>(
-            geo: &TileGeometry,
-            list: &[u32],
-            splats: &[Splat<F>],
-            state: &TileState<F>,
-            background: [F; 3],
-            grad: &TileGrad<F>,
-            out: &mut [F],
-        ) -> u64 {
-            backward_tile::<F, Fused>(geo, list, splats, state, background, grad, out)
-        }
-        #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
-        fn avx512<F: Real>(
-            geo: &TileGeometry,
-            list: &[u32],
-            splats: &[Splat<F>],
-            state: &TileState<F>,
-            background: [F; 3],
-            grad: &TileGrad<F>,
-            out: &mut [F],
-        ) -> u64 {
-            backward_tile::<F, Fused>(geo, list, splats, state, background, grad, out)
-        }
+        compiled_for!("avx2,fma", avx2, backward_tile(
+            geo: &TileGeometry, list: &[u32], splats: &[Splat<F>], state: &TileState<F>,
+            background: [F; 3], grad: &TileGrad<F>, out: &mut [F],
+        ));
+        compiled_for!("avx512f,avx512vl,avx2,fma", avx512, backward_tile(
+            geo: &TileGeometry, list: &[u32], splats: &[Splat<F>], state: &TileState<F>,
+            background: [F; 3], grad: &TileGrad<F>, out: &mut [F],
+        ));
         if build.available() {
             match build {
                 // SAFETY: the CPU runs this build (checked just above).
@@ -145,24 +131,16 @@ mod tests {
     use crate::raster::blend::TILE_PIXELS;
     use crate::raster::project::SplatGrad;
     use crate::raster::render::{forward, tile_geometry};
-    use crate::raster::tests::{Scene, camera, settings};
+    use crate::raster::tests::{Scene, camera, f32_refs, settings};
 
     /// Every build this CPU runs gives the best build's tiles, forward and backward: the fused
     /// builds bit for bit, the portable one within rounding.
     #[test]
     fn every_build_gives_the_same_tiles() {
         let scene = Scene::random_with_opacity(3, 150, 16, (-1.0, 6.0));
-        let [m, s, q, o, sh] = scene.to_f32();
-        let g = crate::raster::GaussianRefs {
-            means: &m,
-            log_scales: &s,
-            quats: &q,
-            opacity_logits: &o,
-            sh: &sh,
-            sh_coeffs: 16,
-        };
+        let arrays = scene.to_f32();
         let cam = camera();
-        let (_, ctx) = forward(&g, &cam, &settings());
+        let (_, ctx) = forward(&f32_refs(&arrays, 16), &cam, &settings());
         const L: usize = SplatGrad::<f32>::LEN;
         let run = |build: KernelBuild| -> Vec<f32> {
             let mut values = Vec::new();

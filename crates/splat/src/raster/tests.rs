@@ -72,6 +72,19 @@ impl Scene {
     }
 }
 
+/// The parameters of [`Scene::to_f32`] as the rasterizer reads them.
+pub(crate) fn f32_refs(arrays: &[Vec<f32>; 5], sh_coeffs: usize) -> GaussianRefs<'_, f32> {
+    let [m, s, q, o, sh] = arrays;
+    GaussianRefs {
+        means: m,
+        log_scales: s,
+        quats: q,
+        opacity_logits: o,
+        sh,
+        sh_coeffs,
+    }
+}
+
 /// A camera looking down +z from a slightly rotated pose, 40×30 with an off-centre principal point.
 pub(crate) fn camera() -> RenderCamera {
     let (a, b) = (0.05f64, -0.03f64);
@@ -111,16 +124,8 @@ fn forward_f32_matches_naive_reference() {
         let scene = Scene::random_with_opacity(seed, 150, 16, logits);
         let cam = camera();
         let reference = reference::render(&scene.refs(), &cam, &settings());
-        let [m, s, q, o, sh] = scene.to_f32();
-        let g = GaussianRefs {
-            means: &m,
-            log_scales: &s,
-            quats: &q,
-            opacity_logits: &o,
-            sh: &sh,
-            sh_coeffs: 16,
-        };
-        let (out, _) = forward(&g, &cam, &settings());
+        let arrays = scene.to_f32();
+        let (out, _) = forward(&f32_refs(&arrays, 16), &cam, &settings());
         let max_depth = reference.chunks(5).map(|p| p[3]).fold(0.0, f64::max);
         let mut worst = [0.0f64; 5];
         for (a, b) in out
