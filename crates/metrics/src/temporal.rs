@@ -267,8 +267,14 @@ pub fn tlp_per_transition<D: PerceptualDistance + ?Sized>(
         .collect()
 }
 
-/// An error unless there is one flow per transition of `frames`.
-fn check_one_flow_per_transition(frames: &[Image], flows: &[Flow]) -> Result<()> {
+/// `measure(previous, current, flow)` of every transition `t = 1..T−1` of `frames` under its
+/// flow; an error unless there is one flow per transition, and a failed measure names its
+/// transition (and the flow's file when it has one).
+fn per_transition<T>(
+    frames: &[Image],
+    flows: &[Flow],
+    measure: impl Fn(&Image, &Image, &Flow) -> Result<T>,
+) -> Result<Vec<T>> {
     if flows.len() + 1 != frames.len() {
         return Err(MetricsError::ShapeMismatch(format!(
             "{} flows for {} frames (need one per transition, {})",
@@ -277,16 +283,10 @@ fn check_one_flow_per_transition(frames: &[Image], flows: &[Flow]) -> Result<()>
             frames.len().saturating_sub(1)
         )));
     }
-    Ok(())
-}
-
-/// Lai et al.'s warping error of each transition `t = 1..T−1` (see the module doc).
-pub fn warping_errors(frames: &[Image], flows: &[Flow]) -> Result<Vec<f64>> {
-    check_one_flow_per_transition(frames, flows)?;
     (1..frames.len())
         .map(|t| {
             let flow = &flows[t - 1];
-            warping_error(&frames[t - 1], &frames[t], flow).map_err(|e| match &flow.source {
+            measure(&frames[t - 1], &frames[t], flow).map_err(|e| match &flow.source {
                 Some(path) => MetricsError::format(path, format!("transition {t}: {e}")),
                 None => MetricsError::invalid(format!("transition {t}: {e}")),
             })
@@ -294,18 +294,17 @@ pub fn warping_errors(frames: &[Image], flows: &[Flow]) -> Result<Vec<f64>> {
         .collect()
 }
 
+/// Lai et al.'s warping error of each transition `t = 1..T−1` (see the module doc).
+pub fn warping_errors(frames: &[Image], flows: &[Flow]) -> Result<Vec<f64>> {
+    per_transition(frames, flows, warping_error)
+}
+
 /// [`warping_errors`] along a rendered path, whose flows may leave the frame entirely (a
 /// model that shows nothing there, or a jump between far views): such a transition is `NaN`,
 /// not scored, instead of an error.
 pub fn warping_errors_where_defined(frames: &[Image], flows: &[Flow]) -> Result<Vec<f64>> {
-    check_one_flow_per_transition(frames, flows)?;
-    (1..frames.len())
-        .map(|t| {
-            let e = mean_warped_error(&frames[t - 1], &frames[t], &flows[t - 1])
-                .map_err(|e| MetricsError::invalid(format!("transition {t}: {e}")))?;
-            Ok(e.unwrap_or(f64::NAN))
-        })
-        .collect()
+    let errors = per_transition(frames, flows, mean_warped_error)?;
+    Ok(errors.into_iter().map(|e| e.unwrap_or(f64::NAN)).collect())
 }
 
 /// Warping error between `previous` warped by `flow` and `current`; an error when no pixel

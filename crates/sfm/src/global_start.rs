@@ -9,6 +9,8 @@
 //! where the matches still sit well off their epipolar lines and the rotations stay far off.
 //! The relative poses need no initial poses at all, so they cannot inherit that basin.
 
+use std::collections::HashMap;
+
 use fewview_geom::epipolar::averaging::LENGTH_PRIOR_WEIGHT;
 use fewview_geom::epipolar::{
     Baseline, RelativePoseOptions, RelativeRotation, average_rotations, centres_from_baselines,
@@ -214,16 +216,16 @@ pub const FLAT_TRIANGLE_DEG: f64 = 10.0;
 /// better measured by the shared points. Elsewhere the directions fix them better than the
 /// points measure them (the points carry each pair's own pose error).
 fn fixed_by_directions(pairs: &[PairPose], rotations: &[Matrix3<f64>]) -> Vec<bool> {
-    // c_b − c_a of views a and b, when they form a pair.
-    let baseline = |a: usize, b: usize| {
-        pairs.iter().find_map(|p| {
+    // c_b − c_a of each pair's views (a, b), found either way round.
+    let directions: HashMap<(usize, usize), Vector3<f64>> = pairs
+        .iter()
+        .map(|p| {
             let d = -(rotations[p.view_b].transpose() * Vector3::from(p.translation));
-            match (p.view_a, p.view_b) {
-                (x, y) if (x, y) == (a, b) => Some(d),
-                (x, y) if (x, y) == (b, a) => Some(-d),
-                _ => None,
-            }
+            ((p.view_a, p.view_b), d)
         })
+        .collect();
+    let baseline = |a: usize, b: usize| {
+        (directions.get(&(a, b)).copied()).or_else(|| directions.get(&(b, a)).map(|d| -d))
     };
     let wide = |i: usize, j: usize, m: usize| {
         let (Some(ij), Some(im), Some(jm)) = (baseline(i, j), baseline(i, m), baseline(j, m))

@@ -137,6 +137,10 @@ impl RunDir {
     pub fn ply(&self) -> PathBuf {
         self.0.join("point_cloud.ply")
     }
+    /// Whether the run trained to its end: its model written and no checkpoint left.
+    pub fn finished(&self) -> bool {
+        self.ply().is_file() && !self.checkpoint().exists()
+    }
     pub fn metrics(&self) -> PathBuf {
         self.0.join("metrics.json")
     }
@@ -592,7 +596,7 @@ pub fn train_run_with(
     if resume && !run.checkpoint().exists() {
         return Err(PipelineError::Checkpoint {
             path: run.checkpoint(),
-            message: if run.ply().exists() {
+            message: if run.finished() {
                 "nothing to resume: the run already finished".into()
             } else {
                 "no checkpoint to resume from".into()

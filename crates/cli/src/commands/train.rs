@@ -166,8 +166,7 @@ pub fn train_with_progress(
 /// checkpoint left), so only the stages after training remain (the transition, leave-one-out);
 /// says so when it does.
 pub fn training_finished(out: &std::path::Path, resume: bool) -> bool {
-    let finished =
-        resume && out.join("point_cloud.ply").is_file() && !out.join("checkpoint.bin").is_file();
+    let finished = resume && fewview_splat::pipeline::RunDir(out.to_path_buf()).finished();
     if finished {
         eprintln!(
             "{}: training already finished; going on with the stages after it",
