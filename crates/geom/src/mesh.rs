@@ -77,6 +77,7 @@ impl From<Points> for fewview_scene::PointCloud {
         fewview_scene::PointCloud {
             positions: p.positions,
             colors: p.colors.unwrap_or_else(|| vec![[0.5; 3]; n]),
+            ..Default::default()
         }
     }
 }

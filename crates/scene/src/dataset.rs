@@ -41,6 +41,11 @@ pub struct PointCloud {
     pub positions: Vec<[f32; 3]>,
     /// RGB in `[0, 1]`, one per position.
     pub colors: Vec<[f32; 3]>,
+    /// Per view name, the indices of the points that view observed (the points' structure-from-
+    /// motion tracks), where the source records them (`fewview poses`' `observed_points`);
+    /// empty otherwise. A point can lie inside a view's image and still be hidden from it.
+    #[serde(default)]
+    pub observed_by: std::collections::BTreeMap<String, Vec<u32>>,
 }
 
 impl PointCloud {
@@ -49,6 +54,12 @@ impl PointCloud {
     }
     pub fn is_empty(&self) -> bool {
         self.positions.is_empty()
+    }
+
+    /// The points view `name` observed, when the cloud records it.
+    pub fn observed_in(&self, name: &str) -> Option<impl Iterator<Item = &[f32; 3]>> {
+        let ids = self.observed_by.get(name)?;
+        Some(ids.iter().filter_map(|&i| self.positions.get(i as usize)))
     }
 }
 

@@ -203,6 +203,7 @@ fn sfm_points(root: &Path, to_source: Option<&Matrix4<f64>>) -> Result<Option<Po
             .iter()
             .map(|p| p.rgb.map(|c| c as f32 / 255.0))
             .collect(),
+        ..PointCloud::default()
     };
     Ok(Some(cloud))
 }

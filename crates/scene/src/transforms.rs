@@ -151,6 +151,9 @@ struct FrameJson {
     /// Near and far z-depth of the scene in this frame (a fewview extension that nerfstudio
     /// ignores; `fewview poses` writes it from the points each photo sees).
     depth_bounds: Option<[f64; 2]>,
+    /// Indices of the `ply_file_path` points this photo observed (a fewview extension that
+    /// nerfstudio ignores; `fewview poses` writes each photo's track memberships).
+    observed_points: Option<Vec<u32>>,
     #[serde(flatten)]
     camera: CameraFields,
 }
@@ -176,6 +179,8 @@ pub struct Frame {
     pub camera_to_world: Se3,
     /// The frame's `depth_bounds`, when given.
     pub depth_bounds: Option<(f64, f64)>,
+    /// The frame's `observed_points`, when given: indices into the file's point cloud.
+    pub observed_points: Option<Vec<u32>>,
     camera: CameraFields,
     /// The JSON file, for errors.
     source: PathBuf,
@@ -282,6 +287,7 @@ pub(crate) fn parse_transforms(text: &str, path: &Path) -> Result<TransformsFile
                 mask: f.mask_path.map(|m| dir.join(m)),
                 camera_to_world: opengl_to_opencv(&gl),
                 depth_bounds,
+                observed_points: f.observed_points,
                 camera,
                 source: path.to_owned(),
                 index: i,
@@ -494,6 +500,10 @@ pub fn load_nerfstudio(
         root,
         report,
     )?;
+    let points = match points {
+        Some(cloud) => Some(with_observations(cloud, &frames, &views, &path)?),
+        None => None,
+    };
     let n_views = views.len();
     let (train, test) = split::capture_split(
         n_views,
@@ -511,6 +521,34 @@ pub fn load_nerfstudio(
         background,
         to_source_world: None,
     })
+}
+
+/// `cloud` with each frame's `observed_points` recorded under its view's name; an index beyond
+/// the cloud is an error naming the file and the frame.
+fn with_observations(
+    mut cloud: crate::dataset::PointCloud,
+    frames: &[Frame],
+    views: &[crate::View],
+    path: &Path,
+) -> Result<crate::dataset::PointCloud> {
+    for (frame, view) in frames.iter().zip(views) {
+        let Some(ids) = &frame.observed_points else {
+            continue;
+        };
+        if let Some(&bad) = ids.iter().find(|&&i| i as usize >= cloud.len()) {
+            return Err(SceneError::invalid(
+                path,
+                format!(
+                    "frame {} ({}): observed point {bad} is beyond the {} points of ply_file_path",
+                    frame.index,
+                    frame.image.display(),
+                    cloud.len()
+                ),
+            ));
+        }
+        cloud.observed_by.insert(view.name.clone(), ids.clone());
+    }
+    Ok(cloud)
 }
 
 /// The vertices of a PLY file as a point cloud (grey where the file has no colours); a file
@@ -534,6 +572,7 @@ fn read_point_cloud(path: &Path) -> Result<crate::dataset::PointCloud> {
     Ok(crate::dataset::PointCloud {
         colors: ply.colors.unwrap_or_else(|| vec![[0.5; 3]; n]),
         positions: ply.vertices,
+        ..Default::default()
     })
 }
 
@@ -853,5 +892,50 @@ pub(crate) mod tests {
         )
         .unwrap();
         assert_eq!(d.train, vec![1, 5, 9]);
+    }
+
+    /// Frames' `observed_points` come back under their views' names (frames are sorted by file,
+    /// so file order and view order differ), and an index beyond the cloud is a one-line error
+    /// naming the file and the frame.
+    #[test]
+    fn observed_points_follow_their_frames() {
+        let dir = tempfile::tempdir().unwrap();
+        write_nerfstudio(dir.path());
+        let geometry = crate::ply::PlyGeometry {
+            vertices: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            ..Default::default()
+        };
+        crate::ply::write(
+            &dir.path().join("points.ply"),
+            &geometry,
+            crate::ply::PlyEncoding::Ascii,
+        )
+        .unwrap();
+        let path = dir.path().join("transforms.json");
+        let with_ids = |ids: serde_json::Value| {
+            let mut doc: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+            doc["ply_file_path"] = json!("points.ply");
+            // File order runs f_09 … f_00: frame 6 is f_03.
+            doc["frames"][6]["observed_points"] = ids;
+            std::fs::write(&path, doc.to_string()).unwrap();
+        };
+        with_ids(json!([0, 2]));
+        let d = crate::load::load_dataset(dir.path(), &LoadOptions::default()).unwrap();
+        let cloud = d.points.expect("the cloud is read");
+        assert_eq!(cloud.observed_by.len(), 1);
+        assert_eq!(cloud.observed_by["f_03"], vec![0, 2]);
+        let seen: Vec<[f32; 3]> = cloud.observed_in("f_03").unwrap().copied().collect();
+        assert_eq!(seen, vec![[0.0; 3], [0.0, 1.0, 0.0]]);
+        assert!(cloud.observed_in("f_04").is_none());
+        with_ids(json!([0, 7]));
+        let e = crate::load::load_dataset(dir.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("transforms.json") && e.contains("frame 6") && e.contains("point 7"),
+            "{e}"
+        );
+        assert_eq!(e.lines().count(), 1, "{e}");
     }
 }

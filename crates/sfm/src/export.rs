@@ -303,11 +303,13 @@ fn points_txt(model: &PoseModel) -> String {
 /// `images/`.
 fn transforms_json(model: &PoseModel) -> Value {
     let bounds = depth_bounds(model);
+    let observed = observed_points(model);
     let frames: Vec<_> = model
         .photos
         .iter()
         .zip(&bounds)
-        .map(|(p, bounds)| {
+        .zip(&observed)
+        .map(|((p, bounds), observed)| {
             let k = p.camera.intrinsics;
             let gl = opengl_to_opencv(&p.camera.camera_to_world()).to_matrix4();
             let rows: Vec<Vec<f64>> = (0..4)
@@ -319,6 +321,7 @@ fn transforms_json(model: &PoseModel) -> Value {
                 "k1": model.report.bundle.radial_k1.unwrap_or(0.0), "k2": 0.0, "p1": 0.0, "p2": 0.0,
                 "transform_matrix": rows,
                 "depth_bounds": bounds.map(|(near, far)| [near, far]),
+                "observed_points": observed,
             })
         })
         .collect();
@@ -327,6 +330,22 @@ fn transforms_json(model: &PoseModel) -> Value {
         doc["ply_file_path"] = Value::from(POINTS_PLY);
     }
     doc
+}
+
+/// Per photo, the indices (in `sparse_pc.ply`'s order) of the points it observed: their tracks,
+/// so that a reader can tell a point a photo saw from one that merely projects into its image
+/// from behind a wall.
+fn observed_points(model: &PoseModel) -> Vec<Vec<u32>> {
+    let mut observed = vec![Vec::new(); model.photos.len()];
+    for (i, point) in model.points.iter().enumerate() {
+        for &(photo, _) in &point.observations {
+            observed[photo].push(i as u32);
+        }
+    }
+    for ids in &mut observed {
+        ids.dedup();
+    }
+    observed
 }
 
 fn report_json(model: &PoseModel) -> Value {
@@ -547,6 +566,12 @@ mod tests {
             let far = z[z.len() - 1] - at * (z[z.len() - 1] - z[z.len() - 2]);
             (near, far)
         };
+        // Each photo's track memberships come back under its name: the last saw the far half.
+        let far_ids: Vec<u32> = (0..50).filter(|&i| z[i as usize] > 4.0).collect();
+        let all_ids: Vec<u32> = (0..51).collect();
+        assert_eq!(cloud.observed_by["0"], all_ids);
+        assert_eq!(cloud.observed_by["1"], all_ids);
+        assert_eq!(cloud.observed_by["2"], far_ids);
         let want = [expect(&z), expect(&z), expect(&far_half)];
         for (view, want) in ds.views.iter().zip(want) {
             let (near, far) = view.depth_bounds.expect("bounds come back");

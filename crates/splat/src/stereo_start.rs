@@ -191,7 +191,14 @@ pub fn stereo_start(
             .collect(),
         DepthFrom::Maps(_) => Vec::new(),
     };
-    let agreement = point_agreement(&cloud, &views);
+    let observed: Vec<Option<Vec<[f32; 3]>>> = views
+        .iter()
+        .map(|v| {
+            let cloud = ds.points.as_ref()?;
+            Some(cloud.observed_in(v.name)?.copied().collect())
+        })
+        .collect();
+    let agreement = point_agreement(&cloud, &views, &observed);
     let chosen = sample_indices(cloud.points.len(), init.fraction, seed)?;
     let points = cloud.points.select(&chosen);
     let sample_regions = chosen.iter().map(|&i| cloud.regions[i]).collect();
@@ -199,6 +206,7 @@ pub fn stereo_start(
     let sample = PointCloud {
         positions: points.positions,
         colors: points.colors.unwrap_or_default(),
+        ..PointCloud::default()
     };
     Ok(StereoStart {
         pairs: pairs
@@ -275,15 +283,23 @@ impl DepthAgreement {
     }
 }
 
-/// [`PointAgreement`] of every view of `cloud` with the views' sparse points.
-fn point_agreement(cloud: &HierarchicalCloud, views: &[StereoView]) -> Vec<PointAgreement> {
+/// [`PointAgreement`] of every view of `cloud` with the sparse points it observed (`observed`,
+/// per view, where the dataset records the points' tracks), else with every sparse point in its
+/// image: a point hidden behind a nearer surface would count against correct depth.
+fn point_agreement(
+    cloud: &HierarchicalCloud,
+    views: &[StereoView],
+    observed: &[Option<Vec<[f32; 3]>>],
+) -> Vec<PointAgreement> {
     views
         .iter()
+        .zip(observed)
         .zip(&cloud.pixel_depths)
         .zip(&cloud.pixel_regions)
-        .map(|((view, depths), regions)| {
+        .map(|(((view, observed), depths), regions)| {
             let verified = |p: usize| regions[p] == Some(Region::Consistent);
-            let pixels = view.sparse_points.iter().filter_map(|p| {
+            let points = observed.as_deref().unwrap_or(view.sparse_points);
+            let pixels = points.iter().filter_map(|p| {
                 let x = nalgebra::Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
                 let (u, v, z) = view.camera.project(&x)?;
                 let (w, h) = (view.camera.width() as f64, view.camera.height() as f64);
@@ -397,5 +413,56 @@ impl StereoStart {
             .map_err(|e| StereoStartError::Other(e.to_string()))?;
         fewview_scene::atomic::write_bytes(&dir.join("stereo.json"), &json)?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fewview_geom::mesh::Points;
+    use fewview_geom::stereo::hierarchy::RegionCounts;
+    use fewview_scene::{Camera, Image, Intrinsics};
+    use nalgebra::Vector3;
+
+    /// A view facing a wall 2 units away, its depth exact and verified everywhere, and two
+    /// sparse points on its optical axis: one on the wall (observed) and one 5 units away behind
+    /// it (observed by another view only). With the tracks, the view's depth is exact; without,
+    /// the hidden point counts as a 60 % error.
+    #[test]
+    fn agreement_counts_only_the_points_a_view_observed() {
+        let camera = Camera::look_at(
+            Intrinsics::centered(50.0, 40, 30),
+            Vector3::zeros(),
+            Vector3::z(),
+            -Vector3::y(),
+        );
+        let image = Image::filled(40, 30, &[0.5, 0.5, 0.5]);
+        let points = [[0.0, 0.0, 2.0], [0.0, 0.0, 5.0]];
+        let view = StereoView {
+            name: "wall",
+            camera: &camera,
+            image: &image,
+            depth_bounds: None,
+            mask: None,
+            sparse_points: &points,
+        };
+        let pixels = 40 * 30;
+        let cloud = HierarchicalCloud {
+            points: Points::from_positions(Vec::new()),
+            regions: Vec::new(),
+            sources: Vec::new(),
+            counts: RegionCounts::default(),
+            contraction: None,
+            pixel_regions: vec![vec![Some(Region::Consistent); pixels]],
+            pixel_depths: vec![vec![2.0; pixels]],
+            skipped: Vec::new(),
+        };
+        let with_tracks = point_agreement(&cloud, &[view], &[Some(vec![points[0]])]);
+        let without = point_agreement(&cloud, &[view], &[None]);
+        assert_eq!(with_tracks[0].points_seen, 1);
+        assert_eq!(with_tracks[0].verified.median_relative_error, Some(0.0));
+        assert_eq!(without[0].points_seen, 2);
+        let error = without[0].verified.median_relative_error.unwrap();
+        assert!((error - 0.6).abs() < 1e-6, "{error}");
     }
 }

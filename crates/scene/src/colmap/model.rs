@@ -162,6 +162,7 @@ impl ColmapModel {
                 .iter()
                 .map(|p| p.rgb.map(|c| c as f32 / 255.0))
                 .collect(),
+            ..PointCloud::default()
         }
     }
 }
