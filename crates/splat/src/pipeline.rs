@@ -454,7 +454,17 @@ fn initial_model_with(
                 format!("stereo start: views {a} and {b} matched by plane sweep: {why}")
             }));
             notes.extend(s.agreement.iter().map(PointAgreement::note));
-            let spacing = (1.0 / cfg.stereo.fraction.sqrt()) as f32;
+            if s.fraction < cfg.stereo.fraction {
+                notes.push(format!(
+                    "stereo start: {} points, sampled {:.2} % of them (not {:.0} %) to stay \
+                     within {} Gaussians (--stereo-max-points)",
+                    s.cloud.points.len(),
+                    100.0 * s.fraction,
+                    100.0 * cfg.stereo.fraction,
+                    cfg.stereo.max_points
+                ));
+            }
+            let spacing = (1.0 / s.fraction.sqrt()) as f32;
             let (model, capped) =
                 from_stereo_points(&s.sample, degree, &s.sample_footprints, spacing);
             if let Some((before, after)) = capped {

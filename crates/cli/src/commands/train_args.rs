@@ -72,6 +72,14 @@ pub struct TrainArgs {
     #[arg(long, value_name = "F", default_value_t = StereoInit::default().fraction,
           value_parser = super::number_args::fraction)]
     pub stereo_fraction: f64,
+    /// The most Gaussians the stereo start gives (0: no cap).
+    ///
+    /// A stereo cloud larger than this over `--stereo-fraction` is sampled more sparsely, so that
+    /// the start gives at most this many Gaussians (0: no cap, the fusion paper's fraction
+    /// whatever the cloud). Many photos of a long scene give millions of points; each Gaussian
+    /// costs training time on every iteration.
+    #[arg(long, value_name = "N", default_value_t = StereoInit::default().max_points)]
+    pub stereo_max_points: usize,
     /// How the stereo start evens the pairs' exposures.
     ///
     /// How the stereo start brings each pair's photos to one brightness before matching: `as-is`
@@ -162,6 +170,7 @@ impl TrainArgs {
         let stereo = StereoInit {
             depth,
             fraction: self.stereo_fraction,
+            max_points: self.stereo_max_points,
             photometry: self.stereo_photometry,
             pair_check: PairCheck {
                 matcher: self.stereo_pair_check,
