@@ -528,7 +528,7 @@ pub fn load_nerfstudio(
 fn with_observations(
     mut cloud: crate::dataset::PointCloud,
     frames: &[Frame],
-    views: &[crate::View],
+    views: &[crate::dataset::View],
     path: &Path,
 ) -> Result<crate::dataset::PointCloud> {
     for (frame, view) in frames.iter().zip(views) {

@@ -20,6 +20,7 @@ pub mod ply;
 pub mod raster;
 pub mod real;
 pub mod sh;
+pub mod sky_shell;
 pub mod stereo_pair;
 pub mod stereo_pair_check;
 pub mod stereo_start;

@@ -465,8 +465,21 @@ fn initial_model_with(
                 ));
             }
             let spacing = (1.0 / s.fraction.sqrt()) as f32;
-            let (model, capped) =
+            let (mut model, capped) =
                 from_stereo_points(&s.sample, degree, &s.sample_footprints, spacing);
+            if let Some(shell) = &s.shell {
+                for ((p, c), scale) in shell.positions.iter().zip(&shell.colors).zip(&shell.scales)
+                {
+                    model.push_isotropic(*p, *scale, *c, crate::init::INITIAL_OPACITY);
+                }
+                notes.push(format!(
+                    "stereo start: {} Gaussians for the sky and far background, {:.3} from T \
+                     (blocks of {} px without a stereo point)",
+                    shell.positions.len(),
+                    shell.radius,
+                    crate::sky_shell::SHELL_BLOCK_PX
+                ));
+            }
             if let Some((before, after)) = capped {
                 notes.push(format!(
                     "stereo start: initial scales capped at {PATCH_SCALE_CAP} patches (a render \

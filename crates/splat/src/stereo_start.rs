@@ -24,6 +24,7 @@ use fewview_geom::stereo::source::{
 use fewview_scene::{Dataset, PointCloud, SceneError};
 use serde::{Deserialize, Serialize};
 
+use crate::sky_shell::{SHELL_BLOCK_PX, Shell, sky_shell};
 use crate::stereo_pair_check::{PairCheck, PairCheckError, PairCheckReport, check_pairs};
 
 /// Where the pairs' depth comes from.
@@ -48,6 +49,10 @@ pub struct StereoInit {
     /// give 5.3 million points) it would make training many times slower for little gain.
     #[serde(default = "default_max_points")]
     pub max_points: usize,
+    /// Add a shell of Gaussians for the sky and far background ([`crate::sky_shell`]): off by
+    /// default (not in the fusion paper); `fewview` turns it on for a folder of photos.
+    #[serde(default)]
+    pub sky_shell: bool,
     pub sgm: SgmParams,
     pub range: DisparityRange,
     /// Sub-pixel refinement of the disparities (`None`: SGM's parabola only).
@@ -86,6 +91,7 @@ impl Default for StereoInit {
             depth: DepthFrom::Sgm,
             fraction: 0.1,
             max_points: DEFAULT_MAX_POINTS,
+            sky_shell: false,
             sgm: SgmParams {
                 // Eight paths: five leave a directional bias on steep surfaces (about twice the
                 // median disparity error on the demo scene's floor).
@@ -118,6 +124,8 @@ pub struct StereoStart {
     /// The fraction of the cloud sampled: [`StereoInit::fraction`], or less under
     /// [`StereoInit::max_points`].
     pub fraction: f64,
+    /// The sky shell's Gaussians, when [`StereoInit::sky_shell`] asks for them.
+    pub shell: Option<Shell>,
     /// The pairs' matches when [`StereoInit::pair_check`] names a matcher.
     pub pair_check: Option<PairCheckReport>,
     /// How each training view's depth agrees with the dataset's sparse points.
@@ -226,6 +234,11 @@ pub fn stereo_start(
         })
         .collect();
     let agreement = point_agreement(&cloud, &views, &observed);
+    let shell = if init.sky_shell {
+        sky_shell(&views, &cloud, SHELL_BLOCK_PX)
+    } else {
+        None
+    };
     let fraction = init.fraction_of(cloud.points.len());
     let chosen = sample_indices(cloud.points.len(), fraction, seed)?;
     let points = cloud.points.select(&chosen);
@@ -247,6 +260,7 @@ pub fn stereo_start(
         sample_regions,
         sample_footprints,
         fraction,
+        shell,
         pair_check: checked.report,
         agreement,
         skipped,

@@ -184,8 +184,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let mut args = args;
     let mut poses_memory = StagePeaks::default();
+    let mut photos = false;
     if let Some(data) = args.data.clone() {
         let folder = poses_first::dataset_folder(&data, &out)?;
+        photos = folder.working_downscale.is_some();
         poses_memory = folder.memory.clone();
         args.downscale = Some(poses_first::chosen_downscale(
             args.downscale,
@@ -204,7 +206,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("--init surface runs the surface method on a dataset; pass --data");
     }
     let bare_surface = surface_first::take(&mut args.train.init, &out);
-    let cfg = args.train.run_config(ds.background, default)?;
+    let mut cfg = args.train.run_config(ds.background, default)?;
+    cfg.stereo.sky_shell = args.train.sky_shell.resolve(photos);
     let first = || {
         Ok(surface_first::SurfaceFirst {
             data: args

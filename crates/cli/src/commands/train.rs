@@ -66,6 +66,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let data = args.dataset.folder()?.to_path_buf();
     let folder = poses_first::dataset_folder(&data, &out)?;
     let poses_memory = folder.memory.clone();
+    let photos = folder.working_downscale.is_some();
     args.dataset.downscale = Some(poses_first::chosen_downscale(
         args.dataset.downscale,
         &folder,
@@ -82,9 +83,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     fewview_fusion::budget::check_dataset_fits(&ds, false, args.dataset.downscale.unwrap_or(1))
         .map_err(anyhow::Error::msg)?;
     let bare_surface = surface_first::take(&mut args.train.init, &out);
-    let cfg = args
+    let mut cfg = args
         .train
         .run_config(ds.background, default_iterations(&ds))?;
+    cfg.stereo.sky_shell = args.train.sky_shell.resolve(photos);
     let d = &args.dataset;
     let first = || {
         Ok(surface_first::SurfaceFirst {

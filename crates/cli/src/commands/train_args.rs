@@ -8,6 +8,7 @@ use fewview_geom::stereo::source::Photometry;
 use fewview_match::learned::MatcherKind;
 use fewview_splat::ComputeDevice;
 use fewview_splat::pipeline::{InitStrategy, MAX_INIT_POINTS, RunConfig};
+use fewview_splat::sky_shell::SkyShell;
 use fewview_splat::stereo_pair_check::PairCheck;
 use fewview_splat::stereo_start::{DepthFrom, StereoInit};
 use fewview_splat::surface_start::SurfacePoses;
@@ -80,6 +81,16 @@ pub struct TrainArgs {
     /// costs training time on every iteration.
     #[arg(long, value_name = "N", default_value_t = StereoInit::default().max_points)]
     pub stereo_max_points: usize,
+    /// Gaussians for the sky and far background: auto, on or off.
+    ///
+    /// A shell of Gaussians on the sphere beyond the stereo start's far bound (Eq. 2's `B_far`
+    /// around `T`), one per 16-px block of a training view where the stereo found no depth, in
+    /// the block's colour: the sky and far background then start where they are instead of
+    /// being filled by floaters in front of the cameras. `auto`: on for a folder of photos, off
+    /// for a dataset with its own poses (the benchmarks, run as their papers ran them). Not in
+    /// the fusion paper.
+    #[arg(long, value_name = "HOW", value_enum, default_value_t)]
+    pub sky_shell: SkyShell,
     /// How the stereo start evens the pairs' exposures.
     ///
     /// How the stereo start brings each pair's photos to one brightness before matching: `as-is`
@@ -171,6 +182,8 @@ impl TrainArgs {
             depth,
             fraction: self.stereo_fraction,
             max_points: self.stereo_max_points,
+            // A dataset's run; `train`/`fusion` on a folder of photos resolve it again.
+            sky_shell: self.sky_shell.resolve(false),
             photometry: self.stereo_photometry,
             pair_check: PairCheck {
                 matcher: self.stereo_pair_check,
