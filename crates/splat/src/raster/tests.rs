@@ -164,6 +164,13 @@ fn forward_f64_matches_naive_reference_exactly() {
     let cam = camera();
     let reference = reference::render(&scene.refs(), &cam, &settings());
     let (out, _) = forward(&scene.refs(), &cam, &settings());
+    assert_eq!(out.data.len(), reference.len());
+    // Not an empty or blank image: many pixels are covered (alpha is channel 4 of 5).
+    let covered = reference
+        .chunks(OUT_CHANNELS)
+        .filter(|p| p[4] > 0.5)
+        .count();
+    assert!(covered > 100, "only {covered} covered pixels");
     for (a, b) in out.data.iter().zip(&reference) {
         assert!((a - b).abs() < 1e-10, "{a} vs {b}");
     }
