@@ -1,6 +1,6 @@
-//! Semi-Global Matching against OpenCV's `StereoSGBM` with the same parameters, bit for bit, on the pairs
-//! `tools/make_sgbm_fixtures.py` wrote (synthetic planes always; the rectified fern pair (1, 10)
-//! and a demo-scene pair when the script was run with `--data`).
+//! Semi-Global Matching against OpenCV's `StereoSGBM` with the same parameters, bit for bit, on
+//! the pairs `tools/make_sgbm_fixtures.py` wrote (synthetic planes always; the rectified fern
+//! pair (1, 10) and a demo-scene pair when the script was run with `--data`).
 
 // Tests report what they measured.
 #![allow(clippy::print_stdout, clippy::print_stderr)]
