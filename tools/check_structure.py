@@ -18,6 +18,10 @@
    the crate root, whose re-exports are for users) depends on what is built from it; shared
    items belong in a sibling module that both use. Documented exceptions would go in
    UPWARD_EXCEPTIONS (empty: every crate is clean).
+5. Crate READMEs name files that exist: a backticked Rust file (`*.rs`), or a folder path
+   through a `src/` (`crates/cli/src/commands/human/`), in `crates/*/README.md` must be found in
+   that crate, as a path from the crate, its `src/` or the workspace root, or by its name
+   anywhere in the crate. (Bare folder names are left alone: most are a run's outputs.)
 
 Test code does not count: `#[cfg(test)]` items (the `mod tests` blocks) are cut out before both
 checks, and `tests/`, `benches/` and `examples/` folders are not read.
@@ -447,9 +451,38 @@ def cli_findings(crates):
     return findings
 
 
+README_PATH_RE = re.compile(r"`([A-Za-z0-9_./-]+(?:\.rs|/))`")
+
+
+def readme_findings(crate):
+    """Backticked `.rs` files and `folder/`s of the crate's README that the crate lacks."""
+    readme = crate / "README.md"
+    if not readme.is_file():
+        return []
+    missing = []
+    for token in sorted(set(README_PATH_RE.findall(readme.read_text()))):
+        want_dir = token.endswith("/")
+        if "://" in token or token.startswith(".") or (want_dir and "src/" not in token):
+            continue
+        path = token.rstrip("/")
+        candidates = [crate / path, crate / "src" / path, ROOT / path]
+        exists = (lambda p: p.is_dir()) if want_dir else (lambda p: p.is_file())
+        if any(exists(c) for c in candidates):
+            continue
+        base = Path(path).name
+        if any(exists(p) for p in crate.rglob(base) if "target" not in p.parts):
+            continue
+        missing.append(f"{readme.relative_to(ROOT)} names `{token}`, which is not in the crate")
+    return missing
+
+
 def main():
     crates = sorted(p for p in (ROOT / "crates").iterdir() if (p / "Cargo.toml").is_file())
     problems = 0
+    for crate in crates:
+        for message in readme_findings(crate):
+            problems += 1
+            print(message)
     upward = set()
     for crate in crates:
         upward |= upward_imports(crate)
