@@ -70,17 +70,16 @@ pub fn sky_shell(views: &[StereoView], cloud: &HierarchicalCloud, block: usize) 
     let mut empty_blocks: Vec<Vec<bool>> = Vec::new();
     for (view, regions) in views.iter().zip(&cloud.pixel_regions) {
         let camera = view.camera;
-        let (w, h) = (camera.width() as usize, camera.height() as usize);
+        let w = camera.width() as usize;
+        let (cols, rows) = (w / block, camera.height() as usize / block);
         let angle = block as f64 / camera.intrinsics.fx;
-        let empty: Vec<bool> = (0..(h / block) * (w / block))
-            .map(|b| {
-                !block_pixels(b % (w / block), b / (w / block), block, w)
-                    .any(|p| regions[p].is_some())
-            })
+        let origin = camera.center();
+        let empty: Vec<bool> = (0..cols * rows)
+            .map(|b| !block_pixels(b % cols, b / cols, block, w).any(|p| regions[p].is_some()))
             .collect();
-        for by in 0..h / block {
-            for bx in 0..w / block {
-                if !empty[by * (w / block) + bx] {
+        for by in 0..rows {
+            for bx in 0..cols {
+                if !empty[by * cols + bx] {
                     continue;
                 }
                 let pixels = block_pixels(bx, by, block, w);
@@ -88,7 +87,6 @@ pub fn sky_shell(views: &[StereoView], cloud: &HierarchicalCloud, block: usize) 
                     ((bx as f64) + 0.5) * block as f64,
                     ((by as f64) + 0.5) * block as f64,
                 );
-                let origin = camera.center();
                 let direction = (camera.unproject(u, v, 1.0) - origin).normalize();
                 let Some(distance) = exit_distance(contraction, &origin, &direction) else {
                     continue;

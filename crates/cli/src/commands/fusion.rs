@@ -206,8 +206,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("--init surface runs the surface method on a dataset; pass --data");
     }
     let bare_surface = surface_first::take(&mut args.train.init, &out);
-    let mut cfg = args.train.run_config(ds.background, default)?;
-    cfg.stereo.sky_shell = args.train.sky_shell.resolve(photos);
+    let cfg = args.train.run_config(ds.background, default, photos)?;
     let first = || {
         Ok(surface_first::SurfaceFirst {
             data: args

@@ -83,10 +83,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     fewview_fusion::budget::check_dataset_fits(&ds, false, args.dataset.downscale.unwrap_or(1))
         .map_err(anyhow::Error::msg)?;
     let bare_surface = surface_first::take(&mut args.train.init, &out);
-    let mut cfg = args
+    let cfg = args
         .train
-        .run_config(ds.background, default_iterations(&ds))?;
-    cfg.stereo.sky_shell = args.train.sky_shell.resolve(photos);
+        .run_config(ds.background, default_iterations(&ds), photos)?;
     let d = &args.dataset;
     let first = || {
         Ok(surface_first::SurfaceFirst {

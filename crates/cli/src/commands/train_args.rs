@@ -157,10 +157,13 @@ pub struct TrainArgs {
 }
 
 impl TrainArgs {
+    /// The run's configuration; `photos` says the data is a folder of photos whose poses the
+    /// run estimated (it decides `--sky-shell auto`).
     pub fn run_config(
         &self,
         background: [f32; 3],
         default_iterations: usize,
+        photos: bool,
     ) -> anyhow::Result<RunConfig> {
         let mut train = TrainConfig::sparse_view(self.iterations.unwrap_or(default_iterations));
         train.seed = self.seed;
@@ -182,8 +185,7 @@ impl TrainArgs {
             depth,
             fraction: self.stereo_fraction,
             max_points: self.stereo_max_points,
-            // A dataset's run; `train`/`fusion` on a folder of photos resolve it again.
-            sky_shell: self.sky_shell.resolve(false),
+            sky_shell: self.sky_shell.resolve(photos),
             photometry: self.stereo_photometry,
             pair_check: PairCheck {
                 matcher: self.stereo_pair_check,
@@ -270,7 +272,7 @@ mod tests {
     #[test]
     fn an_empty_command_line_gives_the_librarys_defaults() {
         let args: TrainArgs = parse(&["train"]);
-        let run = args.run_config([0.0; 3], 1000).unwrap();
+        let run = args.run_config([0.0; 3], 1000, false).unwrap();
         let library = RunConfig::new(TrainConfig::sparse_view(1000));
         let mut train = run.train.clone();
         assert_eq!(
