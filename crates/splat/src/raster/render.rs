@@ -156,6 +156,29 @@ pub fn forward<F: Real>(
     )
 }
 
+/// The upstream gradient of the tile at `geo` in an image `width` pixels wide, or `None` when it
+/// is zero at every pixel (a loss that covers part of the image, such as a masked or
+/// virtual-view loss): then every splat's gradient from the tile is zero and the backward
+/// skips it.
+fn tile_grad<F: Real>(grad_out: &[F], geo: &TileGeometry, width: usize) -> Option<TileGrad<F>> {
+    let mut grad = TileGrad::<F>::default();
+    let mut any = false;
+    for r in 0..geo.height {
+        for c in 0..geo.width {
+            let o = ((geo.y0 + r) * width + geo.x0 + c) * OUT_CHANNELS;
+            for ch in 0..3 {
+                grad.color[ch][r][c] = grad_out[o + ch];
+            }
+            grad.depth[r][c] = grad_out[o + 3];
+            grad.alpha[r][c] = grad_out[o + 4];
+            any |= grad_out[o..o + OUT_CHANNELS]
+                .iter()
+                .any(|&v| v != F::zero());
+        }
+    }
+    any.then_some(grad)
+}
+
 /// Gradients of all Gaussian parameters given `grad_out`, the loss gradient with respect to the
 /// forward output (H×W×5, same layout as [`ForwardOutput::data`]).
 pub fn backward<F: Real>(
@@ -189,17 +212,11 @@ pub fn backward<F: Real>(
                 return 0;
             }
             let geo = tile_geometry(camera, t, tiles_x);
-            let mut grad = TileGrad::<F>::default();
-            for r in 0..geo.height {
-                for c in 0..geo.width {
-                    let o = ((geo.y0 + r) * w + geo.x0 + c) * OUT_CHANNELS;
-                    for ch in 0..3 {
-                        grad.color[ch][r][c] = grad_out[o + ch];
-                    }
-                    grad.depth[r][c] = grad_out[o + 3];
-                    grad.alpha[r][c] = grad_out[o + 4];
-                }
-            }
+            let Some(grad) = tile_grad(grad_out, &geo, w) else {
+                // No gradient reaches this tile: its pairs' gradients are the zeros already
+                // in `piece`.
+                return 0;
+            };
             backward_tile_with(
                 build,
                 &geo,

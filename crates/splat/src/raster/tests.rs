@@ -4,7 +4,8 @@
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 
-use super::render::{OUT_CHANNELS, backward, forward};
+use super::inputs::TILE;
+use super::render::{OUT_CHANNELS, ParamGradients, backward, forward};
 use super::{GaussianRefs, RenderCamera, RenderSettings, reference};
 
 /// A random scene of Gaussians in front of a 40×30 camera (partial edge tiles included).
@@ -275,5 +276,55 @@ fn screen_space_gradient_matches_principal_point_shift() {
         };
         let an: f64 = grads.means2d.iter().skip(axis).step_by(2).sum::<f64>() / half;
         assert!(rel_err(fd, an, 1e-6) < 1e-4, "axis {axis}: {an} vs {fd}");
+    }
+}
+
+/// A loss that reaches only some tiles: the backward skips the others (fewer pairs), and what it
+/// returns is still exact. Split by tiles into two halves, the gradients of the halves add up to
+/// the gradient of the whole (the loss is linear in the image) and so do the pairs evaluated.
+#[test]
+fn tiles_without_gradient_are_skipped_exactly() {
+    let cam = camera();
+    let scene = Scene::random(9, 30, 4);
+    let w = weights(9, cam.num_pixels() * OUT_CHANNELS);
+    let (_, ctx) = forward(&scene.refs(), &cam, &settings());
+    let tile_of = |p: usize| {
+        let (x, y) = (p % cam.width, p / cam.width);
+        (x / TILE + y / TILE).is_multiple_of(2)
+    };
+    let half = |keep: bool| -> Vec<f64> {
+        w.iter()
+            .enumerate()
+            .map(|(i, &v)| {
+                if tile_of(i / OUT_CHANNELS) == keep {
+                    v
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    };
+    let whole = backward(&scene.refs(), &ctx, &w);
+    let (a, b) = (
+        backward(&scene.refs(), &ctx, &half(true)),
+        backward(&scene.refs(), &ctx, &half(false)),
+    );
+    assert!(a.pairs > 0 && b.pairs > 0 && a.pairs < whole.pairs);
+    assert_eq!(a.pairs + b.pairs, whole.pairs);
+    let fields = |g: &ParamGradients<f64>| {
+        [
+            &g.means,
+            &g.log_scales,
+            &g.quats,
+            &g.opacity_logits,
+            &g.sh,
+            &g.means2d,
+        ]
+        .map(Clone::clone)
+    };
+    for ((wf, af), bf) in fields(&whole).iter().zip(fields(&a)).zip(fields(&b)) {
+        for ((x, y), z) in wf.iter().zip(&af).zip(&bf) {
+            assert!(rel_err(*x, y + z, 1e-9) < 1e-9, "{x} vs {y} + {z}");
+        }
     }
 }
