@@ -13,7 +13,9 @@
    longer applies is a finding too, so that the list only shrinks. In the method commands
    (METHOD_COMMANDS), a flag's default written as a number literal repeats what the library's
    `Default` says (take it from there: `default_value_t = Overrides::default().iterations`);
-   flags the library has no setting for are listed in OWN_DEFAULTS.
+   flags the library has no setting for are listed in OWN_DEFAULTS. A command-line enum that is
+   translated into another enum (an `impl From<Arg> for …`, or match arms `Arg::A => Lib::B`)
+   mirrors a library type under other names: parse the library's enum directly.
 4. Upward imports: a file that names a module above it (its parent `mod.rs`, an ancestor, or
    the crate root, whose re-exports are for users) depends on what is built from it; shared
    items belong in a sibling module that both use. Documented exceptions would go in
@@ -26,7 +28,9 @@
 Test code does not count: `#[cfg(test)]` items (the `mod tests` blocks) are cut out before both
 checks, and `tests/`, `benches/` and `examples/` folders are not read.
 
-Exits 1 and lists the findings when there are any.
+Exits 1 and lists the findings when there are any. Before reading the workspace, the checks of
+enum translations and README paths run on planted cases (`self_test`), so a check that stops
+finding anything fails too.
 """
 
 import re
@@ -400,6 +404,32 @@ def enums(path, value_enum_only):
     return found
 
 
+TRANSLATION_RE = r"\b{name}::\w+\s*(?:\{{[^}}]*\}}|\([^)]*\))?\s*=>\s*(?:Some\(\s*)?(?:\w+::)*[A-Z]\w*::[A-Z]\w*"
+
+
+def translated(code, name):
+    """Whether `code` turns enum `name`'s variants into another enum's variants."""
+    if re.search(rf"\bimpl\s+From<\s*{name}\s*>", code):
+        return True
+    return re.search(TRANSLATION_RE.format(name=name), code) is not None
+
+
+def translation_findings(files):
+    """`{key: message}` for each enum of the command line (`files`: relative path → code, comments
+    and strings stripped) whose variants some file translates into another enum's."""
+    found = {}
+    for rel, code in files.items():
+        for m in re.finditer(r"\benum\s+([A-Za-z_]\w*)", code):
+            name = m.group(1)
+            for other, text in files.items():
+                if translated(text, name):
+                    found[f"enum:{rel}:{name}"] = (
+                        f"crates/cli/src/commands/{rel}: enum {name} is translated into a "
+                        f"library enum in {other}; parse the library's enum instead"
+                    )
+    return found
+
+
 def literal_defaults(path):
     """The fields whose clap default is a number literal, test code left out."""
     code = without_test_items(path.read_text())
@@ -446,6 +476,13 @@ def cli_findings(crates):
             findings[f"lines:{rel}"] = (
                 f"crates/cli/src/commands/{rel} is {lines} lines (limit {MAX_COMMAND_LINES})"
             )
+    files = {
+        path.relative_to(commands).as_posix(): without_test_items(
+            strip_comments_and_strings(path.read_text())
+        )
+        for path in sorted(commands.rglob("*.rs"))
+    }
+    findings.update(translation_findings(files))
     for key in sorted(OWN_DEFAULTS - own_seen):
         findings[f"own:{key}"] = f"OWN_DEFAULTS lists `{key}`, which has no number default: remove it"
     return findings
@@ -454,13 +491,16 @@ def cli_findings(crates):
 README_PATH_RE = re.compile(r"`([A-Za-z0-9_./-]+(?:\.rs|/))`")
 
 
-def readme_findings(crate):
-    """Backticked `.rs` files and `folder/`s of the crate's README that the crate lacks."""
+def readme_findings(crate, text=None):
+    """Backticked `.rs` files and `folder/`s of the crate's README (or of `text`) that the crate
+    lacks."""
     readme = crate / "README.md"
-    if not readme.is_file():
-        return []
+    if text is None:
+        if not readme.is_file():
+            return []
+        text = readme.read_text()
     missing = []
-    for token in sorted(set(README_PATH_RE.findall(readme.read_text()))):
+    for token in sorted(set(README_PATH_RE.findall(text))):
         want_dir = token.endswith("/")
         if "://" in token or token.startswith(".") or (want_dir and "src/" not in token):
             continue
@@ -476,7 +516,36 @@ def readme_findings(crate):
     return missing
 
 
+def self_test():
+    """The checks of translated enums and README paths, on planted cases; messages of failures."""
+    planted = {
+        "a.rs": "enum EdgeArg { Area, Product }\nfn f(a: EdgeArg) -> EdgeTest { match a { "
+        "EdgeArg::Area => EdgeTest::TriangleArea, EdgeArg::Product => EdgeTest::DepthProduct } }",
+        "b.rs": "enum KindArg { None, Paper }\nfn g(k: KindArg) { let _ = match k { "
+        "KindArg::None => None, KindArg::Paper => Some(fewview_geom::C::Paper) }; }",
+        "c.rs": "enum StartArg { A }\nimpl From<StartArg> for Start { fn from(_: StartArg) -> Self "
+        "{ todo!() } }",
+        "d.rs": "enum Shown { A, B }\nfn h(s: Shown) -> u8 { match s { Shown::A => 1, Shown::B => 2 } }",
+    }
+    found = translation_findings(planted)
+    want = {"enum:a.rs:EdgeArg", "enum:b.rs:KindArg", "enum:c.rs:StartArg"}
+    failures = []
+    if set(found) != want:
+        failures.append(f"translated enums: planted {sorted(want)}, found {sorted(found)}")
+    cli = ROOT / "crates" / "cli"
+    readme = "`src/main.rs` and `src/gone.rs`, `src/commands/` and `src/nowhere/`"
+    missing = readme_findings(cli, readme)
+    if len(missing) != 2 or not ("gone.rs" in missing[0] and "nowhere" in missing[1]):
+        failures.append(f"README paths: planted gone.rs and nowhere/, found {missing}")
+    return failures
+
+
 def main():
+    failures = self_test()
+    for message in failures:
+        print(f"check_structure.py's own check failed: {message}")
+    if failures:
+        return 1
     crates = sorted(p for p in (ROOT / "crates").iterdir() if (p / "Cargo.toml").is_file())
     problems = 0
     for crate in crates:

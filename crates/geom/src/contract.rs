@@ -31,11 +31,13 @@ use crate::mesh::{Points, f3, v3};
 
 /// Which far-field map (see the module docs).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum ContractionKind {
     /// Eq. (2) as printed: far points onto the sphere of radius `B_far − B_near`.
     #[default]
     Paper,
     /// Mip-NeRF 360's contraction scaled to `[B_near, B_far)`.
+    #[cfg_attr(feature = "cli", value(name = "mipnerf360"))]
     MipNerf360,
 }
 

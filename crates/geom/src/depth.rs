@@ -37,11 +37,14 @@ pub const TAU_DEPTH: f32 = 1e-4;
 
 /// Which quantity Eq. (1) thresholds (see the module docs).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum EdgeTest {
     /// `‖(X − Xₓ) × (X − Xᵧ)‖ / D²` with back-projected 3D points (default).
     #[default]
+    #[cfg_attr(feature = "cli", value(name = "area"))]
     TriangleArea,
     /// The literal scalar reading `(D − Dₓ)(D − Dᵧ) / D²` (misses axis-aligned edges).
+    #[cfg_attr(feature = "cli", value(name = "product"))]
     DepthProduct,
 }
 

@@ -62,6 +62,7 @@ pub struct AffineRefineOptions {
 /// How the window around `a` is mapped into image `b`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum WarpModel {
     /// `x_b = b + A·d`: 6 parameters (and the photometric gain and bias).
     #[default]

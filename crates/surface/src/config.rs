@@ -24,6 +24,35 @@ pub enum InitialPoses {
     AsLoaded,
 }
 
+impl InitialPoses {
+    /// The same start with noise `sigma` where the start is noisy ground truth.
+    pub fn with_noise(self, sigma: f64) -> Self {
+        match self {
+            Self::NoisyGroundTruth { .. } => Self::NoisyGroundTruth { sigma },
+            other => other,
+        }
+    }
+}
+
+/// The command line names the two starts; the noise σ is a flag of its own (see
+/// [`InitialPoses::with_noise`]).
+#[cfg(feature = "cli")]
+impl clap::ValueEnum for InitialPoses {
+    fn value_variants<'a>() -> &'a [Self] {
+        &[Self::NoisyGroundTruth { sigma: 0.0 }, Self::AsLoaded]
+    }
+
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        use clap::builder::PossibleValue;
+        Some(match self {
+            Self::NoisyGroundTruth { .. } => {
+                PossibleValue::new("noisy").help("the ground truth perturbed by --pose-noise")
+            }
+            Self::AsLoaded => PossibleValue::new("loaded").help("the dataset's poses as loaded"),
+        })
+    }
+}
+
 /// Everything about a run besides the dataset.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunConfig {

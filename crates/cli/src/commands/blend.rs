@@ -28,14 +28,6 @@ pub enum Method {
     Feather,
 }
 
-#[derive(Clone, Copy, Debug, ValueEnum)]
-pub enum SolverArg {
-    /// Multigrid-preconditioned conjugate gradients (fast; default).
-    MgCg,
-    /// Sparse Cholesky (faer): exact, slow beyond ~200k overlap pixels.
-    Direct,
-}
-
 /// Blend two images F and G with their validity masks.
 ///
 /// Images are PNG/JPEG (alpha dropped) of equal size; masks are images whose first channel is
@@ -73,7 +65,7 @@ pub struct Args {
     pub weights_npy: Option<PathBuf>,
     /// Linear solver of the Poisson methods.
     #[arg(long, value_enum, default_value = "mg-cg")]
-    pub solver: SolverArg,
+    pub solver: Solver,
     /// Relative residual at which the iterative solver stops.
     #[arg(long, default_value_t = 1e-7, value_parser = positive)]
     pub tolerance: f64,
@@ -146,10 +138,7 @@ pub fn run(args: Args) -> Result<()> {
         None => Weights::Constant(args.weight),
     };
     let options = PoissonOptions {
-        solver: match args.solver {
-            SolverArg::MgCg => Solver::MultigridCg,
-            SolverArg::Direct => Solver::Direct,
-        },
+        solver: args.solver,
         tolerance: args.tolerance,
     };
     let context = || format!("blending {} and {}", args.f.display(), args.g.display());

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use clap::{Args as ClapArgs, ValueEnum};
+use clap::Args as ClapArgs;
 use fewview_geom::depth::{DepthOptions, EdgeTest, TAU_DEPTH, depth_to_mesh_with};
 use fewview_geom::io::{cameras::read_cameras, read_depth, write_mesh};
 use fewview_scene::Camera;
@@ -11,24 +11,6 @@ use fewview_scene::Camera;
 use super::geom_common::load_image;
 use super::number_args::non_negative_f32;
 use super::output_paths::check_file;
-
-#[derive(Clone, Copy, Debug, ValueEnum)]
-pub enum EdgeTestArg {
-    /// ‖(X − Xₓ) × (X − Xᵧ)‖ / D² of the back-projected triangle (default; see the docs of
-    /// fewview_geom::depth for why).
-    Area,
-    /// The literal scalar (D − Dₓ)(D − Dᵧ) / D² (misses edges along the pixel axes).
-    Product,
-}
-
-impl From<EdgeTestArg> for EdgeTest {
-    fn from(a: EdgeTestArg) -> Self {
-        match a {
-            EdgeTestArg::Area => EdgeTest::TriangleArea,
-            EdgeTestArg::Product => EdgeTest::DepthProduct,
-        }
-    }
-}
 
 /// Depth-edge filter options shared by depth-mesh and depth-points.
 #[derive(Clone, Debug, ClapArgs)]
@@ -40,7 +22,7 @@ pub struct DepthInput {
     #[arg(long, default_value_t = TAU_DEPTH, value_parser = non_negative_f32)]
     pub tau: f32,
     #[arg(long, value_enum, default_value = "area")]
-    pub edge_test: EdgeTestArg,
+    pub edge_test: EdgeTest,
     /// Scale of 16-bit PNG depth values.
     ///
     /// E.g. 0.001 for millimetres → metres.
@@ -124,7 +106,7 @@ pub fn run(args: Args) -> Result<()> {
     )?;
     let opts = DepthOptions {
         tau: args.input.tau,
-        test: args.input.edge_test.into(),
+        test: args.input.edge_test,
     };
     let mesh = depth_to_mesh_with(&depth, &cam, img.as_ref(), &opts)
         .with_context(|| format!("meshing {}", args.depth.display()))?;

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use clap::{Args as ClapArgs, ValueEnum};
+use clap::Args as ClapArgs;
 use fewview_geom::contract::{ContractionKind, contraction_reference, subsample};
 use fewview_geom::depth::{DepthOptions, depth_to_points_with};
 use fewview_geom::io::write_points;
@@ -13,16 +13,6 @@ use fewview_geom::mesh::{Points, f3, v3};
 use super::depth_mesh::{DepthInput, load_depth_view};
 use super::number_args::fraction;
 use super::output_paths::check_file;
-
-#[derive(Clone, Copy, Debug, ValueEnum)]
-pub enum ContractArg {
-    /// No contraction.
-    None,
-    /// Eq. (2) as printed (far points onto the sphere of radius B_far − B_near around T).
-    Paper,
-    /// Mip-NeRF 360's contraction scaled to [B_near, B_far).
-    Mipnerf360,
-}
 
 /// Back-project depth maps to a coloured point cloud.
 ///
@@ -45,8 +35,9 @@ pub struct Args {
     pub images: Vec<PathBuf>,
     #[command(flatten)]
     pub input: DepthInput,
-    #[arg(long, value_enum, default_value = "none")]
-    pub contract: ContractArg,
+    /// Contract far points (none when left out).
+    #[arg(long, value_enum)]
+    pub contract: Option<ContractionKind>,
     /// Quantile of the depths taken as B_near.
     ///
     /// Quantile of the pooled depths taken as B_near (1.0 = the maximum depth).
@@ -91,7 +82,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let opts = DepthOptions {
         tau: args.input.tau,
-        test: args.input.edge_test.into(),
+        test: args.input.edge_test,
     };
     let mut all = Points::default();
     let coloured = !args.images.is_empty();
@@ -107,12 +98,7 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     let mut report = serde_json::json!({ "points": all.len() });
-    let kind = match args.contract {
-        ContractArg::None => None,
-        ContractArg::Paper => Some(ContractionKind::Paper),
-        ContractArg::Mipnerf360 => Some(ContractionKind::MipNerf360),
-    };
-    if let Some(kind) = kind {
+    if let Some(kind) = args.contract {
         let refs: Vec<(&[f32], &fewview_scene::Camera)> =
             views.iter().map(|(d, c, _)| (d.as_slice(), c)).collect();
         let c = contraction_reference(&refs, &opts, args.quantile, kind).with_context(|| {

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use clap::{Args as ClapArgs, ValueEnum};
+use clap::Args as ClapArgs;
 use fewview_geom::io::{cameras::read_poses, read_points, write_points};
 use fewview_geom::registration::{
     DenoiseOptions, IcpMethod, IcpStarts, RegistrationOptions, register,
@@ -13,21 +13,6 @@ use fewview_metrics::pose_error::{PoseErrorOptions, pose_error_pairwise};
 
 use super::geom_common::write_json;
 use super::output_paths::check_optional_file;
-
-/// Where ICP starts (`--icp-start`).
-#[derive(Clone, Copy, Debug, ValueEnum)]
-pub enum IcpStartArg {
-    /// Alg. 3 as written: from RANSAC's result.
-    Ransac,
-    /// From RANSAC's result and from the pre-alignment; the better fit wins.
-    Best,
-}
-
-#[derive(Clone, Copy, Debug, ValueEnum)]
-pub enum IcpArg {
-    PointToPoint,
-    PointToPlane,
-}
 
 /// Register a reconstructed point cloud (or mesh vertices) onto a ground-truth cloud.
 ///
@@ -66,7 +51,7 @@ pub struct Args {
     #[arg(long)]
     pub icp_threshold: Vec<f64>,
     #[arg(long, value_enum, default_value = "point-to-point")]
-    pub icp: IcpArg,
+    pub icp: IcpMethod,
     /// Plane-projection radius for noisy scans.
     ///
     /// Deviation from Alg. 3 for noisy scans: project both clouds onto their local planes
@@ -81,7 +66,7 @@ pub struct Args {
     /// failing on a near-symmetric or rough reconstruction cannot undo a good pre-alignment.
     /// `ransac`: from RANSAC's result only, as the paper.
     #[arg(long, value_enum, default_value = "best")]
-    pub icp_start: IcpStartArg,
+    pub icp_start: IcpStarts,
     /// Estimate a scale in point-to-point ICP too.
     #[arg(long)]
     pub with_scaling: bool,
@@ -146,12 +131,7 @@ pub fn run(args: Args) -> Result<()> {
     if !args.icp_threshold.is_empty() {
         options.icp_thresholds = args.icp_threshold.clone();
     }
-    options.icp_method = match args.icp {
-        IcpArg::PointToPoint => IcpMethod::PointToPoint {
-            with_scaling: args.with_scaling,
-        },
-        IcpArg::PointToPlane => IcpMethod::PointToPlane,
-    };
+    options.icp_method = args.icp.with_scaling(args.with_scaling);
     if let Some(radius) = args.denoise_radius {
         if !(radius > 0.0 && radius.is_finite()) {
             bail!("--denoise-radius must be positive, got {radius}");
@@ -161,10 +141,7 @@ pub fn run(args: Args) -> Result<()> {
             max_nn: DenoiseOptions::DEFAULT_MAX_NN,
         });
     }
-    options.icp_starts = match args.icp_start {
-        IcpStartArg::Ransac => IcpStarts::Ransac,
-        IcpStartArg::Best => IcpStarts::RansacOrPrealignment,
-    };
+    options.icp_starts = args.icp_start;
     options.ransac.seed = args.seed;
     let result = register(&source, &target, pre.as_ref(), &options).with_context(|| {
         format!(

@@ -22,6 +22,43 @@ pub enum IcpMethod {
     PointToPlane,
 }
 
+impl IcpMethod {
+    /// The method with point-to-point's scale estimation set to `scaling` (point-to-plane
+    /// estimates no scale and stays as it is).
+    pub fn with_scaling(self, scaling: bool) -> Self {
+        match self {
+            Self::PointToPoint { .. } => Self::PointToPoint {
+                with_scaling: scaling,
+            },
+            other => other,
+        }
+    }
+}
+
+/// The command line names the two objectives; point-to-point's scale is a flag of its own
+/// (see [`IcpMethod::with_scaling`]).
+#[cfg(feature = "cli")]
+impl clap::ValueEnum for IcpMethod {
+    fn value_variants<'a>() -> &'a [Self] {
+        &[
+            Self::PointToPoint {
+                with_scaling: false,
+            },
+            Self::PointToPlane,
+        ]
+    }
+
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        use clap::builder::PossibleValue;
+        Some(match self {
+            Self::PointToPoint { .. } => PossibleValue::new("point-to-point")
+                .help("Σ ‖T s − t‖² (Besl & McKay), with a scale under --with-scaling"),
+            Self::PointToPlane => PossibleValue::new("point-to-plane")
+                .help("Σ ((T s − t)·n_t)² (Chen & Medioni); needs target normals"),
+        })
+    }
+}
+
 /// Open3D's `ICPConvergenceCriteria` (its defaults).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct IcpCriteria {

@@ -52,6 +52,7 @@ pub struct RegistrationOptions {
 
 /// Where ICP starts from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum IcpStarts {
     /// Alg. 3 as written: from RANSAC's global registration only.
     Ransac,
@@ -60,6 +61,7 @@ pub enum IcpStarts {
     /// FPFH + RANSAC can lock onto a wrong pose of a near-symmetric or still rough
     /// reconstruction (a torus-like shape after a short run registered 3× worse than it lay
     /// already); when the camera evaluation's pre-alignment is good, this keeps it.
+    #[cfg_attr(feature = "cli", value(name = "best"))]
     RansacOrPrealignment,
 }
 

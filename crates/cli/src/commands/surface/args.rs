@@ -13,8 +13,8 @@ use fewview_surface::{
 };
 
 use super::flags::{
-    InitialPosesArg, LossTerm, MAX_MESH_RESOLUTION, MatchRefineArg, Toggle, WeightName, c2f_window,
-    loss_weight, pose_noise, pose_rates, switch,
+    LossTerm, MAX_MESH_RESOLUTION, MatchRefine, Toggle, WeightName, c2f_window, loss_weight,
+    match_refine, pose_noise, pose_rates, switch,
 };
 use crate::commands::dataset_args::DatasetArgs;
 
@@ -72,8 +72,8 @@ pub struct Args {
     /// Start from noisy true poses or the dataset's.
     ///
     /// Start from the perturbed ground truth (`noisy`) or from the dataset's poses (`loaded`).
-    #[arg(long, value_enum, default_value_t = InitialPosesArg::Noisy)]
-    pub initial_poses: InitialPosesArg,
+    #[arg(long, value_enum, default_value = "noisy")]
+    pub initial_poses: InitialPoses,
     /// Pose schedule: the paper's, or `cpu`.
     ///
     /// Pose schedule (`cpu`: deviations from the surface paper's §B.1 that converge on a CPU
@@ -112,8 +112,10 @@ pub struct Args {
     /// Sub-pixel refinement of the matches.
     ///
     /// By Lucas–Kanade (a deviation from the surface paper).
-    #[arg(long, value_enum, default_value_t = MatchRefineArg::Affine)]
-    pub match_refine: MatchRefineArg,
+    ///
+    /// `affine` (default), `quadratic` or `none`.
+    #[arg(long, default_value = "affine", value_parser = match_refine)]
+    pub match_refine: MatchRefine,
     /// Largest bend (px) of a quadratic refinement.
     ///
     /// With `--match-refine quadratic`: drop matches whose second-order term moves a window
@@ -269,18 +271,13 @@ impl Args {
             rays_per_batch: self.rays,
             matches_per_batch: self.matches_per_batch,
             seed: self.seed,
-            initial_poses: match self.initial_poses {
-                InitialPosesArg::Noisy => InitialPoses::NoisyGroundTruth {
-                    sigma: self.pose_noise,
-                },
-                InitialPosesArg::Loaded => InitialPoses::AsLoaded,
-            },
+            initial_poses: self.initial_poses.clone().with_noise(self.pose_noise),
             pose_lr: self.pose_lr,
             pose_start: self.pose_start,
             refine_poses: !self.no_pose_refinement,
             max_pair_angle_deg: self.max_pair_angle,
             matcher: self.matcher,
-            match_refine: self.match_refine.warp(),
+            match_refine: self.match_refine.0,
             match_max_bend_px: self.match_max_bend,
             densify: self.densify,
             pose_warmup: switch(self.pose_warmup),

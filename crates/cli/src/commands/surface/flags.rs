@@ -1,6 +1,7 @@
 //! The `surface` command's flags that are not plain values: their parsers, the switches and
 //! names they take, and their translation into the library's settings.
 
+use clap::ValueEnum;
 use fewview_surface::adam::ExpSchedule;
 use fewview_surface::matching::refine::WarpModel;
 
@@ -65,29 +66,25 @@ pub(super) fn loss_weight(s: &str) -> std::result::Result<(WeightName, f32), Str
     Ok((name, non_negative_f32(value.trim())?))
 }
 
-/// `--initial-poses` ([`InitialPoses`](fewview_surface::InitialPoses); the noise σ is `--pose-noise`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum InitialPosesArg {
-    Noisy,
-    Loaded,
-}
+/// `--match-refine`: the warp model of the sub-pixel refinement (the library's [`WarpModel`], by
+/// its own names), or `none`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MatchRefine(pub Option<WarpModel>);
 
-/// `--match-refine`: the warp of the sub-pixel refinement ([`WarpModel`]), or none.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum MatchRefineArg {
-    Affine,
-    Quadratic,
-    None,
-}
-
-impl MatchRefineArg {
-    pub(super) fn warp(self) -> Option<WarpModel> {
-        match self {
-            MatchRefineArg::Affine => Some(WarpModel::Affine),
-            MatchRefineArg::Quadratic => Some(WarpModel::Quadratic),
-            MatchRefineArg::None => None,
-        }
+/// Parses `--match-refine`: `none`, or a [`WarpModel`] name.
+pub(super) fn match_refine(s: &str) -> Result<MatchRefine, String> {
+    if s == "none" {
+        return Ok(MatchRefine(None));
     }
+    WarpModel::from_str(s, false)
+        .map(|w| MatchRefine(Some(w)))
+        .map_err(|_| {
+            let names: Vec<String> = WarpModel::value_variants()
+                .iter()
+                .filter_map(|w| w.to_possible_value().map(|v| v.get_name().to_string()))
+                .collect();
+            format!("expected {} or none", names.join(", "))
+        })
 }
 
 /// `--c2f`: 0 ≤ α₁ ≤ α₂ ≤ 1.
