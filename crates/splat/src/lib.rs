@@ -1,7 +1,8 @@
 #![doc = include_str!("../README.md")]
-//! 3D Gaussian splatting (Kerbl et al. 2023) on the CPU: the Gaussian model, a differentiable
-//! tile rasterizer exposed as a Burn custom autodiff op, SH colour, the Inria PLY format and
-//! sparse-view training.
+//! 3D Gaussian splatting (Kerbl et al. 2023): the Gaussian model, a differentiable tile rasterizer
+//! exposed as a Burn custom autodiff op (CPU kernels in [`raster`]; with the feature `gpu`, CubeCL
+//! kernels in `gpu` behind the same op, chosen by [`ComputeDevice`]), SH colour, the Inria PLY
+//! format and sparse-view training.
 
 pub mod bench;
 #[cfg(feature = "gpu")]

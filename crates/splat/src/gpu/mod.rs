@@ -12,7 +12,7 @@
 //! The backward pass runs them in reverse with exact gradients and without floating-point
 //! atomics (WGSL has none): each (tile, Gaussian) pair's gradient is reduced across its tile
 //! and written to the pair's own slot, then summed per Gaussian in a fixed order. The CPU
-//! rasterizer is the oracle: `tests/gpu.rs` compares images and every gradient.
+//! rasterizer is the oracle: the module's tests compare images and every gradient.
 
 pub mod blend;
 mod launch;
