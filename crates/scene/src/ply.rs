@@ -49,23 +49,129 @@ fn colour_scale(t: PlyScalar) -> f64 {
     }
 }
 
-#[derive(Clone, Debug)]
-enum PropKind {
+/// The type of a PLY property: one value, or a list of values after a count.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlyPropertyKind {
     Scalar(PlyScalar),
     List { count: PlyScalar, item: PlyScalar },
 }
 
-#[derive(Clone, Debug)]
-struct Property {
-    name: String,
-    kind: PropKind,
+/// A property of an element, as its header line declares it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PlyProperty {
+    pub name: String,
+    pub kind: PlyPropertyKind,
 }
 
-#[derive(Clone, Debug)]
-struct Element {
-    name: String,
-    count: usize,
-    props: Vec<Property>,
+/// An element of a PLY file (`vertex`, `face`, …): its row count and properties, in order.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PlyElement {
+    pub name: String,
+    pub count: usize,
+    pub properties: Vec<PlyProperty>,
+}
+
+/// A PLY header: the body's encoding, the elements in file order, and its length in bytes (the
+/// `end_header` line included), where the body starts.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PlyHeader {
+    pub encoding: PlyEncoding,
+    pub elements: Vec<PlyElement>,
+    pub bytes: usize,
+}
+
+/// The most header lines [`read_header`] reads before giving up (a Gaussian PLY has about 70).
+pub const MAX_HEADER_LINES: usize = 10_000;
+
+/// Reads the header at the start of `reader`, which is left at the first byte of the body.
+/// Every PLY reader of the workspace (meshes and point clouds here, Gaussian models in
+/// `fewview-splat`, the viewer's check in `fewview-view`) parses its header with this. Errors
+/// are one line, for the caller to put after the file's name.
+pub fn read_header(reader: &mut impl std::io::BufRead) -> std::result::Result<PlyHeader, String> {
+    let mut bytes = 0;
+    let mut line = Vec::new();
+    let mut encoding = None;
+    let mut elements: Vec<PlyElement> = Vec::new();
+    for k in 0..=MAX_HEADER_LINES {
+        line.clear();
+        let n = reader
+            .read_until(b'\n', &mut line)
+            .map_err(|e| format!("reading the header: {e}"))?;
+        if n == 0 {
+            return Err(if k == 0 {
+                "empty file, not a PLY".into()
+            } else {
+                "PLY header ends before `end_header`".into()
+            });
+        }
+        bytes += n;
+        let text = std::str::from_utf8(&line).map_err(|_| "the PLY header is not text")?;
+        if k == 0 {
+            if text.trim_end() != "ply" {
+                return Err("not a PLY file (missing `ply` magic)".into());
+            }
+            continue;
+        }
+        let words: Vec<&str> = text.split_ascii_whitespace().collect();
+        match words.as_slice() {
+            ["format", fmt, _version] => {
+                encoding = Some(match *fmt {
+                    "ascii" => PlyEncoding::Ascii,
+                    "binary_little_endian" => PlyEncoding::BinaryLittleEndian,
+                    "binary_big_endian" => PlyEncoding::BinaryBigEndian,
+                    other => return Err(format!("unknown PLY format `{other}`")),
+                });
+            }
+            ["element", name, count] => elements.push(PlyElement {
+                name: name.to_string(),
+                count: count
+                    .parse()
+                    .map_err(|_| format!("bad {name} count `{count}`"))?,
+                properties: Vec::new(),
+            }),
+            ["property", "list", c, i, name] => {
+                let count = scalar_type(c, name)?;
+                let item = scalar_type(i, name)?;
+                property_of(&mut elements, name, PlyPropertyKind::List { count, item })?;
+            }
+            ["property", t, name] => {
+                let kind = PlyPropertyKind::Scalar(scalar_type(t, name)?);
+                property_of(&mut elements, name, kind)?;
+            }
+            ["end_header"] => {
+                let encoding = encoding.ok_or("missing `format` line")?;
+                return Ok(PlyHeader {
+                    encoding,
+                    elements,
+                    bytes,
+                });
+            }
+            ["comment" | "obj_info", ..] | [] => {}
+            _ => return Err(format!("unexpected header line `{}`", text.trim_end())),
+        }
+    }
+    Err(format!(
+        "no `end_header` in the first {MAX_HEADER_LINES} lines"
+    ))
+}
+
+fn scalar_type(t: &str, property: &str) -> std::result::Result<PlyScalar, String> {
+    PlyScalar::parse(t).ok_or_else(|| format!("property {property} has unknown type `{t}`"))
+}
+
+fn property_of(
+    elements: &mut [PlyElement],
+    name: &str,
+    kind: PlyPropertyKind,
+) -> std::result::Result<(), String> {
+    let element = elements
+        .last_mut()
+        .ok_or_else(|| format!("property {name} comes before any element"))?;
+    element.properties.push(PlyProperty {
+        name: name.to_string(),
+        kind,
+    });
+    Ok(())
 }
 
 /// Reads numbers from the body in the file's encoding.
@@ -96,77 +202,10 @@ impl Body<'_> {
     }
 }
 
-fn parse_header(text: &str) -> std::result::Result<(PlyEncoding, Vec<Element>), String> {
-    let mut lines = text.lines();
-    if lines.next().map(str::trim) != Some("ply") {
-        return Err("not a PLY file (first line is not 'ply')".into());
-    }
-    let mut encoding = None;
-    let mut elements: Vec<Element> = Vec::new();
-    for line in lines {
-        let words: Vec<&str> = line.split_ascii_whitespace().collect();
-        match words.as_slice() {
-            ["format", fmt, _version] => {
-                encoding = Some(match *fmt {
-                    "ascii" => PlyEncoding::Ascii,
-                    "binary_little_endian" => PlyEncoding::BinaryLittleEndian,
-                    "binary_big_endian" => PlyEncoding::BinaryBigEndian,
-                    other => return Err(format!("unknown PLY format '{other}'")),
-                });
-            }
-            ["element", name, count] => elements.push(Element {
-                name: name.to_string(),
-                count: count
-                    .parse()
-                    .map_err(|_| format!("bad element count '{count}'"))?,
-                props: Vec::new(),
-            }),
-            ["property", "list", c, i, name] => {
-                let el = elements.last_mut().ok_or("property before any element")?;
-                let count = PlyScalar::parse(c).ok_or(format!("unknown type '{c}'"))?;
-                let item = PlyScalar::parse(i).ok_or(format!("unknown type '{i}'"))?;
-                el.props.push(Property {
-                    name: name.to_string(),
-                    kind: PropKind::List { count, item },
-                });
-            }
-            ["property", t, name] => {
-                let el = elements.last_mut().ok_or("property before any element")?;
-                let t = PlyScalar::parse(t).ok_or(format!("unknown type '{t}'"))?;
-                el.props.push(Property {
-                    name: name.to_string(),
-                    kind: PropKind::Scalar(t),
-                });
-            }
-            ["end_header"] => {
-                return Ok((encoding.ok_or("header has no 'format' line")?, elements));
-            }
-            ["comment" | "obj_info", ..] | [] => {}
-            _ => return Err(format!("unexpected header line '{line}'")),
-        }
-    }
-    Err("header has no 'end_header'".into())
-}
-
-fn find_header_end(bytes: &[u8]) -> Option<usize> {
-    let tag = b"end_header";
-    let at = bytes.windows(tag.len()).position(|w| w == tag)?;
-    let mut end = at + tag.len();
-    // The header ends after the line break (\n or \r\n).
-    if bytes.get(end) == Some(&b'\r') {
-        end += 1;
-    }
-    if bytes.get(end) == Some(&b'\n') {
-        end += 1;
-    }
-    Some(end)
-}
-
 fn parse(bytes: &[u8]) -> std::result::Result<PlyGeometry, String> {
-    let header_end = find_header_end(bytes).ok_or("no 'end_header' line")?;
-    let header = std::str::from_utf8(&bytes[..header_end]).map_err(|_| "header is not text")?;
-    let (encoding, elements) = parse_header(header)?;
-    let body_bytes = &bytes[header_end..];
+    let header = read_header(&mut std::io::Cursor::new(bytes))?;
+    let (encoding, elements) = (header.encoding, header.elements);
+    let body_bytes = &bytes[header.bytes..];
     let mut body = match encoding {
         PlyEncoding::Ascii => Body::Ascii(
             std::str::from_utf8(body_bytes)
@@ -181,7 +220,7 @@ fn parse(bytes: &[u8]) -> std::result::Result<PlyGeometry, String> {
     };
     let mut mesh = PlyGeometry::default();
     for el in &elements {
-        let slot = |name: &str| el.props.iter().position(|p| p.name == name);
+        let slot = |name: &str| el.properties.iter().position(|p| p.name == name);
         let is_vertex = el.name == "vertex";
         let is_face = el.name == "face";
         let xyz = [slot("x"), slot("y"), slot("z")];
@@ -198,13 +237,13 @@ fn parse(bytes: &[u8]) -> std::result::Result<PlyGeometry, String> {
         }
         let mut normals = Vec::new();
         let mut colors = Vec::new();
-        let mut scalars = vec![0.0f64; el.props.len()];
+        let mut scalars = vec![0.0f64; el.properties.len()];
         let mut list = Vec::new();
         for row in 0..el.count {
-            for (pi, p) in el.props.iter().enumerate() {
+            for (pi, p) in el.properties.iter().enumerate() {
                 match p.kind {
-                    PropKind::Scalar(t) => scalars[pi] = body.read(t)?,
-                    PropKind::List { count, item } => {
+                    PlyPropertyKind::Scalar(t) => scalars[pi] = body.read(t)?,
+                    PlyPropertyKind::List { count, item } => {
                         let n = body.read(count)?;
                         if !(0.0..=1e6).contains(&n) {
                             return Err(format!("{} {row}: bad list length {n}", el.name));
@@ -229,7 +268,7 @@ fn parse(bytes: &[u8]) -> std::result::Result<PlyGeometry, String> {
                     normals.push(g(nrm));
                 }
                 if has_c {
-                    let PropKind::Scalar(t) = el.props[rgb[0].unwrap_or(0)].kind else {
+                    let PlyPropertyKind::Scalar(t) = el.properties[rgb[0].unwrap_or(0)].kind else {
                         return Err("colour is a list".into());
                     };
                     let s = colour_scale(t) as f32;

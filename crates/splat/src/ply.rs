@@ -6,10 +6,11 @@
 //! Reading accepts any property order, extra properties (ignored), `float`/`double` and the
 //! other scalar types, binary little/big-endian or ASCII.
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{BufReader, Read, Write};
 use std::path::Path;
 
 use fewview_scene::SceneError;
+use fewview_scene::ply::{PlyEncoding, PlyHeader, PlyPropertyKind, read_header};
 use fewview_scene::ply_scalar::PlyScalar;
 
 use crate::model::GaussianModel;
@@ -62,10 +63,30 @@ pub fn write_ply(path: &Path, model: &GaussianModel) -> Result<(), SceneError> {
     })
 }
 
-#[derive(Debug)]
-enum Format {
-    Ascii,
-    Binary { little: bool },
+/// The row count and scalar properties of the header's `vertex` element, which must come first
+/// (the body is read row by row from the start) and hold no lists.
+fn vertex_properties(header: &PlyHeader) -> Result<(usize, Vec<(String, PlyScalar)>), String> {
+    let vertex = match header.elements.first() {
+        Some(e) if e.name == "vertex" => e,
+        Some(e) => {
+            return Err(format!(
+                "element `{}` comes before `vertex`; elements before `vertex` are not supported",
+                e.name
+            ));
+        }
+        None => return Err("no `vertex` element".into()),
+    };
+    let props = vertex
+        .properties
+        .iter()
+        .map(|p| match p.kind {
+            PlyPropertyKind::Scalar(t) => Ok((p.name.clone(), t)),
+            PlyPropertyKind::List { .. } => {
+                Err("list properties in `vertex` are not supported".to_string())
+            }
+        })
+        .collect::<Result<_, _>>()?;
+    Ok((vertex.count, props))
 }
 
 /// Reads a Gaussian PLY (Inria layout; see the module docs for what is accepted).
@@ -73,66 +94,8 @@ pub fn read_ply(path: &Path) -> Result<GaussianModel, SceneError> {
     let file = std::fs::File::open(path).map_err(|e| SceneError::io(path, e))?;
     let mut r = BufReader::new(file);
     let bad = |m: String| SceneError::format(path, m);
-    let mut line = String::new();
-    let read_line =
-        |r: &mut BufReader<std::fs::File>, line: &mut String| -> Result<(), SceneError> {
-            line.clear();
-            let n = r.read_line(line).map_err(|e| SceneError::io(path, e))?;
-            if n == 0 {
-                return Err(SceneError::format(
-                    path,
-                    "PLY header ends before `end_header`",
-                ));
-            }
-            Ok(())
-        };
-    read_line(&mut r, &mut line)?;
-    if line.trim_end() != "ply" {
-        return Err(bad("not a PLY file (missing `ply` magic)".into()));
-    }
-    let mut format = None;
-    let mut vertex_count = None;
-    let mut in_vertex = false;
-    let mut props: Vec<(String, PlyScalar)> = Vec::new();
-    let mut other_elements_before = false;
-    loop {
-        read_line(&mut r, &mut line)?;
-        let words: Vec<&str> = line.split_whitespace().collect();
-        match words.as_slice() {
-            ["end_header"] => break,
-            ["format", "ascii", _] => format = Some(Format::Ascii),
-            ["format", "binary_little_endian", _] => format = Some(Format::Binary { little: true }),
-            ["format", "binary_big_endian", _] => format = Some(Format::Binary { little: false }),
-            ["element", "vertex", n] => {
-                vertex_count = Some(
-                    n.parse::<usize>()
-                        .map_err(|_| bad(format!("bad vertex count `{n}`")))?,
-                );
-                in_vertex = true;
-            }
-            ["element", ..] => {
-                if vertex_count.is_none() {
-                    other_elements_before = true;
-                }
-                in_vertex = false;
-            }
-            ["property", "list", ..] if in_vertex => {
-                return Err(bad("list properties in `vertex` are not supported".into()));
-            }
-            ["property", ty, name] if in_vertex => {
-                let s = PlyScalar::parse(ty)
-                    .ok_or_else(|| bad(format!("unknown property type `{ty}`")))?;
-                props.push((name.to_string(), s));
-            }
-            ["comment" | "obj_info" | "property", ..] | [] => {}
-            _ => return Err(bad(format!("unexpected header line `{}`", line.trim_end()))),
-        }
-    }
-    if other_elements_before {
-        return Err(bad("elements before `vertex` are not supported".into()));
-    }
-    let format = format.ok_or_else(|| bad("missing `format` line".into()))?;
-    let n = vertex_count.ok_or_else(|| bad("no `vertex` element".into()))?;
+    let header = read_header(&mut r).map_err(bad)?;
+    let (n, props) = vertex_properties(&header).map_err(bad)?;
     if n == 0 {
         return Err(SceneError::invalid(
             path,
@@ -187,8 +150,9 @@ pub fn read_ply(path: &Path) -> Result<GaussianModel, SceneError> {
         model.log_scales.extend(scale.map(f));
         model.quats.extend(rot.map(f));
     };
-    match format {
-        Format::Binary { little } => {
+    match header.encoding {
+        PlyEncoding::BinaryLittleEndian | PlyEncoding::BinaryBigEndian => {
+            let little = header.encoding == PlyEncoding::BinaryLittleEndian;
             let stride: usize = props.iter().map(|(_, s)| s.size()).sum();
             let mut buf = vec![0u8; stride];
             for v in 0..n {
@@ -202,7 +166,7 @@ pub fn read_ply(path: &Path) -> Result<GaussianModel, SceneError> {
                 fill(&values, &mut model);
             }
         }
-        Format::Ascii => {
+        PlyEncoding::Ascii => {
             let mut text = String::new();
             r.read_to_string(&mut text)
                 .map_err(|e| SceneError::io(path, e))?;

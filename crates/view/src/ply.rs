@@ -9,9 +9,11 @@
 //! properties and `double` parameters are refused with the reason.
 
 use std::collections::BTreeMap;
-use std::io::{BufRead, BufReader};
+use std::io::BufReader;
 use std::path::Path;
 
+use fewview_scene::ply::{PlyEncoding, PlyPropertyKind, read_header};
+use fewview_scene::ply_scalar::PlyScalar;
 use serde::Serialize;
 
 use crate::error::{Result, ViewError};
@@ -31,19 +33,6 @@ pub struct GaussianPly {
     pub offsets: BTreeMap<String, usize>,
     /// Size of the whole file.
     pub file_bytes: u64,
-}
-
-/// The most header lines read before giving up: a Gaussian PLY has about 70.
-const MAX_HEADER_LINES: usize = 10_000;
-
-fn scalar_size(ty: &str) -> Option<usize> {
-    Some(match ty {
-        "char" | "uchar" | "int8" | "uint8" => 1,
-        "short" | "ushort" | "int16" | "uint16" => 2,
-        "int" | "uint" | "float" | "int32" | "uint32" | "float32" => 4,
-        "double" | "float64" => 8,
-        _ => return None,
-    })
 }
 
 /// The names of the properties the page draws, for SH degree `degree`.
@@ -68,77 +57,39 @@ pub fn check_gaussian_ply(path: &Path) -> Result<GaussianPly> {
     let file_bytes = file.metadata().map_err(|e| ViewError::io(path, e))?.len();
     let mut r = BufReader::new(file);
     let bad = |m: String| ViewError::format(path, m);
-    let mut header_bytes = 0;
-    let mut lines = Vec::new();
-    loop {
-        let mut line = Vec::new();
-        let n = r
-            .read_until(b'\n', &mut line)
-            .map_err(|e| ViewError::io(path, e))?;
-        if n == 0 {
-            return Err(bad(if lines.is_empty() {
-                "empty file, not a PLY".into()
-            } else {
-                "PLY header ends before `end_header`".into()
-            }));
-        }
-        header_bytes += n;
-        let text = String::from_utf8_lossy(&line).trim_end().to_string();
-        if lines.is_empty() && text != "ply" {
-            return Err(bad("not a PLY file (missing `ply` magic)".into()));
-        }
-        if text == "end_header" {
-            break;
-        }
-        lines.push(text);
-        if lines.len() > MAX_HEADER_LINES {
+    let header = read_header(&mut r).map_err(bad)?;
+    if header.encoding != PlyEncoding::BinaryLittleEndian {
+        return Err(bad(format!(
+            "the viewer reads binary little-endian PLY, this one is {:?}",
+            header.encoding
+        )));
+    }
+    let header_bytes = header.bytes;
+    let (count, props) = match header.elements.as_slice() {
+        [] => (None, Vec::new()),
+        [first, ..] if first.name != "vertex" => {
             return Err(bad(format!(
-                "no `end_header` in the first {MAX_HEADER_LINES} lines"
+                "element `{}` comes before `vertex`; the viewer reads the vertices first",
+                first.name
             )));
         }
-    }
-    let mut count = None;
-    let mut props: Vec<(String, String)> = Vec::new();
-    let mut in_vertex = false;
-    for line in &lines[1..] {
-        let words: Vec<&str> = line.split_whitespace().collect();
-        match words.as_slice() {
-            ["format", "binary_little_endian", _] => {}
-            ["format", other, _] => {
-                return Err(bad(format!(
-                    "the viewer reads binary little-endian PLY, this one is {other}"
-                )));
+        [vertex, rest @ ..] => {
+            if rest.iter().any(|e| e.name == "vertex") {
+                return Err(bad("two `vertex` elements".into()));
             }
-            ["element", "vertex", n] => {
-                if count.is_some() {
-                    return Err(bad("two `vertex` elements".into()));
-                }
-                count = Some(
-                    n.parse::<usize>()
-                        .map_err(|_| bad(format!("bad vertex count `{n}`")))?,
-                );
-                in_vertex = true;
-            }
-            ["element", name, ..] => {
-                if count.is_none() {
-                    return Err(bad(format!(
-                        "element `{name}` comes before `vertex`; the viewer reads the vertices first"
-                    )));
-                }
-                in_vertex = false;
-            }
-            ["property", "list", ..] if in_vertex => {
-                return Err(bad("list properties in `vertex` are not supported".into()));
-            }
-            ["property", ty, name] if in_vertex => {
-                if scalar_size(ty).is_none() {
-                    return Err(bad(format!("property {name} has unknown type `{ty}`")));
-                }
-                props.push((name.to_string(), ty.to_string()));
-            }
-            _ => {}
+            let props = vertex
+                .properties
+                .iter()
+                .map(|p| match p.kind {
+                    PlyPropertyKind::Scalar(t) => Ok((p.name.clone(), t)),
+                    PlyPropertyKind::List { .. } => {
+                        Err(bad("list properties in `vertex` are not supported".into()))
+                    }
+                })
+                .collect::<Result<Vec<_>>>()?;
+            (Some(vertex.count), props)
         }
-    }
+    };
     let count = count.ok_or_else(|| bad("no `vertex` element".into()))?;
     if count == 0 {
         return Err(bad("holds no Gaussians (vertex count 0)".into()));
@@ -161,8 +112,8 @@ pub fn check_gaussian_ply(path: &Path) -> Result<GaussianPly> {
     let mut offset = 0;
     let mut all = BTreeMap::new();
     for (name, ty) in &props {
-        all.insert(name.clone(), (offset, ty.clone()));
-        offset += scalar_size(ty).unwrap_or(0);
+        all.insert(name.clone(), (offset, *ty));
+        offset += ty.size();
     }
     let stride = offset;
     let mut offsets = BTreeMap::new();
@@ -174,9 +125,9 @@ pub fn check_gaussian_ply(path: &Path) -> Result<GaussianPly> {
                      x y z f_dc_* f_rest_* opacity scale_* rot_*)"
                 )));
             }
-            Some((_, ty)) if ty != "float" && ty != "float32" => {
+            Some((_, ty)) if *ty != PlyScalar::F32 => {
                 return Err(bad(format!(
-                    "property {name} is `{ty}`; the viewer reads Gaussian parameters as `float`"
+                    "property {name} is {ty:?}; the viewer reads Gaussian parameters as `float`"
                 )));
             }
             Some((o, _)) => {
