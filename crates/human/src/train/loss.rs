@@ -23,6 +23,7 @@ use serde::{Deserialize, Serialize};
 
 use super::forward::{image_tensor, mask_tensor};
 use super::prepare::PreparedView;
+use crate::error::HumanError;
 use crate::gaussians::{PixelMaps, Rendered, render_gaussians};
 use crate::net::HeadOutputs;
 
@@ -57,13 +58,19 @@ pub struct LossParts {
     pub total: f32,
 }
 
-fn scalar(t: &Tensor<1>) -> f32 {
-    t.clone()
+/// The value of a one-element loss term, read back for the log; `what` names the term in the
+/// error when the read-back fails.
+fn scalar(t: &Tensor<1>, what: &str) -> Result<f32, HumanError> {
+    let failed = |message: String| HumanError::argument("training", message);
+    let values = t
+        .clone()
         .into_data()
         .try_to_vec::<f32>()
-        .ok()
-        .and_then(|v| v.first().copied())
-        .unwrap_or(f32::NAN)
+        .map_err(|e| failed(format!("reading the {what} loss back: {e:?}")))?;
+    values
+        .first()
+        .copied()
+        .ok_or_else(|| failed(format!("the {what} loss has no value")))
 }
 
 /// Laplace NLL `mean(c·e − log c)` over the pixels where `valid` is 1.
@@ -161,7 +168,7 @@ pub fn training_loss(
     rendered: &Rendered,
     target: &PreparedView,
     weights: &LossWeights,
-) -> (Tensor<1>, LossParts) {
+) -> Result<(Tensor<1>, LossParts), HumanError> {
     let device = rendered.rgb.device();
     let truth = image_tensor(&target.image, &device)
         * mask_tensor(&target.mask, &device).permute([1, 2, 0]);
@@ -182,15 +189,15 @@ pub fn training_loss(
         .flatten();
     let silhouette = silhouette_term(gaussians, rendered, heads, views, target);
     let mut parts = LossParts {
-        photometric: scalar(&photometric),
-        silhouette: scalar(&silhouette),
+        photometric: scalar(&photometric, "photometric")?,
+        silhouette: scalar(&silhouette, "silhouette")?,
         ..Default::default()
     };
     let mut total = photometric + silhouette * weights.silhouette;
     if let Some(d) = depth {
-        parts.depth = scalar(&d);
+        parts.depth = scalar(&d, "depth")?;
         total = total + d * weights.depth;
     }
-    parts.total = scalar(&total);
-    (total, parts)
+    parts.total = scalar(&total, "total")?;
+    Ok((total, parts))
 }

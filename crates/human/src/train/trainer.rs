@@ -324,7 +324,7 @@ impl<'a> Trainer<'a> {
             &rendered,
             target_view,
             &self.config.loss,
-        );
+        )?;
         if !parts.total.is_finite() {
             return Err(HumanError::argument(
                 "training",

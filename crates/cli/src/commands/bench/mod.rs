@@ -5,6 +5,7 @@ mod report;
 mod sections;
 mod table;
 
+use anyhow::Context;
 use fewview_scene::synthetic::{DemoOptions, demo_dataset};
 
 pub use self::args::Args;
@@ -114,7 +115,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let blend = match args.wants(Section::Blend) {
         true => {
             eprintln!("Poisson blend 1024x1024x3 ...");
-            fewview_geom::bench::blend_1024().ok()
+            Some(fewview_geom::bench::blend_1024().context("the Poisson blend benchmark")?)
         }
         false => None,
     };
