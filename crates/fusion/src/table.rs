@@ -37,6 +37,8 @@ pub struct TableRow {
     pub path_lpips: Option<f64>,
     /// The ground truth's own local popping along the path.
     pub truth_popping: Option<f64>,
+    /// The run's local popping in excess of the truth's (runs scored before it: none).
+    pub popping_excess: Option<f64>,
     pub train_seconds: f64,
 }
 
@@ -113,6 +115,7 @@ pub fn read_row(dir: &Path) -> Result<TableRow, FusionError> {
         path_psnr_delta: optional("/truth/psnr/delta/mean"),
         path_lpips: optional("/truth/lpips/mean"),
         truth_popping: optional("/truth/truth_popping/p99"),
+        popping_excess: optional("/truth/popping_excess/p99"),
         train_seconds: number(&metrics, "/train_seconds", &m)?,
     })
 }
@@ -143,12 +146,12 @@ pub fn markdown(rows: &[TableRow]) -> String {
         "| run | dataset | variant | seed | held-out PSNR raw / gain-matched | SSIM raw / g.-m. \
          | LPIPS (ST-Alex) raw / g.-m. | local popping all / overlap (levels) \
          | path warping error ×10³ | path PSNR vs truth raw / g.-m. | path LPIPS \
-         | truth's popping | train s |\n\
+         | truth's popping / excess over it | train s |\n\
          |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         out.push_str(&format!(
-            "| {} | {} | {} | {} | {:.2} / {:.2} | {:.4} / {:.4} | {} / {} | {:.1} / {} | {:.4} | {} / {} | {} | {} | {:.0} |\n",
+            "| {} | {} | {} | {} | {:.2} / {:.2} | {:.4} / {:.4} | {} / {} | {:.1} / {} | {:.4} | {} / {} | {} | {} / {} | {:.0} |\n",
             run_label(&r.run),
             r.dataset,
             r.variant,
@@ -166,6 +169,7 @@ pub fn markdown(rows: &[TableRow]) -> String {
             opt(r.path_psnr_gain_matched, 2),
             opt(r.path_lpips, 4),
             opt(r.truth_popping.map(|p| p * 255.0), 1),
+            opt(r.popping_excess.map(|p| p * 255.0), 1),
             r.train_seconds,
         ));
     }

@@ -17,7 +17,8 @@
 //!   shows what one photo or none constrains.
 //! * With a **ground truth along the path** (the demo scene's ray tracer): per-frame PSNR, SSIM,
 //!   LPIPS against the true frames, their Δ, and the truth's own warping error and popping (its
-//!   view-dependent highlight moves, so an exact render's warping error is that, not 0). When the
+//!   view-dependent highlight moves, so an exact render's warping error is that, not 0), and the
+//!   clip's popping in excess of the truth's, transition by transition. When the
 //!   training photos' exposures differ, the truth of a frame between two photos has their gains
 //!   interpolated log-linearly ([`fewview_scene::photometric`]): the natural colour transition.
 //!   The path PSNR is also given after one gain per channel for the whole clip
@@ -28,7 +29,9 @@ use fewview_geom::colormap::colorize_range;
 use fewview_metrics::flow::{Onlooker, path_flows, views_seeing};
 use fewview_metrics::gain::{gain_matched, sequence_gain_matched};
 use fewview_metrics::lpips::Lpips;
-use fewview_metrics::popping::{Popping, local_popping, local_popping_with, popping_of_maps};
+use fewview_metrics::popping::{
+    Popping, local_popping, local_popping_with, popping_excess, popping_of_maps,
+};
 use fewview_metrics::psnr::{psnr, psnr_from_mse};
 use fewview_metrics::ssim::SsimOptions;
 use fewview_metrics::temporal::{
@@ -166,6 +169,10 @@ pub struct PathTruth {
     pub truth_popping: Popping,
     /// The same without the low-pass.
     pub truth_popping_per_pixel: Popping,
+    /// Local popping in excess of the truth's along the same flows
+    /// ([`fewview_metrics::popping::popping_excess`]): what the clip adds to what the scene
+    /// itself does between the frames.
+    pub popping_excess: Popping,
 }
 
 /// How smooth a transition is (see the module docs).
@@ -264,6 +271,7 @@ pub fn score_transition(
                 .zip(gt)
                 .map(|(m, g)| psnr(m, g))
                 .collect::<Result<Vec<f64>, _>>()?;
+            let truth_popping = local_popping(gt, &flows)?.0;
             Some(PathTruth {
                 psnr: r.psnr,
                 psnr_gain_matched: MetricSeries::new("psnr", matched),
@@ -273,7 +281,8 @@ pub fn score_transition(
                     "warping_error",
                     warping_errors(gt, &flows)?,
                 ),
-                truth_popping: local_popping(gt, &flows)?.0,
+                popping_excess: popping_excess(&popping, &truth_popping)?,
+                truth_popping,
                 truth_popping_per_pixel: local_popping_with(gt, &flows, 0.0)?.0,
             })
         }

@@ -226,9 +226,82 @@ pub fn popping_of_maps(maps: &[Vec<f32>], keep: Option<&[Vec<bool>]>) -> Result<
     })
 }
 
+/// Popping in excess of a reference's along the same flows: per transition, how far the clip's
+/// popping exceeds the reference's (`max(0, clip − reference)`; `NaN` where either is), then
+/// its 99th percentile and mean as in [`Popping`]. With a ray-traced truth as the reference, what
+/// the truth itself does along the path (a moving highlight, a gain ramp between photos of
+/// different exposure) is not counted against the clip. Both must have the same transitions.
+pub fn popping_excess(clip: &Popping, reference: &Popping) -> Result<Popping> {
+    if clip.per_transition.len() != reference.per_transition.len() {
+        return Err(MetricsError::ShapeMismatch(format!(
+            "{} transitions against the reference's {}",
+            clip.per_transition.len(),
+            reference.per_transition.len()
+        )));
+    }
+    let per_transition: Vec<f64> = clip
+        .per_transition
+        .iter()
+        .zip(&reference.per_transition)
+        .map(|(c, r)| {
+            if c.is_finite() && r.is_finite() {
+                (c - r).max(0.0)
+            } else {
+                f64::NAN
+            }
+        })
+        .collect();
+    let p99 = percentile(per_transition.iter().copied(), POPPING_PERCENTILE).ok_or_else(|| {
+        MetricsError::invalid("no transition is scored in both: popping excess is undefined")
+    })?;
+    let finite: Vec<f64> = per_transition
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    let mean = finite.iter().sum::<f64>() / finite.len() as f64;
+    Ok(Popping {
+        per_transition,
+        p99,
+        mean,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A still camera over five frames: the truth brightens by 10 levels at transition 2, the
+    /// clip by 25 there and by 4 at transition 3, where the truth holds. The excess is 15 and 4
+    /// levels at those transitions and 0 elsewhere, whatever the low-pass (the frames are flat).
+    #[test]
+    fn the_excess_over_the_truth_is_what_the_clip_adds() {
+        let (w, h) = (12, 10);
+        let clip_levels = [100.0, 100.0, 125.0, 129.0, 129.0];
+        let truth_levels = [100.0, 100.0, 110.0, 110.0, 110.0];
+        let frames = |levels: &[f32]| -> Vec<Image> {
+            levels
+                .iter()
+                .map(|&l| Image::filled(w, h, &[l / 255.0; 3]))
+                .collect()
+        };
+        let flows = vec![still(w, h); 4];
+        let clip = local_popping(&frames(&clip_levels), &flows).unwrap().0;
+        let truth = local_popping(&frames(&truth_levels), &flows).unwrap().0;
+        let excess = popping_excess(&clip, &truth).unwrap();
+        let levels: Vec<f64> = excess.per_transition.iter().map(|v| v * 255.0).collect();
+        for (got, want) in levels.iter().zip([0.0, 15.0, 4.0, 0.0]) {
+            assert!((got - want).abs() < 1e-3, "{levels:?}");
+        }
+        assert!((excess.p99 * 255.0 - 15.0).abs() < 1e-3);
+        assert!((excess.mean * 255.0 - 19.0 / 4.0).abs() < 1e-3);
+        let short = Popping {
+            per_transition: vec![0.0; 3],
+            p99: 0.0,
+            mean: 0.0,
+        };
+        assert!(popping_excess(&clip, &short).is_err());
+    }
 
     fn still(w: usize, h: usize) -> Flow {
         Flow {

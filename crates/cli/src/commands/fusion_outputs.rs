@@ -106,9 +106,10 @@ pub fn print_transition(r: &TransitionReport) {
                 .unwrap_or_default()
         );
         println!(
-            "truth's popping  {:.1} levels (unfiltered {:.1})",
+            "truth's popping  {:.1} levels (unfiltered {:.1}); the clip's in excess of it {:.1}",
             t.truth_popping.p99 * 255.0,
-            t.truth_popping_per_pixel.p99 * 255.0
+            t.truth_popping_per_pixel.p99 * 255.0,
+            t.popping_excess.p99 * 255.0
         );
     }
 }
