@@ -136,6 +136,25 @@ fn train_then_eval_and_render_agree_with_the_run() {
     }
     let (frames, _) = fewview_video::read_video(&video).unwrap();
     assert_eq!(frames.len(), 2 * 3 + 1);
+
+    // The held-out ST-LPIPS in metrics.json is the mean over the saved renders against their
+    // photos (within the renders' 8-bit rounding).
+    assert!(stdout.contains("held-out LPIPS"), "{stdout}");
+    let lpips = fewview_metrics::lpips::Lpips::default_st_alex().unwrap();
+    let mut distances = Vec::new();
+    for entry in std::fs::read_dir(run.join("renders/test")).unwrap() {
+        let p = entry.unwrap().path();
+        let render = fewview_scene::Image::load(&p).unwrap();
+        let photo = fewview_scene::Image::load(&data.join("images_8").join(p.file_name().unwrap()))
+            .unwrap();
+        distances.push(lpips.distance(&render, &photo).unwrap());
+    }
+    let want = distances.iter().sum::<f64>() / distances.len() as f64;
+    let got = metrics["lpips"]["mean"].as_f64().unwrap();
+    assert!(
+        !distances.is_empty() && (got - want).abs() < 5e-3,
+        "{got} vs {want}"
+    );
 }
 
 #[test]

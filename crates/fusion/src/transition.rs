@@ -458,6 +458,22 @@ fn write_popping_maps(
     Ok(())
 }
 
+/// [`held_out_lpips`] of the finished run in `dir` (its `point_cloud.ply`), rendered over the
+/// dataset's background: the LPIPS column of `fewview train`'s scores.
+pub fn held_out_lpips_of_run(
+    ds: &Dataset,
+    dir: &Path,
+    lpips: &Lpips,
+) -> Result<(f64, f64), FusionError> {
+    let model = read_ply(&dir.join("point_cloud.ply"))?;
+    let settings = RenderSettings {
+        background: ds.background,
+        sh_degree: model.sh_degree(),
+        ..RenderSettings::default()
+    };
+    held_out_lpips(ds, &model, &settings, lpips)
+}
+
 /// Mean LPIPS of `model`'s renders of the held-out views against their photos: raw, and after
 /// the per-channel gain fit ([`fewview_metrics::gain`]).
 pub fn held_out_lpips(

@@ -23,7 +23,7 @@ use super::train_args::TrainArgs;
 ///
 /// Writes a run directory: `config.json`, `checkpoint.bin` while training (resume with
 /// `--resume`), `point_cloud.ply` (Inria layout, opens in splat viewers), `renders/test/*.png`
-/// and `metrics.json` (PSNR, SSIM per held-out view and their means).
+/// and `metrics.json` (PSNR, SSIM per held-out view and their means; ST-LPIPS means).
 #[derive(Debug, ClapArgs)]
 pub struct Args {
     #[command(flatten)]
@@ -41,6 +41,12 @@ pub struct Args {
     /// held out (a capture of 8 photos or fewer), else held-out.
     #[arg(long, value_enum, value_name = "MODE")]
     pub eval: Option<EvalMode>,
+    /// Skip LPIPS of the held-out views.
+    ///
+    /// By default the held-out views are also scored by ST-LPIPS (AlexNet; the original LPIPS
+    /// backbones cannot be fetched), raw and gain-matched, into `metrics.json` under `lpips`.
+    #[arg(long)]
+    pub no_lpips: bool,
     /// Continue the run in `--out`.
     ///
     /// From its last checkpoint, with the same flags as the first time. A checkpoint of another
@@ -115,6 +121,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let summary = train_with_progress(&ds, &cfg, &out, args.resume)?;
         print_summary(&summary, &out);
         poses_first::record_memory(&out, &poses_memory, &summary.memory, &Default::default())?;
+        if !args.no_lpips && !ds.test.is_empty() {
+            score_lpips(&ds, &out)?;
+        }
     }
     if eval == EvalMode::LeaveOneOut {
         let train = |ds: &fewview_scene::Dataset, dir: &std::path::Path, resume: bool| {
@@ -124,6 +133,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             leave_one_out::print(&report);
         }
     }
+    Ok(())
+}
+
+/// Scores the held-out views of the run in `out` by ST-LPIPS, adds them to its `metrics.json`
+/// (`lpips`: the network, the mean raw and gain-matched) and prints them.
+fn score_lpips(ds: &fewview_scene::Dataset, out: &std::path::Path) -> anyhow::Result<()> {
+    let lpips = fewview_metrics::lpips::Lpips::default_st_alex()?;
+    let (raw, matched) = fewview_fusion::transition::held_out_lpips_of_run(ds, out, &lpips)?;
+    let value = serde_json::json!({
+        "network": "ST-LPIPS AlexNet",
+        "mean": raw,
+        "mean_gain_matched": matched,
+    });
+    fewview_fusion::leave_one_out::add_to_json(&out.join("metrics.json"), "lpips", &value)?;
+    println!("held-out LPIPS   {raw:.4}, gain-matched {matched:.4} (ST-LPIPS AlexNet)");
     Ok(())
 }
 
