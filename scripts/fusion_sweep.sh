@@ -34,15 +34,18 @@ runs=()
 for c in "${order[@]}"; do
   [[ -v "conditions[$c]" ]] || { echo "unknown condition $c" >&2; exit 2; }
   for v in plain gf; do
+    # gf as the supplement reads it (the sweep's figures predate gf's default of 2026-12-06).
+    extra=""
+    [[ $v == gf ]] && extra="--match-exposure false --occlusion own-depth"
     dir="$out/$c/$v"
     if [[ -f "$dir/transition.json" && "${RESCORE:-0}" == 1 ]]; then
       # shellcheck disable=SC2086
-      "$bin" fusion --demo ${conditions[$c]} --variant "$v" --seed 0 --rescore --out "$dir" \
+      "$bin" fusion --demo ${conditions[$c]} --variant "$v" $extra --seed 0 --rescore --out "$dir" \
         > "$out/$c/$v.rescore.log" 2>&1
     elif [[ ! -f "$dir/transition.json" ]]; then
       mkdir -p "$out/$c"
       # shellcheck disable=SC2086
-      "$bin" fusion --demo ${conditions[$c]} --variant "$v" --seed 0 --out "$dir" \
+      "$bin" fusion --demo ${conditions[$c]} --variant "$v" $extra --seed 0 --out "$dir" \
         > "$out/$c/$v.log" 2>&1
     fi
     runs+=("$dir")

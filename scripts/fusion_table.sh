@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The fusion paper's method, its alternatives and the per-photo appearance model side by side:
-# plain, (a)-(e), gf, affine (plain with a colour transform per photo), gf+affine and gf with
-# its references brought to one exposure and tested against each other (gf-me-occ), seeds 0
+# plain, (a)-(e), gf as the supplement reads (its references as they are, hidden by the virtual
+# view's depth), affine (plain with a colour transform per photo), gf+affine and gf with its
+# references brought to one exposure and tested against each other (gf-me-occ, gf's default
+# since 2026-12-06), seeds 0
 # and 1, on the demo scene with a phone's exposure (0.5 EV, 5 % white balance) and its highlight
 # at full strength (0.4, 40), and on LLFF fern 3-view with the same jitter; then one Markdown
 # table per scene (docs/guide/fusion.md).
@@ -27,9 +29,9 @@ variants=(
   "tv|--variant tv"
   "l1-virtual|--variant l1-virtual"
   "poisson|--variant poisson"
-  "gf|--variant gf"
+  "gf|--variant gf --match-exposure false --occlusion own-depth"
   "affine|--variant plain --appearance affine"
-  "gf+affine|--variant gf --appearance affine"
+  "gf+affine|--variant gf --appearance affine --match-exposure false --occlusion own-depth"
   "gf-me-occ|--variant gf --match-exposure --occlusion meshes"
 )
 run_scene() {

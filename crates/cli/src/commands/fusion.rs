@@ -112,20 +112,23 @@ pub struct Args {
     #[arg(long, default_value_t = FusionConfig::default().refresh_interval,
           value_parser = super::number_args::positive_count)]
     pub refresh: usize,
-    /// Even the exposures of photos in a virtual view.
+    /// Even the exposures of photos in a virtual view (default: on for gf).
     ///
     /// Bring the two photos reprojected into a virtual view to one exposure (their gain ratio
     /// where both see the surface, interpolated log-linearly) before the guidance field (or the
-    /// pseudo ground truth of l1-virtual and poisson) is built from them.
-    #[arg(long)]
-    pub match_exposure: bool,
-    /// What hides a reprojected photo in a virtual view.
+    /// pseudo ground truth of l1-virtual and poisson) is built from them. `--match-exposure`
+    /// alone is `true`; `--match-exposure false` takes the references as they are (the
+    /// supplement's reading). Default: on for gf, off for the alternatives.
+    #[arg(long, value_name = "BOOL", num_args = 0..=1, default_missing_value = "true")]
+    pub match_exposure: Option<bool>,
+    /// What hides a reprojected photo in a virtual view (default: meshes for gf).
     ///
     /// What decides that a photo reprojected into a virtual view shows what that view sees
-    /// (with `own-depth`, a floater in the virtual view hides the photos behind it from the
-    /// loss; `meshes` ignores what the virtual view renders in front).
-    #[arg(long, value_enum, default_value_t)]
-    pub occlusion: Occlusion,
+    /// (with `own-depth`, the supplement's reading, a floater in the virtual view hides the
+    /// photos behind it from the loss; `meshes` ignores what the virtual view renders in
+    /// front). Default: meshes for gf, own-depth for the alternatives.
+    #[arg(long, value_enum)]
+    pub occlusion: Option<Occlusion>,
     /// How the run is scored: leave-one-out or held-out.
     ///
     /// `leave-one-out` holds each of up to three interior photos out in turn and trains the
@@ -342,17 +345,17 @@ fn print_table(runs: &[PathBuf]) -> anyhow::Result<()> {
 
 /// The regulariser's flags as the library's configuration.
 fn fusion_config(args: &Args) -> FusionConfig {
+    let defaults = FusionConfig::for_variant(args.variant);
     FusionConfig {
-        variant: args.variant,
         weight: args.weight,
         every: args.every,
         refresh_interval: args.refresh,
-        match_exposure: args.match_exposure,
+        match_exposure: args.match_exposure.unwrap_or(defaults.match_exposure),
         reproject: ReprojectOptions {
-            occlusion: args.occlusion,
-            ..ReprojectOptions::default()
+            occlusion: args.occlusion.unwrap_or(defaults.reproject.occlusion),
+            ..defaults.reproject
         },
-        ..FusionConfig::default()
+        ..defaults
     }
 }
 
@@ -366,5 +369,29 @@ mod tests {
         let args: super::Args = parse(&["fusion", "--demo", "--out", "o"]);
         let config = super::fusion_config(&args);
         assert_eq!(config, super::FusionConfig::default());
+        // The alternatives keep the supplement's reading unless asked otherwise.
+        let args: super::Args = parse(&["fusion", "--demo", "--variant", "poisson", "--out", "o"]);
+        let config = super::fusion_config(&args);
+        assert!(!config.match_exposure);
+        assert_eq!(
+            config.reproject.occlusion,
+            fewview_fusion::reproject::Occlusion::OwnDepth
+        );
+        let args: super::Args = parse(&[
+            "fusion",
+            "--demo",
+            "--match-exposure",
+            "false",
+            "--occlusion",
+            "own-depth",
+            "--out",
+            "o",
+        ]);
+        let config = super::fusion_config(&args);
+        assert!(!config.match_exposure);
+        assert_eq!(
+            config.reproject.occlusion,
+            fewview_fusion::reproject::Occlusion::OwnDepth
+        );
     }
 }
