@@ -210,9 +210,17 @@ pub fn popping_of_maps(maps: &[Vec<f32>], keep: Option<&[Vec<bool>]>) -> Result<
             percentile(kept, POPPING_PERCENTILE).unwrap_or(f64::NAN)
         })
         .collect();
-    let p99 = percentile(per_transition.iter().copied(), POPPING_PERCENTILE).ok_or_else(|| {
-        MetricsError::invalid("no transition has a co-visible pixel: popping is undefined")
-    })?;
+    summarised(
+        per_transition,
+        "no transition has a co-visible pixel: popping is undefined",
+    )
+}
+
+/// [`Popping`] of per-transition values: their 99th percentile and the mean of the finite ones;
+/// `undefined` is the error when no value is finite.
+fn summarised(per_transition: Vec<f64>, undefined: &str) -> Result<Popping> {
+    let p99 = percentile(per_transition.iter().copied(), POPPING_PERCENTILE)
+        .ok_or_else(|| MetricsError::invalid(undefined))?;
     let finite: Vec<f64> = per_transition
         .iter()
         .copied()
@@ -251,20 +259,10 @@ pub fn popping_excess(clip: &Popping, reference: &Popping) -> Result<Popping> {
             }
         })
         .collect();
-    let p99 = percentile(per_transition.iter().copied(), POPPING_PERCENTILE).ok_or_else(|| {
-        MetricsError::invalid("no transition is scored in both: popping excess is undefined")
-    })?;
-    let finite: Vec<f64> = per_transition
-        .iter()
-        .copied()
-        .filter(|v| v.is_finite())
-        .collect();
-    let mean = finite.iter().sum::<f64>() / finite.len() as f64;
-    Ok(Popping {
+    summarised(
         per_transition,
-        p99,
-        mean,
-    })
+        "no transition is scored in both: popping excess is undefined",
+    )
 }
 
 #[cfg(test)]

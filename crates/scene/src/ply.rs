@@ -80,6 +80,39 @@ pub struct PlyHeader {
     pub bytes: usize,
 }
 
+impl PlyHeader {
+    /// The row count and scalar properties of a `vertex` element that comes first and once, as
+    /// readers that take the body row by row from its start need (Gaussian splat files); a
+    /// list property, another element first, or a second `vertex` is an error.
+    pub fn leading_vertex(&self) -> std::result::Result<(usize, Vec<(String, PlyScalar)>), String> {
+        let vertex = match self.elements.as_slice() {
+            [] => return Err("no `vertex` element".into()),
+            [first, ..] if first.name != "vertex" => {
+                return Err(format!(
+                    "element `{}` comes before `vertex`; the vertices must come first",
+                    first.name
+                ));
+            }
+            [vertex, rest @ ..] if rest.iter().any(|e| e.name == "vertex") => {
+                return Err(format!("two `vertex` elements ({} and more)", vertex.count));
+            }
+            [vertex, ..] => vertex,
+        };
+        let properties = vertex
+            .properties
+            .iter()
+            .map(|p| match p.kind {
+                PlyPropertyKind::Scalar(t) => Ok((p.name.clone(), t)),
+                PlyPropertyKind::List { .. } => Err(format!(
+                    "list property {} in `vertex` is not supported",
+                    p.name
+                )),
+            })
+            .collect::<std::result::Result<_, _>>()?;
+        Ok((vertex.count, properties))
+    }
+}
+
 /// The most header lines [`read_header`] reads before giving up (a Gaussian PLY has about 70).
 pub const MAX_HEADER_LINES: usize = 10_000;
 

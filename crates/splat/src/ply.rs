@@ -10,8 +10,7 @@ use std::io::{BufReader, Read, Write};
 use std::path::Path;
 
 use fewview_scene::SceneError;
-use fewview_scene::ply::{PlyEncoding, PlyHeader, PlyPropertyKind, read_header};
-use fewview_scene::ply_scalar::PlyScalar;
+use fewview_scene::ply::{PlyEncoding, read_header};
 
 use crate::model::GaussianModel;
 
@@ -63,39 +62,13 @@ pub fn write_ply(path: &Path, model: &GaussianModel) -> Result<(), SceneError> {
     })
 }
 
-/// The row count and scalar properties of the header's `vertex` element, which must come first
-/// (the body is read row by row from the start) and hold no lists.
-fn vertex_properties(header: &PlyHeader) -> Result<(usize, Vec<(String, PlyScalar)>), String> {
-    let vertex = match header.elements.first() {
-        Some(e) if e.name == "vertex" => e,
-        Some(e) => {
-            return Err(format!(
-                "element `{}` comes before `vertex`; elements before `vertex` are not supported",
-                e.name
-            ));
-        }
-        None => return Err("no `vertex` element".into()),
-    };
-    let props = vertex
-        .properties
-        .iter()
-        .map(|p| match p.kind {
-            PlyPropertyKind::Scalar(t) => Ok((p.name.clone(), t)),
-            PlyPropertyKind::List { .. } => {
-                Err("list properties in `vertex` are not supported".to_string())
-            }
-        })
-        .collect::<Result<_, _>>()?;
-    Ok((vertex.count, props))
-}
-
 /// Reads a Gaussian PLY (Inria layout; see the module docs for what is accepted).
 pub fn read_ply(path: &Path) -> Result<GaussianModel, SceneError> {
     let file = std::fs::File::open(path).map_err(|e| SceneError::io(path, e))?;
     let mut r = BufReader::new(file);
     let bad = |m: String| SceneError::format(path, m);
     let header = read_header(&mut r).map_err(bad)?;
-    let (n, props) = vertex_properties(&header).map_err(bad)?;
+    let (n, props) = header.leading_vertex().map_err(bad)?;
     if n == 0 {
         return Err(SceneError::invalid(
             path,

@@ -12,7 +12,7 @@ use std::collections::BTreeMap;
 use std::io::BufReader;
 use std::path::Path;
 
-use fewview_scene::ply::{PlyEncoding, PlyPropertyKind, read_header};
+use fewview_scene::ply::{PlyEncoding, read_header};
 use fewview_scene::ply_scalar::PlyScalar;
 use serde::Serialize;
 
@@ -65,32 +65,7 @@ pub fn check_gaussian_ply(path: &Path) -> Result<GaussianPly> {
         )));
     }
     let header_bytes = header.bytes;
-    let (count, props) = match header.elements.as_slice() {
-        [] => (None, Vec::new()),
-        [first, ..] if first.name != "vertex" => {
-            return Err(bad(format!(
-                "element `{}` comes before `vertex`; the viewer reads the vertices first",
-                first.name
-            )));
-        }
-        [vertex, rest @ ..] => {
-            if rest.iter().any(|e| e.name == "vertex") {
-                return Err(bad("two `vertex` elements".into()));
-            }
-            let props = vertex
-                .properties
-                .iter()
-                .map(|p| match p.kind {
-                    PlyPropertyKind::Scalar(t) => Ok((p.name.clone(), t)),
-                    PlyPropertyKind::List { .. } => {
-                        Err(bad("list properties in `vertex` are not supported".into()))
-                    }
-                })
-                .collect::<Result<Vec<_>>>()?;
-            (Some(vertex.count), props)
-        }
-    };
-    let count = count.ok_or_else(|| bad("no `vertex` element".into()))?;
+    let (count, props) = header.leading_vertex().map_err(bad)?;
     if count == 0 {
         return Err(bad("holds no Gaussians (vertex count 0)".into()));
     }
