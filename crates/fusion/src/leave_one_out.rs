@@ -11,11 +11,11 @@ use fewview_metrics::gain::gain_matched;
 use fewview_metrics::lpips::Lpips;
 use fewview_scene::{Camera, Dataset};
 use fewview_splat::eval::{render_model, score};
-use fewview_splat::ply::read_ply;
-use fewview_splat::raster::{RenderCamera, RenderSettings};
+use fewview_splat::raster::RenderCamera;
 use serde::{Deserialize, Serialize};
 
 use crate::error::FusionError;
+use crate::transition::model_of_run;
 
 /// How a run is scored.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -135,16 +135,11 @@ pub fn score_left_out(
     dir: &Path,
     lpips: Option<&Lpips>,
 ) -> Result<LeftOut, FusionError> {
-    let model = read_ply(&dir.join("point_cloud.ply"))?;
+    let (model, settings) = model_of_run(left_out, dir)?;
     let view = left_out
         .test_views()
         .next()
         .ok_or_else(|| FusionError::Invalid("no view is held out".into()))?;
-    let settings = RenderSettings {
-        background: left_out.background,
-        sh_degree: model.sh_degree(),
-        ..RenderSettings::default()
-    };
     let rendered = render_model(&model, &RenderCamera::from(&view.camera), &settings).rgb;
     let s = score(&view.name, &rendered, view)?;
     let (lpips_raw, lpips_matched) = match lpips {

@@ -324,12 +324,7 @@ pub fn transition_of_run(
     truth: Option<TruthRenderer<'_>>,
     lpips: Option<&Lpips>,
 ) -> Result<TransitionReport, FusionError> {
-    let model = read_ply(&dir.join("point_cloud.ply"))?;
-    let settings = RenderSettings {
-        background: ds.background,
-        sh_degree: model.sh_degree(),
-        ..RenderSettings::default()
-    };
+    let (model, settings) = model_of_run(ds, dir)?;
     // One frame size for the clip: photos of other sizes keep their field of view.
     let first = &ds.views[ds.train[0]].camera;
     let (w, h) = (first.width(), first.height());
@@ -465,13 +460,23 @@ pub fn held_out_lpips_of_run(
     dir: &Path,
     lpips: &Lpips,
 ) -> Result<(f64, f64), FusionError> {
+    let (model, settings) = model_of_run(ds, dir)?;
+    held_out_lpips(ds, &model, &settings, lpips)
+}
+
+/// The finished run in `dir` (its `point_cloud.ply`) and the settings that render it over the
+/// dataset's background at the model's SH degree.
+pub(crate) fn model_of_run(
+    ds: &Dataset,
+    dir: &Path,
+) -> Result<(GaussianModel, RenderSettings), FusionError> {
     let model = read_ply(&dir.join("point_cloud.ply"))?;
     let settings = RenderSettings {
         background: ds.background,
         sh_degree: model.sh_degree(),
         ..RenderSettings::default()
     };
-    held_out_lpips(ds, &model, &settings, lpips)
+    Ok((model, settings))
 }
 
 /// Mean LPIPS of `model`'s renders of the held-out views against their photos: raw, and after
