@@ -632,6 +632,16 @@ impl Lpips {
         self.distance_between(&fa, &fb)
     }
 
+    /// The smallest width and height this network scores: its strided layers need that many
+    /// pixels to leave a feature map at every stage.
+    pub fn min_side(&self) -> usize {
+        match self.net {
+            LpipsNet::Alex | LpipsNet::StAlex => 32,
+            LpipsNet::Squeeze => 24,
+            LpipsNet::Vgg | LpipsNet::StVgg => 16,
+        }
+    }
+
     /// The channel-normalised feature maps of one image, to compare it with several others
     /// without recomputing the backbone ([`Self::distance_between`]).
     pub fn features_of(&self, img: &Image) -> Result<LpipsFeatures> {
@@ -640,11 +650,7 @@ impl Lpips {
                 "image contains NaN or infinite values",
             ));
         }
-        let min = match self.net {
-            LpipsNet::Alex | LpipsNet::StAlex => 32,
-            LpipsNet::Squeeze => 24,
-            LpipsNet::Vgg | LpipsNet::StVgg => 16,
-        };
+        let min = self.min_side();
         if img.width < min || img.height < min {
             return Err(MetricsError::invalid(format!(
                 "{} needs images of at least {min}x{min} pixels, got {}x{}",

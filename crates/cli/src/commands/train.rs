@@ -140,6 +140,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// (`lpips`: the network, the mean raw and gain-matched) and prints them.
 fn score_lpips(ds: &fewview_scene::Dataset, out: &std::path::Path) -> anyhow::Result<()> {
     let lpips = fewview_metrics::lpips::Lpips::default_st_alex()?;
+    let (w, h) = (
+        ds.views[ds.test[0]].image.width,
+        ds.views[ds.test[0]].image.height,
+    );
+    if w.min(h) < lpips.min_side() {
+        let min = lpips.min_side();
+        println!("held-out LPIPS   not scored: the views are {w}x{h}, ST-LPIPS needs {min}x{min}");
+        return Ok(());
+    }
     let (raw, matched) = fewview_fusion::transition::held_out_lpips_of_run(ds, out, &lpips)?;
     let value = serde_json::json!({
         "network": "ST-LPIPS AlexNet",
