@@ -7,6 +7,7 @@
 pub mod bench;
 #[cfg(feature = "gpu")]
 pub mod bench_gpu;
+pub mod benchmark;
 pub use fewview_scene::cputime;
 pub mod device;
 pub mod eval;
@@ -22,6 +23,7 @@ pub mod raster;
 pub mod real;
 pub mod sh;
 pub mod sky_shell;
+pub mod stereo_depth;
 pub mod stereo_pair;
 pub mod stereo_pair_check;
 pub mod stereo_start;

@@ -1,6 +1,7 @@
 //! Subcommands: one module each, exposing `Args` (clap) and `run`.
 
 mod bench;
+mod benchmark;
 mod blend;
 mod chamfer;
 mod dataset_args;
@@ -47,6 +48,7 @@ pub enum Command {
     Render(render::Args),
     Eval(eval::Args),
     Bench(bench::Args),
+    Benchmark(benchmark::Args),
     Stereo(stereo::Args),
     Blend(blend::Args),
     DepthMesh(depth_mesh::Args),
@@ -76,6 +78,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Render(a) => render::run(a),
         Command::Eval(a) => eval::run(a),
         Command::Bench(a) => bench::run(a),
+        Command::Benchmark(a) => benchmark::run(a),
         Command::Stereo(a) => stereo::run(a),
         Command::Blend(a) => blend::run(a),
         Command::DepthMesh(a) => depth_mesh::run(a),

@@ -21,6 +21,13 @@ pub enum TrainBackground {
     Fixed,
 }
 
+impl TrainBackground {
+    /// The choice a library `random_background` flag stands for.
+    fn of(random: bool) -> Self {
+        if random { Self::Random } else { Self::Fixed }
+    }
+}
+
 #[derive(Debug, Clone, Args)]
 pub struct TrainArgs {
     /// Training iterations (default: by scene).
@@ -124,8 +131,25 @@ pub struct TrainArgs {
     /// nerfstudio's splatfacto; a deviation from the fusion paper, it removes floaters that a
     /// fixed background hides) or `fixed` (the dataset's background, as the fusion paper and
     /// Inria 3DGS). Opaque photos always train over the fixed background.
-    #[arg(long, value_name = "HOW", value_enum, default_value_t = TrainBackground::Random)]
+    #[arg(long, value_name = "HOW", value_enum,
+          default_value_t = TrainBackground::of(TrainConfig::sparse_view(1).random_background))]
     pub train_background: TrainBackground,
+    /// Largest opacity-dropout rate (DropGaussian), 0: off.
+    ///
+    /// DropGaussian's opacity dropout: each training render leaves out this share of the
+    /// Gaussians at the last iteration (growing linearly from 0) and scales the others' opacity to
+    /// compensate, so that a few views cannot be fitted by Gaussians leaning on each other.
+    #[arg(long, value_name = "GAMMA", default_value_t = TrainConfig::sparse_view(1).dropout,
+          value_parser = super::number_args::non_negative_f32)]
+    pub dropout: f32,
+    /// Weight of the stereo start's depth as a loss, 0: off.
+    ///
+    /// Weight of the stereo start's depth as a training loss: each training render's depth is
+    /// pulled to the depth stereo accepted at its pixels (R^c fully, R^o half, R^s not), as a
+    /// relative L1. Only with the stereo start.
+    #[arg(long, value_name = "W", default_value_t = RunConfig::new(TrainConfig::sparse_view(1)).stereo_depth_weight,
+          value_parser = super::number_args::non_negative_f32)]
+    pub stereo_depth_weight: f32,
     /// Save a checkpoint every N iterations (0: never).
     #[arg(long, value_name = "N", default_value_t = 500)]
     pub checkpoint_every: usize,
@@ -172,6 +196,7 @@ impl TrainArgs {
         train.background = background;
         train.random_background = self.train_background == TrainBackground::Random;
         train.checkpoint_interval = self.checkpoint_every;
+        train.dropout = self.dropout;
         train.appearance = AppearanceConfig {
             model: self.appearance,
             lr: self.appearance_lr,
@@ -211,6 +236,7 @@ impl TrainArgs {
             stereo,
             device: self.device,
             surface_depth_weight: self.surface_depth_weight,
+            stereo_depth_weight: self.stereo_depth_weight,
         })
     }
 }
@@ -267,23 +293,21 @@ mod tests {
 
     /// The flags' defaults are the library's (the Inria schedule's, which the sparse-view one
     /// keeps): an empty command line gives the sparse-view schedule's training settings and
-    /// the library's start, but for the command's own two choices: a checkpoint every 500
-    /// iterations and a random background behind photos with alpha.
+    /// the library's start, but for the command's own choice of a checkpoint every 500
+    /// iterations.
     #[test]
     fn an_empty_command_line_gives_the_librarys_defaults() {
         let args: TrainArgs = parse(&["train"]);
         let run = args.run_config([0.0; 3], 1000, false).unwrap();
         let library = RunConfig::new(TrainConfig::sparse_view(1000));
         let mut train = run.train.clone();
-        assert_eq!(
-            (train.checkpoint_interval, train.random_background),
-            (500, true)
-        );
+        assert_eq!(train.checkpoint_interval, 500);
+        assert!(train.random_background);
         train.checkpoint_interval = library.train.checkpoint_interval;
-        train.random_background = library.train.random_background;
         assert_eq!(train, library.train);
         assert_eq!(run.init_points, library.init_points);
         assert_eq!(run.stereo, library.stereo);
         assert_eq!(run.surface_depth_weight, library.surface_depth_weight);
+        assert_eq!(run.stereo_depth_weight, library.stereo_depth_weight);
     }
 }

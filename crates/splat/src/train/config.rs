@@ -84,8 +84,9 @@ pub struct TrainConfig {
     /// re-composited over the same colour, on views whose images have alpha (NeRF-synthetic
     /// RGBA). Gaussians must then match the alpha as well as the colour, so floaters that
     /// blend into a fixed white background are pruned. nerfstudio's splatfacto default for
-    /// RGBA data; not in the fusion paper or Inria's 3DGS (whose `--random_background` leaves the
-    /// targets composited over the fixed colour).
+    /// RGBA data, and [`TrainConfig::sparse_view`]'s; not in the fusion paper or Inria's 3DGS
+    /// (whose `--random_background` leaves the targets composited over the fixed colour), so
+    /// [`TrainConfig::inria`] leaves it off.
     #[serde(default)]
     pub random_background: bool,
     /// Gaussians closer than this to a camera (camera z) are culled.
@@ -96,6 +97,10 @@ pub struct TrainConfig {
     /// [`super::appearance`]).
     #[serde(default)]
     pub appearance: AppearanceConfig,
+    /// Largest opacity-dropout rate γ of DropGaussian ([`super::dropout`]), reached at the last
+    /// iteration; 0: off.
+    #[serde(default)]
+    pub dropout: f32,
 }
 
 impl TrainConfig {
@@ -126,6 +131,7 @@ impl TrainConfig {
             near_plane: 0.2,
             checkpoint_interval: 1000,
             appearance: AppearanceConfig::default(),
+            dropout: 0.0,
         }
     }
 
@@ -139,9 +145,11 @@ impl TrainConfig {
     /// every 3000) happens every `max(iterations / 3, 1000)` iterations while densifying, so not
     /// at all in runs of up to 1500 iterations; the SH degree grows every `iterations / 10`
     /// iterations (Inria reaches degree 3 at 10% of its run too); the position learning rate
-    /// decays over the whole run. Learning rates and thresholds are Inria's.
+    /// decays over the whole run. Learning rates and thresholds are Inria's. Views with alpha
+    /// train over a random background ([`TrainConfig::random_background`]).
     pub fn sparse_view(iterations: usize) -> Self {
         let mut c = Self::inria();
+        c.random_background = true;
         c.iterations = iterations;
         c.densify.from_iter = iterations / 5;
         c.densify.until_iter = iterations * 3 / 5;
@@ -190,6 +198,9 @@ impl TrainConfig {
                 "lambda_dssim {} is outside [0, 1]",
                 self.lambda_dssim
             ));
+        }
+        if !(0.0..1.0).contains(&self.dropout) {
+            return Err(format!("dropout rate {} is outside [0, 1)", self.dropout));
         }
         if self.densify.interval == 0 {
             return Err("densify interval must be at least 1".into());

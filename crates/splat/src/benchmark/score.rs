@@ -1,0 +1,131 @@
+//! One run's scores under a protocol: PSNR and SSIM from its `metrics.json` (inside the masks
+//! where the protocol scores there), ST-LPIPS of its held-out renders, its size and time.
+
+use std::path::Path;
+
+use fewview_metrics::lpips::Lpips;
+use fewview_scene::{Dataset, Image};
+use serde::{Deserialize, Serialize};
+
+use super::{BenchmarkError, Protocol};
+use crate::eval::render_model;
+use crate::pipeline::{ResolvedConfig, RunDir};
+use crate::ply::read_ply;
+use crate::raster::{RenderCamera, RenderSettings};
+
+/// The scores of one seed's run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SeedScore {
+    pub seed: u64,
+    pub psnr: f64,
+    pub ssim: f64,
+    /// ST-LPIPS (AlexNet), when scored.
+    pub lpips: Option<f64>,
+    pub gaussians: usize,
+    pub train_seconds: f64,
+}
+
+const SCORE_FILE: &str = "score.json";
+
+impl SeedScore {
+    /// The scores of the finished run in `dir` on `ds`'s held-out views.
+    pub fn of_run(
+        ds: &Dataset,
+        dir: &Path,
+        seed: u64,
+        protocol: Protocol,
+        lpips: Option<&Lpips>,
+    ) -> Result<Self, BenchmarkError> {
+        let run = RunDir(dir.to_path_buf());
+        let bad = |message: String| BenchmarkError::Run {
+            run: dir.to_path_buf(),
+            message,
+        };
+        let metrics: serde_json::Value = read_json(&run.metrics()).map_err(bad)?;
+        let test = &metrics["test"];
+        let (psnr, ssim) = if protocol.masked() {
+            (&test["mean_masked_psnr"], &test["mean_masked_ssim"])
+        } else {
+            (&test["mean_psnr"], &test["mean_ssim"])
+        };
+        let number = |v: &serde_json::Value, what: &str| {
+            v.as_f64()
+                .ok_or_else(|| bad(format!("metrics.json has no {what}")))
+        };
+        let lpips = match lpips {
+            Some(net) => Some(held_out_lpips(ds, &run, net, protocol.masked()).map_err(bad)?),
+            None => None,
+        };
+        Ok(Self {
+            seed,
+            psnr: number(psnr, "PSNR")?,
+            ssim: number(ssim, "SSIM")?,
+            lpips,
+            gaussians: number(&metrics["gaussians"], "Gaussian count")? as usize,
+            train_seconds: number(&metrics["train_seconds"], "training time")?,
+        })
+    }
+
+    /// The scores written in `dir` by an earlier run, if any.
+    pub fn read(dir: &Path) -> Result<Option<Self>, BenchmarkError> {
+        let path = dir.join(SCORE_FILE);
+        if !path.is_file() {
+            return Ok(None);
+        }
+        read_json(&path)
+            .map(Some)
+            .map_err(|message| BenchmarkError::Run {
+                run: dir.to_path_buf(),
+                message,
+            })
+    }
+
+    /// Writes `score.json` in `dir`, atomically.
+    pub fn write(&self, dir: &Path) -> Result<(), BenchmarkError> {
+        let json = serde_json::to_vec_pretty(self).expect("scores serialise");
+        fewview_scene::atomic::write_bytes(&dir.join(SCORE_FILE), &json)
+            .map_err(|e| BenchmarkError::Pipeline(e.into()))
+    }
+}
+
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Mean ST-LPIPS of the run's Gaussians rendered at `ds`'s held-out views, with both images
+/// set to black outside the view's object mask when `masked` (RegNeRF's masked DTU metrics).
+fn held_out_lpips(ds: &Dataset, run: &RunDir, net: &Lpips, masked: bool) -> Result<f64, String> {
+    let config: ResolvedConfig = read_json(&run.config())?;
+    let model = read_ply(&run.ply()).map_err(|e| e.to_string())?;
+    let settings = RenderSettings {
+        background: config.run.train.background,
+        sh_degree: config.run.train.sh_degree,
+        near_plane: config.run.train.near_plane,
+    };
+    let mut total = 0.0;
+    for v in ds.test_views() {
+        let mut rendered = render_model(&model, &RenderCamera::from(&v.camera), &settings).rgb;
+        let mut truth = v.image.clone();
+        if let (true, Some(mask)) = (masked, &v.mask) {
+            rendered = times_mask(&rendered, mask);
+            truth = times_mask(&truth, mask);
+        }
+        total += net
+            .distance(&rendered, &truth)
+            .map_err(|e| format!("LPIPS of view {}: {e}", v.name))?;
+    }
+    Ok(total / ds.test.len().max(1) as f64)
+}
+
+/// `image` with every channel multiplied by the 1-channel `mask`.
+fn times_mask(image: &Image, mask: &Image) -> Image {
+    let c = image.channels;
+    let data = image
+        .data
+        .iter()
+        .enumerate()
+        .map(|(i, v)| v * mask.data[i / c])
+        .collect();
+    Image::from_vec(image.width, image.height, c, data)
+}

@@ -1,0 +1,332 @@
+//! One training run from start to end: check the data, start (or resume), write the run's
+//! header files, train with checkpoints, then write the Gaussians, the held-out renders and
+//! `metrics.json`.
+
+use std::path::Path;
+use std::time::Instant;
+
+use burn::tensor::Device;
+use fewview_scene::memory::StagePeaks;
+use fewview_scene::{Dataset, SceneError};
+
+use super::checkpoint::{load_checkpoint, save_checkpoint};
+use super::run_dir::{ResolvedConfig, RunData, RunDir, RunSummary, write_appearance};
+use super::start::{initial_model_and_start, resolve_init};
+use super::{InitStrategy, PipelineError, RunConfig};
+use crate::eval::{check_scorable, evaluate};
+use crate::model::GaussianModel;
+use crate::ply::write_ply;
+use crate::raster::{RenderCamera, RenderSettings};
+use crate::stereo_depth::StereoDepthTerm;
+use crate::stereo_start::{StereoStart, stereo_start};
+use crate::train::{AlphaImage, LossTerm, Progress, TrainState, TrainView, Trainer};
+
+/// Trains on `ds` in `dir` (resuming from its checkpoint when `resume`), writes the PLY, held-out
+/// renders and `metrics.json`, and returns the summary.
+pub fn train_run(
+    ds: &Dataset,
+    cfg: &RunConfig,
+    dir: &Path,
+    resume: bool,
+    on_progress: impl FnMut(&Progress),
+) -> Result<RunSummary, PipelineError> {
+    train_run_with(ds, cfg, dir, resume, Vec::new(), on_progress)
+}
+
+/// [`train_run`] with extra loss terms added to the photometric loss (the fusion method of the
+/// fusion paper and its alternatives). The terms must be pure functions of the iteration and the
+/// model for a resumed run to repeat an uninterrupted one.
+pub fn train_run_with(
+    ds: &Dataset,
+    cfg: &RunConfig,
+    dir: &Path,
+    resume: bool,
+    terms: Vec<Box<dyn LossTerm>>,
+    on_progress: impl FnMut(&Progress),
+) -> Result<RunSummary, PipelineError> {
+    let run = RunDir(dir.to_path_buf());
+    // Before anything is written: a run that cannot score its held-out views would otherwise
+    // leave config.json and point_cloud.ply behind and fail only after training.
+    for v in ds.test_views() {
+        check_scorable(v).map_err(PipelineError::Eval)?;
+    }
+    let device = cfg.device.open()?.autodiff();
+    let (_, extent) = ds.camera_extent();
+    let resolved = ResolvedConfig {
+        data: RunData::of(ds)?,
+        extent,
+        run: cfg.clone(),
+    };
+    let mut memory = StagePeaks::default();
+    let mut begun = if resume {
+        Begun::resumed(ds, &run, &resolved)?
+    } else {
+        memory.measure("initialisation", || Begun::started(ds, cfg))?
+    };
+    // The run folder is made only now, once the initial Gaussians exist: an `--init` the
+    // dataset cannot serve (a missing PLY, `points` without sparse points) fails with nothing
+    // written.
+    write_header(ds, &run, &resolved, begun.start.as_ref())?;
+
+    let views = train_views(ds, &device);
+    let mut trainer = begun.trainer(cfg, views, extent as f32, device)?;
+    for term in terms {
+        trainer.add_term(term);
+    }
+    add_surface_depth(ds, cfg, &mut trainer)?;
+    add_stereo_depth(ds, cfg, &begun, &mut trainer)?;
+    let resumed_from = (trainer.iteration() > 0).then_some(trainer.iteration());
+    let clock = Instant::now();
+    let ckpt_path = run.checkpoint();
+    memory.measure("training", || {
+        trainer.run(on_progress, |state, config| {
+            save_checkpoint(&ckpt_path, config, &resolved.data, state).map_err(|e| e.to_string())
+        })
+    })?;
+    let trained = Trained {
+        train_seconds: clock.elapsed().as_secs_f64(),
+        iterations: trainer.iteration(),
+        resumed_from,
+        state: trainer.into_state()?,
+        init: begun.used,
+        init_notes: begun.notes,
+        memory,
+    };
+    finish(ds, cfg, &run, trained)
+}
+
+/// The training views of `ds` on `device`, with their valid-pixel masks and, for photos with
+/// alpha, the alpha to composite them over another background.
+fn train_views(ds: &Dataset, device: &Device) -> Vec<TrainView> {
+    ds.train_views()
+        .map(|v| {
+            let view = TrainView::new(&v.name, RenderCamera::from(&v.camera), &v.image, device);
+            let view = match &v.valid {
+                Some(valid) => view.with_valid(valid, device),
+                None => view,
+            };
+            match v.mask.as_ref().filter(|_| v.mask_is_alpha) {
+                Some(a) => match AlphaImage::new(&v.image, a, ds.background) {
+                    Some(alpha) => view.with_alpha(alpha),
+                    None => view,
+                },
+                None => view,
+            }
+        })
+        .collect()
+}
+
+/// Where training begins: fresh initial Gaussians or a checkpoint's state.
+struct Begun {
+    model: Option<GaussianModel>,
+    resumed: Option<TrainState>,
+    start: Option<StereoStart>,
+    used: InitStrategy,
+    notes: Vec<String>,
+}
+
+impl Begun {
+    /// The initial Gaussians of `ds` as `cfg` says.
+    fn started(ds: &Dataset, cfg: &RunConfig) -> Result<Self, PipelineError> {
+        let init = initial_model_and_start(ds, cfg)?;
+        Ok(Self {
+            model: Some(init.model),
+            resumed: None,
+            start: init.start,
+            used: init.used,
+            notes: init.notes,
+        })
+    }
+
+    /// The state of the run's checkpoint, refused when it belongs to another dataset, split,
+    /// size or training configuration.
+    fn resumed(
+        ds: &Dataset,
+        run: &RunDir,
+        resolved: &ResolvedConfig,
+    ) -> Result<Self, PipelineError> {
+        let refuse = |message: String| PipelineError::Checkpoint {
+            path: run.checkpoint(),
+            message,
+        };
+        if !run.checkpoint().exists() {
+            return Err(refuse(if run.finished() {
+                "nothing to resume: the run already finished".into()
+            } else {
+                "no checkpoint to resume from".into()
+            }));
+        }
+        let saved = load_checkpoint(&run.checkpoint())?;
+        if let Some(difference) = saved.data.difference(&resolved.data) {
+            return Err(refuse(format!(
+                "the checkpoint belongs to another run: {difference}"
+            )));
+        }
+        if saved.config != resolved.run.train {
+            return Err(refuse(
+                "the checkpoint was written with a different training configuration".into(),
+            ));
+        }
+        Ok(Self {
+            model: None,
+            resumed: Some(saved.state),
+            start: None,
+            used: resolve_init(ds, &resolved.run.init),
+            notes: Vec::new(),
+        })
+    }
+
+    /// The trainer, from the initial Gaussians or with the checkpoint's state set.
+    fn trainer(
+        &mut self,
+        cfg: &RunConfig,
+        views: Vec<TrainView>,
+        extent: f32,
+        device: Device,
+    ) -> Result<Trainer, PipelineError> {
+        let resumed = self.resumed.take();
+        let model = match (self.model.take(), &resumed) {
+            (Some(m), _) => m,
+            (None, Some(state)) => state.model.clone(),
+            (None, None) => unreachable!("one of model or state"),
+        };
+        let mut trainer = Trainer::new(cfg.train.clone(), model, views, extent, device)?;
+        if let Some(state) = resumed {
+            trainer.set_state(state);
+        }
+        Ok(trainer)
+    }
+}
+
+/// Creates the run folder and writes `config.json`, `cameras.json` and the stereo start's files.
+fn write_header(
+    ds: &Dataset,
+    run: &RunDir,
+    resolved: &ResolvedConfig,
+    start: Option<&StereoStart>,
+) -> Result<(), PipelineError> {
+    let dir = &run.0;
+    std::fs::create_dir_all(dir).map_err(|e| SceneError::io(dir, e))?;
+    // A run interrupted while writing (SIGINT during a checkpoint) leaves a partial file.
+    fewview_scene::atomic::remove_partial_files(dir)?;
+    let json =
+        serde_json::to_vec_pretty(resolved).map_err(|e| PipelineError::Eval(e.to_string()))?;
+    fewview_scene::atomic::write_bytes(&run.config(), &json)?;
+    let cameras: Vec<serde_json::Value> = ds
+        .train_views()
+        .chain(ds.test_views())
+        .map(|v| fewview_geom::io::cameras::camera_to_json(&v.camera))
+        .collect();
+    let json =
+        serde_json::to_vec_pretty(&cameras).map_err(|e| PipelineError::Eval(e.to_string()))?;
+    fewview_scene::atomic::write_bytes(&run.cameras(), &json)?;
+    if let Some(s) = start {
+        s.write(ds, &run.init())
+            .map_err(|e| PipelineError::Init(e.to_string()))?;
+    }
+    Ok(())
+}
+
+/// The surface start's depth term, when the run starts from a surface run and weighs it.
+fn add_surface_depth(
+    ds: &Dataset,
+    cfg: &RunConfig,
+    trainer: &mut Trainer,
+) -> Result<(), PipelineError> {
+    if let InitStrategy::Surface(surface_dir) = &cfg.init
+        && cfg.surface_depth_weight > 0.0
+    {
+        let surface = crate::surface_start::SurfaceRun::load(surface_dir, ds)?;
+        trainer.add_term(Box::new(crate::surface_start::SurfaceDepthTerm::new(
+            ds,
+            &surface.mesh,
+            cfg.surface_depth_weight,
+        )?));
+    }
+    Ok(())
+}
+
+/// The stereo depth term, when the run starts from stereo and weighs it. A resumed run builds
+/// its stereo start again (the same, from the same seed): the checkpoint keeps only the
+/// Gaussians.
+fn add_stereo_depth(
+    ds: &Dataset,
+    cfg: &RunConfig,
+    begun: &Begun,
+    trainer: &mut Trainer,
+) -> Result<(), PipelineError> {
+    if cfg.stereo_depth_weight <= 0.0 || begun.used != InitStrategy::Stereo {
+        return Ok(());
+    }
+    let rebuilt;
+    let start = match &begun.start {
+        Some(start) => start,
+        None => {
+            rebuilt = stereo_start(ds, &cfg.stereo, cfg.train.seed, &mut |_, _| {})
+                .map_err(|e| PipelineError::Init(e.to_string()))?;
+            &rebuilt
+        }
+    };
+    trainer.add_term(Box::new(StereoDepthTerm::new(
+        &start.cloud,
+        cfg.stereo_depth_weight,
+    )));
+    Ok(())
+}
+
+/// What training leaves for [`finish`].
+struct Trained {
+    train_seconds: f64,
+    iterations: usize,
+    resumed_from: Option<usize>,
+    state: TrainState,
+    init: InitStrategy,
+    init_notes: Vec<String>,
+    memory: StagePeaks,
+}
+
+/// Writes the trained Gaussians, the colour transforms, the held-out renders and
+/// `metrics.json`, then removes the checkpoint: the run is complete.
+fn finish(
+    ds: &Dataset,
+    cfg: &RunConfig,
+    run: &RunDir,
+    trained: Trained,
+) -> Result<RunSummary, PipelineError> {
+    let model = &trained.state.model;
+    write_ply(&run.ply(), model)?;
+    if !trained.state.appearance.transforms.is_empty() {
+        write_appearance(&run.appearance(), ds, &trained.state.appearance.transforms)?;
+    }
+    let settings = RenderSettings {
+        background: cfg.train.background,
+        sh_degree: cfg.train.sh_degree,
+        near_plane: cfg.train.near_plane,
+    };
+    let test: Vec<_> = ds.test_views().collect();
+    let (report, renders) =
+        evaluate(model, &test, &settings).map_err(|e| PipelineError::Eval(e.to_string()))?;
+    let out = run.renders("test");
+    std::fs::create_dir_all(&out).map_err(|e| SceneError::io(&out, e))?;
+    for (v, r) in test.iter().zip(&renders) {
+        r.rgb.save_png(&out.join(format!("{}.png", v.name)))?;
+    }
+    let summary = RunSummary {
+        dataset: ds.name.clone(),
+        init: trained.init.name().to_string(),
+        init_notes: trained.init_notes,
+        memory: trained.memory,
+        iterations: trained.iterations,
+        gaussians: model.len(),
+        train_seconds: trained.train_seconds,
+        resumed_from: trained.resumed_from,
+        test: report,
+    };
+    let json =
+        serde_json::to_vec_pretty(&summary).map_err(|e| PipelineError::Eval(e.to_string()))?;
+    fewview_scene::atomic::write_bytes(&run.metrics(), &json)?;
+    if run.checkpoint().exists() {
+        std::fs::remove_file(run.checkpoint()).map_err(|e| SceneError::io(run.checkpoint(), e))?;
+    }
+    Ok(summary)
+}
