@@ -13,6 +13,7 @@ use fewview_splat::pipeline::{
 };
 use fewview_splat::ply::{read_ply, write_ply};
 use fewview_splat::raster::{RenderCamera, RenderSettings};
+use fewview_splat::train::pair::{CoRegConfig, TrainerPair, second_seed};
 use fewview_splat::train::{TrainConfig, TrainError, TrainView, Trainer};
 
 /// The demo scene, eight views on its arc, at `width × height` with these training views.
@@ -50,20 +51,17 @@ fn short_config(iterations: usize) -> RunConfig {
 }
 
 fn trainer(ds: &Dataset, cfg: &RunConfig) -> Trainer {
+    trainer_from(ds, cfg, initial_model(ds, cfg).unwrap())
+}
+
+fn trainer_from(ds: &Dataset, cfg: &RunConfig, model: fewview_splat::GaussianModel) -> Trainer {
     let device = Device::flex().autodiff();
     let views = ds
         .train_views()
         .map(|v| TrainView::new(&v.name, RenderCamera::from(&v.camera), &v.image, &device))
         .collect();
     let (_, extent) = ds.camera_extent();
-    Trainer::new(
-        cfg.train.clone(),
-        initial_model(ds, cfg).unwrap(),
-        views,
-        extent as f32,
-        device,
-    )
-    .unwrap()
+    Trainer::new(cfg.train.clone(), model, views, extent as f32, device).unwrap()
 }
 
 #[test]
@@ -98,6 +96,59 @@ fn resumed_run_equals_uninterrupted_run() {
     assert_eq!(resumed.iteration(), 40);
     // Bit-identical: same Gaussians, optimiser moments and statistics.
     assert_eq!(resumed.state().unwrap(), straight.state().unwrap());
+}
+
+/// CoR-GS's second field: the first's start, another seed.
+fn second(ds: &Dataset, cfg: &RunConfig) -> Trainer {
+    let mut second = cfg.clone();
+    second.train.seed = second_seed(cfg.train.seed);
+    trainer_from(ds, &second, initial_model(ds, cfg).unwrap())
+}
+
+/// CoR-GS's pair of fields, with co-pruning every densification step and the pseudo-view term.
+fn pair_of(ds: &Dataset, first: Trainer, second: Trainer) -> TrainerPair {
+    let cameras = ds.train_views().map(|v| v.camera.clone()).collect();
+    let co = CoRegConfig {
+        every: 1,
+        ..CoRegConfig::default()
+    };
+    TrainerPair::new(first, second, cameras, co).unwrap()
+}
+
+#[test]
+fn a_resumed_pair_of_fields_equals_an_uninterrupted_one() {
+    let ds = small_demo();
+    let cfg = short_config(30);
+    let fresh = || pair_of(&ds, trainer(&ds, &cfg), second(&ds, &cfg));
+    let mut straight = fresh();
+    while !straight.first.is_done() {
+        straight.step().unwrap();
+    }
+    let mut first = fresh();
+    for _ in 0..13 {
+        first.step().unwrap();
+    }
+    let saved = (
+        first.first.state().unwrap().clone(),
+        first.second.state().unwrap().clone(),
+    );
+    drop(first);
+    let (mut a, mut b) = (trainer(&ds, &cfg), second(&ds, &cfg));
+    a.set_state(saved.0);
+    b.set_state(saved.1);
+    let mut resumed = pair_of(&ds, a, b);
+    while !resumed.first.is_done() {
+        resumed.step().unwrap();
+    }
+    let (s, r) = (&mut straight, &mut resumed);
+    assert_eq!(r.first.state().unwrap(), s.first.state().unwrap());
+    assert_eq!(r.second.state().unwrap(), s.second.state().unwrap());
+    let (a, b) = (
+        s.first.state().unwrap().model.clone(),
+        s.second.state().unwrap().model.clone(),
+    );
+    assert!(!a.is_empty() && !b.is_empty());
+    assert_ne!(a, b, "the two fields draw differently");
 }
 
 #[test]

@@ -12,6 +12,7 @@ use fewview_splat::sky_shell::SkyShell;
 use fewview_splat::stereo_pair_check::PairCheck;
 use fewview_splat::stereo_start::{DepthFrom, StereoInit};
 use fewview_splat::surface_start::SurfacePoses;
+use fewview_splat::train::pair::CoRegConfig;
 use fewview_splat::train::{AppearanceConfig, AppearanceModel, TrainConfig};
 
 /// What the Gaussians are composited over during training on images with alpha.
@@ -150,6 +151,22 @@ pub struct TrainArgs {
     #[arg(long, value_name = "W", default_value_t = RunConfig::new(TrainConfig::sparse_view(1)).stereo_depth_weight,
           value_parser = super::number_args::non_negative_f32)]
     pub stereo_depth_weight: f32,
+    /// CoR-GS: two fields regularised by their disagreement.
+    ///
+    /// CoR-GS's co-regularisation: a second field trains beside the first from the same start
+    /// with other random draws; Gaussians without a counterpart in the other field within
+    /// `--co-reg-tau` are pruned every 5 densification steps, and each field's render of a view
+    /// between the training cameras is pulled to the other's. Doubles the training time or more.
+    #[arg(long)]
+    pub co_reg: bool,
+    /// CoR-GS co-pruning distance, a fraction of the scene extent.
+    #[arg(long, value_name = "F", default_value_t = CoRegConfig::default().tau,
+          requires = "co_reg", value_parser = super::number_args::non_negative_f32)]
+    pub co_reg_tau: f32,
+    /// CoR-GS pseudo-view weight λ_p (0: co-pruning only).
+    #[arg(long, value_name = "W", default_value_t = CoRegConfig::default().pseudo_weight,
+          requires = "co_reg", value_parser = super::number_args::non_negative_f32)]
+    pub co_reg_pseudo_weight: f32,
     /// Save a checkpoint every N iterations (0: never).
     #[arg(long, value_name = "N", default_value_t = 500)]
     pub checkpoint_every: usize,
@@ -237,6 +254,11 @@ impl TrainArgs {
             device: self.device,
             surface_depth_weight: self.surface_depth_weight,
             stereo_depth_weight: self.stereo_depth_weight,
+            co_reg: self.co_reg.then_some(CoRegConfig {
+                tau: self.co_reg_tau,
+                pseudo_weight: self.co_reg_pseudo_weight,
+                ..CoRegConfig::default()
+            }),
         })
     }
 }
@@ -309,5 +331,6 @@ mod tests {
         assert_eq!(run.stereo, library.stereo);
         assert_eq!(run.surface_depth_weight, library.surface_depth_weight);
         assert_eq!(run.stereo_depth_weight, library.stereo_depth_weight);
+        assert_eq!(run.co_reg, library.co_reg);
     }
 }

@@ -86,6 +86,9 @@ pub struct RunConfig {
     /// ([`crate::stereo_depth::StereoDepthTerm`]) when the run starts from stereo; 0: none.
     #[serde(default)]
     pub stereo_depth_weight: f32,
+    /// CoR-GS's co-regularised pair of fields ([`crate::train::pair`]); `None`: one field.
+    #[serde(default)]
+    pub co_reg: Option<crate::train::pair::CoRegConfig>,
 }
 
 fn default_surface_depth_weight() -> f32 {
@@ -107,6 +110,7 @@ impl RunConfig {
             device: ComputeDevice::Cpu,
             surface_depth_weight: default_surface_depth_weight(),
             stereo_depth_weight: 0.0,
+            co_reg: None,
         }
     }
 }

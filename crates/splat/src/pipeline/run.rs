@@ -19,7 +19,8 @@ use crate::ply::write_ply;
 use crate::raster::{RenderCamera, RenderSettings};
 use crate::stereo_depth::StereoDepthTerm;
 use crate::stereo_start::{StereoStart, stereo_start};
-use crate::train::{AlphaImage, LossTerm, Progress, TrainState, TrainView, Trainer};
+use crate::train::pair::{TrainerPair, second_seed};
+use crate::train::{AlphaImage, LossTerm, Progress, TrainConfig, TrainState, TrainView, Trainer};
 
 /// Trains on `ds` in `dir` (resuming from its checkpoint when `resume`), writes the PLY, held-out
 /// renders and `metrics.json`, and returns the summary.
@@ -69,7 +70,8 @@ pub fn train_run_with(
     write_header(ds, &run, &resolved, begun.start.as_ref())?;
 
     let views = train_views(ds, &device);
-    let mut trainer = begun.trainer(cfg, views, extent as f32, device)?;
+    let second_start = second_start(cfg, &run, &begun)?;
+    let mut trainer = begun.trainer(cfg, views.clone(), extent as f32, device.clone())?;
     for term in terms {
         trainer.add_term(term);
     }
@@ -78,11 +80,37 @@ pub fn train_run_with(
     let resumed_from = (trainer.iteration() > 0).then_some(trainer.iteration());
     let clock = Instant::now();
     let ckpt_path = run.checkpoint();
-    memory.measure("training", || {
-        trainer.run(on_progress, |state, config| {
-            save_checkpoint(&ckpt_path, config, &resolved.data, state).map_err(|e| e.to_string())
-        })
-    })?;
+    let trainer = match (cfg.co_reg, second_start) {
+        (Some(co), Some(mut start)) => {
+            let mut second = start.trainer(cfg, views, extent as f32, device)?;
+            add_surface_depth(ds, cfg, &mut second)?;
+            add_stereo_depth(ds, cfg, &begun, &mut second)?;
+            let cameras = ds.train_views().map(|v| v.camera.clone()).collect();
+            let mut pair = TrainerPair::new(trainer, second, cameras, co)?;
+            let second_path = run.checkpoint_second();
+            memory.measure("training", || {
+                pair.run(on_progress, |first, second, config| {
+                    let save = |path: &Path, config: &TrainConfig, state: &TrainState| {
+                        save_checkpoint(path, config, &resolved.data, state)
+                            .map_err(|e| e.to_string())
+                    };
+                    save(&second_path, &second_config(config), second)?;
+                    save(&ckpt_path, config, first)
+                })
+            })?;
+            pair.first
+        }
+        _ => {
+            let mut trainer = trainer;
+            memory.measure("training", || {
+                trainer.run(on_progress, |state, config| {
+                    save_checkpoint(&ckpt_path, config, &resolved.data, state)
+                        .map_err(|e| e.to_string())
+                })
+            })?;
+            trainer
+        }
+    };
     let trained = Trained {
         train_seconds: clock.elapsed().as_secs_f64(),
         iterations: trainer.iteration(),
@@ -118,6 +146,8 @@ fn train_views(ds: &Dataset, device: &Device) -> Vec<TrainView> {
 
 /// Where training begins: fresh initial Gaussians or a checkpoint's state.
 struct Begun {
+    /// Whether this is the start of CoR-GS's second field.
+    second: bool,
     model: Option<GaussianModel>,
     resumed: Option<TrainState>,
     start: Option<StereoStart>,
@@ -130,6 +160,7 @@ impl Begun {
     fn started(ds: &Dataset, cfg: &RunConfig) -> Result<Self, PipelineError> {
         let init = initial_model_and_start(ds, cfg)?;
         Ok(Self {
+            second: false,
             model: Some(init.model),
             resumed: None,
             start: init.start,
@@ -168,6 +199,7 @@ impl Begun {
             ));
         }
         Ok(Self {
+            second: false,
             model: None,
             resumed: Some(saved.state),
             start: None,
@@ -190,7 +222,11 @@ impl Begun {
             (None, Some(state)) => state.model.clone(),
             (None, None) => unreachable!("one of model or state"),
         };
-        let mut trainer = Trainer::new(cfg.train.clone(), model, views, extent, device)?;
+        let config = match self.second {
+            true => second_config(&cfg.train),
+            false => cfg.train.clone(),
+        };
+        let mut trainer = Trainer::new(config, model, views, extent, device)?;
         if let Some(state) = resumed {
             trainer.set_state(state);
         }
@@ -274,6 +310,41 @@ fn add_stereo_depth(
     Ok(())
 }
 
+/// The training configuration of CoR-GS's second field: the first's with another seed.
+fn second_config(first: &TrainConfig) -> TrainConfig {
+    TrainConfig {
+        seed: second_seed(first.seed),
+        ..first.clone()
+    }
+}
+
+/// Where the second field of a co-regularised run begins: the first's initial Gaussians, or its
+/// own checkpoint when the run resumes; `None` for a run of one field.
+fn second_start(
+    cfg: &RunConfig,
+    run: &RunDir,
+    begun: &Begun,
+) -> Result<Option<Begun>, PipelineError> {
+    if cfg.co_reg.is_none() {
+        return Ok(None);
+    }
+    let (model, resumed) = match &begun.model {
+        Some(model) => (Some(model.clone()), None),
+        None => {
+            let saved = load_checkpoint(&run.checkpoint_second())?;
+            (None, Some(saved.state))
+        }
+    };
+    Ok(Some(Begun {
+        second: true,
+        model,
+        resumed,
+        start: None,
+        used: begun.used.clone(),
+        notes: Vec::new(),
+    }))
+}
+
 /// What training leaves for [`finish`].
 struct Trained {
     train_seconds: f64,
@@ -325,8 +396,10 @@ fn finish(
     let json =
         serde_json::to_vec_pretty(&summary).map_err(|e| PipelineError::Eval(e.to_string()))?;
     fewview_scene::atomic::write_bytes(&run.metrics(), &json)?;
-    if run.checkpoint().exists() {
-        std::fs::remove_file(run.checkpoint()).map_err(|e| SceneError::io(run.checkpoint(), e))?;
+    for path in [run.checkpoint_second(), run.checkpoint()] {
+        if path.exists() {
+            std::fs::remove_file(&path).map_err(|e| SceneError::io(&path, e))?;
+        }
     }
     Ok(summary)
 }

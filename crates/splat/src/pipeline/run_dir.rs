@@ -21,6 +21,10 @@ impl RunDir {
     pub fn checkpoint(&self) -> PathBuf {
         self.0.join("checkpoint.bin")
     }
+    /// The second field's checkpoint of a co-regularised run (CoR-GS).
+    pub fn checkpoint_second(&self) -> PathBuf {
+        self.0.join("checkpoint_second.bin")
+    }
     pub fn ply(&self) -> PathBuf {
         self.0.join("point_cloud.ply")
     }

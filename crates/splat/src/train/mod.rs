@@ -7,9 +7,11 @@
 /// Adam lives in `fewview-optim`, shared with the surface trainer.
 pub use fewview_optim::adam;
 pub mod appearance;
+pub mod co_prune;
 pub mod config;
 pub mod densify;
 pub mod dropout;
+pub mod pair;
 mod resident;
 pub mod state;
 pub mod term;
