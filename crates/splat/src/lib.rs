@@ -11,6 +11,7 @@ pub mod benchmark;
 pub use fewview_scene::cputime;
 pub mod device;
 pub mod eval;
+pub mod floaters;
 #[cfg(feature = "gpu")]
 pub mod gpu;
 pub mod init;

@@ -117,8 +117,7 @@ impl LossTerm for StereoDepthTerm {
 mod tests {
     use super::*;
     use crate::model::GaussianModel;
-    use crate::op::{GaussianTensors, RenderView, render};
-    use crate::raster::RenderSettings;
+    use crate::op::GaussianTensors;
     use burn::tensor::Device;
 
     /// Two overlapping splats in front of `camera()`, the far one partly behind the near one.
@@ -150,20 +149,7 @@ mod tests {
     }
 
     fn loss_of(g: &GaussianTensors) -> Tensor<1> {
-        let camera = crate::raster::tests::camera();
-        let n = g.opacity_logits.dims()[0];
-        let out = render(
-            g,
-            Tensor::<2>::zeros([n, 2], &g.means.device()),
-            &RenderView {
-                camera: camera.clone(),
-                settings: RenderSettings {
-                    background: [0.0; 3],
-                    sh_degree: 0,
-                    near_plane: 0.01,
-                },
-            },
-        );
+        let out = crate::raster::tests::render_from_camera(g);
         let [h, w, _] = out.image.dims();
         let (depth, weights) = target();
         weighted_relative_depth_l1(out.image.slice([0..h, 0..w, 3..4]), &depth, &weights).unwrap()

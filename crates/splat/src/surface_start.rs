@@ -26,7 +26,7 @@
 
 use std::path::{Path, PathBuf};
 
-use burn::tensor::{Tensor, TensorData};
+use burn::tensor::Tensor;
 use fewview_geom::Mesh;
 use fewview_geom::similarity::Similarity;
 use fewview_scene::{Camera, Dataset, PointCloud, View};
@@ -427,19 +427,8 @@ impl SurfaceDepthTerm {
 /// `mean |rendered − d| / d` over the pixels where the target depth `d > 0` (`rendered` is
 /// `[H, W, 1]`, `depth` row-major `H·W`); `None` when no pixel has a target.
 pub fn relative_depth_l1(rendered: Tensor<3>, depth: &[f32]) -> Option<Tensor<1>> {
-    let count = depth.iter().filter(|&&d| d > 0.0).count();
-    if count == 0 {
-        return None;
-    }
-    let [h, w, _] = rendered.dims();
-    let device = rendered.device();
-    let inverse: Vec<f32> = depth
-        .iter()
-        .map(|&d| if d > 0.0 { 1.0 / d } else { 0.0 })
-        .collect();
-    let target = Tensor::<3>::from_data(TensorData::new(depth.to_vec(), [h, w, 1]), &device);
-    let inverse = Tensor::<3>::from_data(TensorData::new(inverse, [h, w, 1]), &device);
-    Some(((rendered - target).abs() * inverse).sum() / count as f32)
+    let weights = vec![1.0; depth.len()];
+    crate::stereo_depth::weighted_relative_depth_l1(rendered, depth, &weights)
 }
 
 impl LossTerm for SurfaceDepthTerm {
@@ -468,7 +457,7 @@ impl LossTerm for SurfaceDepthTerm {
 
 #[cfg(test)]
 mod tests {
-    use burn::tensor::Device;
+    use burn::tensor::{Device, TensorData};
     use fewview_scene::{Image, Intrinsics};
     use nalgebra::{Quaternion, UnitQuaternion};
 

@@ -151,6 +151,14 @@ pub struct TrainArgs {
     #[arg(long, value_name = "W", default_value_t = RunConfig::new(TrainConfig::sparse_view(1)).stereo_depth_weight,
           value_parser = super::number_args::non_negative_f32)]
     pub stereo_depth_weight: f32,
+    /// Weight of the floater loss, 0: off.
+    ///
+    /// Weight of the floater loss: a Gaussian that one training view sees alone, in front of
+    /// the depth stereo confirmed there, has its opacity pulled down until densification prunes
+    /// it. Only with the stereo start.
+    #[arg(long, value_name = "W", default_value_t = RunConfig::new(TrainConfig::sparse_view(1)).floater_weight,
+          value_parser = super::number_args::non_negative_f32)]
+    pub floater_weight: f32,
     /// CoR-GS: two fields regularised by their disagreement.
     ///
     /// CoR-GS's co-regularisation: a second field trains beside the first from the same start
@@ -254,6 +262,7 @@ impl TrainArgs {
             device: self.device,
             surface_depth_weight: self.surface_depth_weight,
             stereo_depth_weight: self.stereo_depth_weight,
+            floater_weight: self.floater_weight,
             co_reg: self.co_reg.then_some(CoRegConfig {
                 tau: self.co_reg_tau,
                 pseudo_weight: self.co_reg_pseudo_weight,
@@ -332,5 +341,6 @@ mod tests {
         assert_eq!(run.surface_depth_weight, library.surface_depth_weight);
         assert_eq!(run.stereo_depth_weight, library.stereo_depth_weight);
         assert_eq!(run.co_reg, library.co_reg);
+        assert_eq!(run.floater_weight, library.floater_weight);
     }
 }

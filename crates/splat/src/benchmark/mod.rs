@@ -11,6 +11,7 @@
 //! A half-done table resumes: scored runs are read back, a run with a checkpoint continues
 //! from it, a finished run that was not scored is scored.
 
+mod error;
 pub mod protocol;
 mod score;
 mod table;
@@ -20,21 +21,11 @@ use std::path::{Path, PathBuf};
 use fewview_metrics::lpips::Lpips;
 use fewview_scene::Dataset;
 
-use crate::pipeline::{PipelineError, RunDir};
+use crate::pipeline::RunDir;
+pub use error::BenchmarkError;
 pub use protocol::{Peer, Protocol};
 pub use score::SeedScore;
 pub use table::{SceneRow, Table};
-
-/// Why a benchmark cannot run, naming the scene folder or the run.
-#[derive(Debug, thiserror::Error)]
-pub enum BenchmarkError {
-    #[error("{}: {message}", folder.display())]
-    Scene { folder: PathBuf, message: String },
-    #[error(transparent)]
-    Pipeline(#[from] PipelineError),
-    #[error("{}: {message}", run.display())]
-    Run { run: PathBuf, message: String },
-}
 
 /// One scene of a benchmark: its name (the folder's) and its data under the protocol.
 pub struct Scene {

@@ -8,7 +8,7 @@ use std::path::Path;
 use fewview_scene::{Dataset, DatasetFormat, LoadOptions};
 use serde::Serialize;
 
-use super::BenchmarkError;
+use super::error::BenchmarkError;
 
 /// A benchmark protocol.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]

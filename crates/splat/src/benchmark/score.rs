@@ -7,7 +7,8 @@ use fewview_metrics::lpips::Lpips;
 use fewview_scene::{Dataset, Image};
 use serde::{Deserialize, Serialize};
 
-use super::{BenchmarkError, Protocol};
+use super::error::BenchmarkError;
+use super::protocol::Protocol;
 use crate::eval::render_model;
 use crate::pipeline::{ResolvedConfig, RunDir};
 use crate::ply::read_ply;

@@ -6,7 +6,9 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use super::{BenchmarkError, Peer, Protocol, SeedScore};
+use super::error::BenchmarkError;
+use super::protocol::{Peer, Protocol};
+use super::score::SeedScore;
 
 /// Means over a set of runs.
 #[derive(Clone, Debug, PartialEq, Serialize)]

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::PipelineError;
+use super::error::PipelineError;
 use super::run_dir::RunData;
 use crate::train::{TrainConfig, TrainState};
 

@@ -14,125 +14,26 @@
 //! ```
 
 mod checkpoint;
+mod config;
+mod error;
 mod run;
 mod run_dir;
 mod start;
 
-use std::path::PathBuf;
-
-use serde::{Deserialize, Serialize};
-
-use crate::device::{ComputeDevice, DeviceError};
 use crate::eval::render_model;
 use crate::model::GaussianModel;
 use crate::raster::{RenderCamera, RenderSettings};
-use crate::stereo_start::StereoInit;
-use crate::train::{TrainConfig, TrainError};
-use fewview_scene::{Camera, Image, SceneError};
+use fewview_scene::{Camera, Image};
 
 pub use checkpoint::{Checkpoint, load_checkpoint, save_checkpoint};
+pub use config::{InitStrategy, MAX_INIT_POINTS, RunConfig};
+pub use error::PipelineError;
 pub use run::{train_run, train_run_with};
 pub use run_dir::{ResolvedConfig, RunData, RunDir, RunSummary};
 pub use start::{
     InitialModel, MAX_STEREO_START_VIEWS, adopt_init_poses, default_iterations, initial_model,
     initial_model_and_start, look_at_point, resolve_init,
 };
-
-/// How to place the initial Gaussians.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum InitStrategy {
-    /// The dataset's sparse points if it has them; else the stereo start when at least two
-    /// training views overlap (see [`fewview_geom::stereo::pairs::stereo_pairs`]); else random
-    /// points in the training frustums if the views have depth bounds, else random points in a
-    /// box around the point the cameras look at.
-    Auto,
-    /// The dataset's sparse points (COLMAP `points3D`).
-    DatasetPoints,
-    /// Random points in the training frustums between each view's depth bounds.
-    RandomFrustum,
-    /// Random points in a cube of half-size `half_size` (default: 0.35 × the median camera
-    /// distance) around the point the cameras look at.
-    RandomBox { half_size: Option<f64> },
-    /// Gaussians read from an Inria-layout PLY.
-    Ply(PathBuf),
-    /// The stereo start of the fusion paper §2: a sample of the hierarchical point cloud of the
-    /// training views' stereo pairs ([`crate::stereo_start`]), built as [`RunConfig::stereo`]
-    /// says.
-    Stereo,
-    /// Gaussians on the mesh of the surface run in this folder ([`crate::surface_start`]).
-    Surface(PathBuf),
-}
-
-/// Everything that defines a run besides the data.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct RunConfig {
-    pub train: TrainConfig,
-    pub init: InitStrategy,
-    /// Number of random initial points (random strategies).
-    pub init_points: usize,
-    /// How the stereo start is built, when the run uses it.
-    pub stereo: StereoInit,
-    /// Where training runs. Not part of a checkpoint's identity: a run may resume on another
-    /// device.
-    #[serde(default)]
-    pub device: ComputeDevice,
-    /// Weight of the surface mesh's depth in the training views
-    /// ([`crate::surface_start::SurfaceDepthTerm`]) when the run starts from a surface run;
-    /// 0: none.
-    #[serde(default = "default_surface_depth_weight")]
-    pub surface_depth_weight: f32,
-    /// Weight of the stereo start's depth in the training views
-    /// ([`crate::stereo_depth::StereoDepthTerm`]) when the run starts from stereo; 0: none.
-    #[serde(default)]
-    pub stereo_depth_weight: f32,
-    /// CoR-GS's co-regularised pair of fields ([`crate::train::pair`]); `None`: one field.
-    #[serde(default)]
-    pub co_reg: Option<crate::train::pair::CoRegConfig>,
-}
-
-fn default_surface_depth_weight() -> f32 {
-    crate::surface_start::SURFACE_DEPTH_WEIGHT
-}
-
-/// The most random initial points a run accepts. Each Gaussian costs about 1 KB while training
-/// (parameters, gradients and Adam moments at SH degree 3), so this is ~10 GB; sparse-view scenes
-/// use 10⁴–10⁵. A larger count is refused up front instead of aborting on allocation.
-pub const MAX_INIT_POINTS: usize = 10_000_000;
-
-impl RunConfig {
-    pub fn new(train: TrainConfig) -> Self {
-        Self {
-            train,
-            init: InitStrategy::Auto,
-            init_points: 20_000,
-            stereo: StereoInit::default(),
-            device: ComputeDevice::Cpu,
-            surface_depth_weight: default_surface_depth_weight(),
-            stereo_depth_weight: 0.0,
-            co_reg: None,
-        }
-    }
-}
-
-/// Errors of a run, each naming what failed.
-#[derive(Debug, thiserror::Error)]
-pub enum PipelineError {
-    #[error(transparent)]
-    Scene(#[from] SceneError),
-    #[error(transparent)]
-    Train(#[from] TrainError),
-    #[error("{path}: {message}")]
-    Checkpoint { path: PathBuf, message: String },
-    #[error("initialisation: {0}")]
-    Init(String),
-    #[error("surface start: {0}")]
-    SurfaceStart(#[from] crate::surface_start::SurfaceStartError),
-    #[error("evaluation: {0}")]
-    Eval(String),
-    #[error(transparent)]
-    Device(#[from] DeviceError),
-}
 
 pub fn render_path(
     model: &GaussianModel,

@@ -10,10 +10,12 @@ use fewview_scene::memory::StagePeaks;
 use fewview_scene::{Dataset, SceneError};
 
 use super::checkpoint::{load_checkpoint, save_checkpoint};
+use super::config::{InitStrategy, RunConfig};
+use super::error::PipelineError;
 use super::run_dir::{ResolvedConfig, RunData, RunDir, RunSummary, write_appearance};
 use super::start::{initial_model_and_start, resolve_init};
-use super::{InitStrategy, PipelineError, RunConfig};
 use crate::eval::{check_scorable, evaluate};
+use crate::floaters::FloaterTerm;
 use crate::model::GaussianModel;
 use crate::ply::write_ply;
 use crate::raster::{RenderCamera, RenderSettings};
@@ -76,7 +78,7 @@ pub fn train_run_with(
         trainer.add_term(term);
     }
     add_surface_depth(ds, cfg, &mut trainer)?;
-    add_stereo_depth(ds, cfg, &begun, &mut trainer)?;
+    add_stereo_terms(ds, cfg, &begun, &mut trainer)?;
     let resumed_from = (trainer.iteration() > 0).then_some(trainer.iteration());
     let clock = Instant::now();
     let ckpt_path = run.checkpoint();
@@ -84,7 +86,7 @@ pub fn train_run_with(
         (Some(co), Some(mut start)) => {
             let mut second = start.trainer(cfg, views, extent as f32, device)?;
             add_surface_depth(ds, cfg, &mut second)?;
-            add_stereo_depth(ds, cfg, &begun, &mut second)?;
+            add_stereo_terms(ds, cfg, &begun, &mut second)?;
             let cameras = ds.train_views().map(|v| v.camera.clone()).collect();
             let mut pair = TrainerPair::new(trainer, second, cameras, co)?;
             let second_path = run.checkpoint_second();
@@ -282,16 +284,17 @@ fn add_surface_depth(
     Ok(())
 }
 
-/// The stereo depth term, when the run starts from stereo and weighs it. A resumed run builds
-/// its stereo start again (the same, from the same seed): the checkpoint keeps only the
-/// Gaussians.
-fn add_stereo_depth(
+/// The terms built on the stereo start's depth ([`StereoDepthTerm`], [`FloaterTerm`]), those the
+/// run weighs, when it starts from stereo. A resumed run builds its stereo start again (the
+/// same, from the same seed): the checkpoint keeps only the Gaussians.
+fn add_stereo_terms(
     ds: &Dataset,
     cfg: &RunConfig,
     begun: &Begun,
     trainer: &mut Trainer,
 ) -> Result<(), PipelineError> {
-    if cfg.stereo_depth_weight <= 0.0 || begun.used != InitStrategy::Stereo {
+    let wanted = cfg.stereo_depth_weight > 0.0 || cfg.floater_weight > 0.0;
+    if !wanted || begun.used != InitStrategy::Stereo {
         return Ok(());
     }
     let rebuilt;
@@ -303,10 +306,20 @@ fn add_stereo_depth(
             &rebuilt
         }
     };
-    trainer.add_term(Box::new(StereoDepthTerm::new(
-        &start.cloud,
-        cfg.stereo_depth_weight,
-    )));
+    if cfg.stereo_depth_weight > 0.0 {
+        trainer.add_term(Box::new(StereoDepthTerm::new(
+            &start.cloud,
+            cfg.stereo_depth_weight,
+        )));
+    }
+    if cfg.floater_weight > 0.0 {
+        let cameras = ds.train_views().map(|v| v.camera.clone()).collect();
+        trainer.add_term(Box::new(FloaterTerm::new(
+            cameras,
+            &start.cloud,
+            cfg.floater_weight,
+        )));
+    }
     Ok(())
 }
 

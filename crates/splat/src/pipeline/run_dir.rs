@@ -7,7 +7,8 @@ use fewview_scene::Dataset;
 use fewview_scene::memory::StagePeaks;
 use serde::{Deserialize, Serialize};
 
-use super::{PipelineError, RunConfig};
+use super::config::RunConfig;
+use super::error::PipelineError;
 use crate::eval::EvalReport;
 
 /// Paths inside a run directory.

@@ -5,7 +5,8 @@
 use fewview_scene::{Camera, Dataset, Image};
 use nalgebra::Vector3;
 
-use super::{InitStrategy, MAX_INIT_POINTS, PipelineError, RunConfig};
+use super::config::{InitStrategy, MAX_INIT_POINTS, RunConfig};
+use super::error::PipelineError;
 use crate::init::{
     FrustumView, PATCH_SCALE_CAP, from_points, from_stereo_points, random_in_box,
     random_in_frustums,

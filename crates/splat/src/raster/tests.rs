@@ -86,6 +86,24 @@ pub(crate) fn f32_refs(arrays: &[Vec<f32>; 5], sh_coeffs: usize) -> GaussianRefs
     }
 }
 
+/// `g` rendered through the Burn op from [`camera`] over black at SH degree 0: RGB, depth and
+/// alpha, `[30, 40, 5]`.
+pub(crate) fn render_from_camera(g: &crate::op::GaussianTensors) -> crate::op::RenderTensors {
+    let n = g.opacity_logits.dims()[0];
+    crate::op::render(
+        g,
+        burn::tensor::Tensor::<2>::zeros([n, 2], &g.means.device()),
+        &crate::op::RenderView {
+            camera: camera(),
+            settings: RenderSettings {
+                background: [0.0; 3],
+                sh_degree: 0,
+                near_plane: 0.01,
+            },
+        },
+    )
+}
+
 /// A camera looking down +z from a slightly rotated pose, 40×30 with an off-centre principal point.
 pub(crate) fn camera() -> RenderCamera {
     let (a, b) = (0.05f64, -0.03f64);

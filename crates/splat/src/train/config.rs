@@ -64,6 +64,9 @@ pub struct DensifyConfig {
     pub opacity_reset_interval: usize,
 }
 
+/// The largest dropout rate of [`TrainConfig::sparse_view`]: DropGaussian's γ.
+pub const SPARSE_VIEW_DROPOUT: f32 = 0.2;
+
 /// Everything a training run needs besides the data.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TrainConfig {
@@ -146,10 +149,12 @@ impl TrainConfig {
     /// at all in runs of up to 1500 iterations; the SH degree grows every `iterations / 10`
     /// iterations (Inria reaches degree 3 at 10% of its run too); the position learning rate
     /// decays over the whole run. Learning rates and thresholds are Inria's. Views with alpha
-    /// train over a random background ([`TrainConfig::random_background`]).
+    /// train over a random background ([`TrainConfig::random_background`]), and the photometric
+    /// render drops Gaussians as DropGaussian does, up to its γ = 0.2 ([`super::dropout`]).
     pub fn sparse_view(iterations: usize) -> Self {
         let mut c = Self::inria();
         c.random_background = true;
+        c.dropout = SPARSE_VIEW_DROPOUT;
         c.iterations = iterations;
         c.densify.from_iter = iterations / 5;
         c.densify.until_iter = iterations * 3 / 5;

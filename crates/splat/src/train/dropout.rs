@@ -67,8 +67,6 @@ pub fn drop_gaussians(gaussians: &GaussianTensors, keep: &[bool], rate: f32) -> 
 mod tests {
     use super::*;
     use crate::model::GaussianModel;
-    use crate::op::{RenderView, render};
-    use crate::raster::{RenderCamera, RenderSettings};
     use burn::tensor::Device;
     use rand::SeedableRng;
 
@@ -82,20 +80,8 @@ mod tests {
         m
     }
 
-    fn image_of(g: &GaussianTensors, camera: &RenderCamera) -> Vec<f32> {
-        let n = g.opacity_logits.dims()[0];
-        let out = render(
-            g,
-            Tensor::<2>::zeros([n, 2], &g.means.device()),
-            &RenderView {
-                camera: camera.clone(),
-                settings: RenderSettings {
-                    background: [0.0; 3],
-                    sh_degree: 0,
-                    near_plane: 0.01,
-                },
-            },
-        );
+    fn image_of(g: &GaussianTensors) -> Vec<f32> {
+        let out = crate::raster::tests::render_from_camera(g);
         let [h, w, _] = out.image.dims();
         let rgb = out.image.slice([0..h, 0..w, 0..3]);
         rgb.into_data().try_to_vec::<f32>().unwrap()
@@ -109,15 +95,14 @@ mod tests {
     #[test]
     fn compensation_keeps_the_expected_image() {
         let device = Device::flex();
-        let camera = crate::raster::tests::camera();
         let base = [0.3f32, 0.5, 0.7];
         let rate = 0.25f32;
-        let full = image_of(&three_splats(base).to_tensors(&device, false), &camera);
+        let full = image_of(&three_splats(base).to_tensors(&device, false));
         let mut expected = vec![0.0f64; full.len()];
         for pattern in 0..8u32 {
             let keep: Vec<bool> = (0..3).map(|k| pattern >> k & 1 == 1).collect();
             let g = three_splats(base).to_tensors(&device, false);
-            let got = image_of(&drop_gaussians(&g, &keep, rate), &camera);
+            let got = image_of(&drop_gaussians(&g, &keep, rate));
             // The naive reference: dropped splats removed, kept ones at o / (1 − r).
             let kept: Vec<f32> = (0..3)
                 .map(|k| {
@@ -129,7 +114,7 @@ mod tests {
                 })
                 .collect();
             let by_hand = three_splats([kept[0], kept[1], kept[2]]);
-            let reference = image_of(&by_hand.to_tensors(&device, false), &camera);
+            let reference = image_of(&by_hand.to_tensors(&device, false));
             for (a, b) in got.iter().zip(&reference) {
                 assert!((a - b).abs() < 1e-5, "pattern {pattern}: {a} vs {b}");
             }
@@ -154,22 +139,9 @@ mod tests {
     #[test]
     fn dropped_gaussians_get_no_gradient_and_kept_ones_do() {
         let device = Device::flex().autodiff();
-        let camera = crate::raster::tests::camera();
         let g = three_splats([0.3, 0.5, 0.7]).to_tensors(&device, true);
         let dropped = drop_gaussians(&g, &[true, false, true], 0.2);
-        let n = 3;
-        let out = render(
-            &dropped,
-            Tensor::<2>::zeros([n, 2], &device),
-            &RenderView {
-                camera: camera.clone(),
-                settings: RenderSettings {
-                    background: [0.0; 3],
-                    sh_degree: 0,
-                    near_plane: 0.01,
-                },
-            },
-        );
+        let out = crate::raster::tests::render_from_camera(&dropped);
         let grads = out.image.sum().backward();
         let grad = g.opacity_logits.grad(&grads).unwrap();
         let grad = grad.into_data().try_to_vec::<f32>().unwrap();

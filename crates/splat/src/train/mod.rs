@@ -1,6 +1,6 @@
 //! Sparse-view training of 3D Gaussians.
 //!
-//! [`Trainer`] runs the loop ([`trainer`]: render, loss, backward; [`update`]: densification and
+//! [`Trainer`] runs the loop ([`trainer`]: render, loss, backward; `update`: densification and
 //! Adam). What it trains on is a [`TrainView`] each ([`view`]); what it reports and saves is in
 //! [`state`]; an extra loss is one [`LossTerm`] ([`term`]).
 

@@ -19,8 +19,8 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use super::TrainConfig;
 use super::co_prune::{co_prune, depth_scale};
+use super::config::TrainConfig;
 use super::state::{Progress, TrainError, TrainState};
 use super::term::{LossContext, LossTerm};
 use super::trainer::Trainer;

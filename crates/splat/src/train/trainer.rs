@@ -1,5 +1,5 @@
 //! The training loop: render a training view through the Burn op, photometric loss plus any
-//! pluggable [`LossTerm`]s, backward, then the update of [`super::update`] — and checkpoints
+//! pluggable [`LossTerm`]s, backward, then densification and Adam (`update`) — and checkpoints
 //! that resume to the same result.
 
 use std::cell::OnceCell;
