@@ -25,4 +25,4 @@ pub mod virtual_view;
 
 pub use error::FusionError;
 pub use run::{FusionRecord, fusion_run};
-pub use variant::{FusionConfig, Variant};
+pub use variant::{FUSION_DROPOUT, FusionConfig, Variant};

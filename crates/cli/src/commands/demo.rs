@@ -144,7 +144,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     check_folder(&args.out, "--out")?;
     let ds = demo_dataset(&opts);
     // Checked before anything is written.
-    let cfg = args.train.run_config(ds.background, 2000, false)?;
+    let cfg = args
+        .train
+        .transition_run_config(ds.background, 2000, false)?;
     check_init(&ds, &cfg, &args.train.init, args.resume)?;
     let gt = args.out.join("ground_truth");
     std::fs::create_dir_all(&gt)?;

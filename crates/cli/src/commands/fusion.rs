@@ -209,7 +209,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("--init surface runs the surface method on a dataset; pass --data");
     }
     let bare_surface = surface_first::take(&mut args.train.init, &out);
-    let cfg = args.train.run_config(ds.background, default, photos)?;
+    let cfg = args
+        .train
+        .transition_run_config(ds.background, default, photos)?;
     let first = || {
         Ok(surface_first::SurfaceFirst {
             data: args

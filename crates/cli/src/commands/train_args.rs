@@ -135,14 +135,16 @@ pub struct TrainArgs {
     #[arg(long, value_name = "HOW", value_enum,
           default_value_t = TrainBackground::of(TrainConfig::sparse_view(1).random_background))]
     pub train_background: TrainBackground,
-    /// Largest opacity-dropout rate (DropGaussian), 0: off.
+    /// Largest opacity-dropout rate (DropGaussian), 0: off [default: 0.2; fusion, demo: 0].
     ///
     /// DropGaussian's opacity dropout: each training render leaves out this share of the
     /// Gaussians at the last iteration (growing linearly from 0) and scales the others' opacity to
     /// compensate, so that a few views cannot be fitted by Gaussians leaning on each other.
-    #[arg(long, value_name = "GAMMA", default_value_t = TrainConfig::sparse_view(1).dropout,
-          value_parser = super::number_args::non_negative_f32)]
-    pub dropout: f32,
+    /// Default: DropGaussian's γ = 0.2 for `train` and `benchmark` (`TrainConfig::sparse_view`),
+    /// none for `fusion` and `demo`, whose transitions it did not improve
+    /// (`fewview_fusion::FUSION_DROPOUT`).
+    #[arg(long, value_name = "GAMMA", value_parser = super::number_args::non_negative_f32)]
+    pub dropout: Option<f32>,
     /// Weight of the stereo start's depth as a loss, 0: off.
     ///
     /// Weight of the stereo start's depth as a training loss: each training render's depth is
@@ -206,6 +208,21 @@ pub struct TrainArgs {
 }
 
 impl TrainArgs {
+    /// [`Self::run_config`] for a run whose product is a transition (`fusion`, `demo`): without
+    /// `--dropout`, the fusion method's own rate ([`fewview_fusion::FUSION_DROPOUT`]).
+    pub fn transition_run_config(
+        &self,
+        background: [f32; 3],
+        default_iterations: usize,
+        photos: bool,
+    ) -> anyhow::Result<RunConfig> {
+        let mut cfg = self.run_config(background, default_iterations, photos)?;
+        if self.dropout.is_none() {
+            cfg.train.dropout = fewview_fusion::FUSION_DROPOUT;
+        }
+        Ok(cfg)
+    }
+
     /// The run's configuration; `photos` says the data is a folder of photos whose poses the
     /// run estimated (it decides `--sky-shell auto`).
     pub fn run_config(
@@ -221,7 +238,7 @@ impl TrainArgs {
         train.background = background;
         train.random_background = self.train_background == TrainBackground::Random;
         train.checkpoint_interval = self.checkpoint_every;
-        train.dropout = self.dropout;
+        train.dropout = self.dropout.unwrap_or(train.dropout);
         train.appearance = AppearanceConfig {
             model: self.appearance,
             lr: self.appearance_lr,
@@ -342,5 +359,32 @@ mod tests {
         assert_eq!(run.stereo_depth_weight, library.stereo_depth_weight);
         assert_eq!(run.co_reg, library.co_reg);
         assert_eq!(run.floater_weight, library.floater_weight);
+    }
+
+    /// `train` drops Gaussians as the library's sparse-view schedule does, a transition run
+    /// as the fusion method does, and `--dropout` sets both.
+    #[test]
+    fn dropout_defaults_by_product_and_the_flag_sets_it() {
+        let args: TrainArgs = parse(&["train"]);
+        let library = TrainConfig::sparse_view(1000).dropout;
+        assert_eq!(
+            args.run_config([0.0; 3], 1000, false)
+                .unwrap()
+                .train
+                .dropout,
+            library
+        );
+        let transition = args.transition_run_config([0.0; 3], 1000, false).unwrap();
+        assert_eq!(transition.train.dropout, fewview_fusion::FUSION_DROPOUT);
+        let args: TrainArgs = parse(&["train", "--dropout", "0.3"]);
+        assert_eq!(
+            args.run_config([0.0; 3], 1000, false)
+                .unwrap()
+                .train
+                .dropout,
+            0.3
+        );
+        let transition = args.transition_run_config([0.0; 3], 1000, false).unwrap();
+        assert_eq!(transition.train.dropout, 0.3);
     }
 }
