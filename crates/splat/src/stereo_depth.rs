@@ -101,16 +101,28 @@ impl LossTerm for StereoDepthTerm {
         let Some((depth, weights)) = self.targets.get(ctx.view_index) else {
             return Ok(None);
         };
-        let [h, w, _] = ctx.render.image.dims();
-        if depth.len() != h * w {
-            return Err(TrainError::Invalid(format!(
-                "stereo depth of {} pixels for a {w}×{h} render",
-                depth.len()
-            )));
-        }
-        let rendered = ctx.render.image.clone().slice([0..h, 0..w, 3..4]);
-        Ok(weighted_relative_depth_l1(rendered, depth, weights).map(|l| l * self.weight))
+        depth_loss_of_render(ctx, "stereo", depth, weights, self.weight)
     }
+}
+
+/// `weight ×` [`weighted_relative_depth_l1`] of the iteration's rendered depth against one
+/// view's target; a target of another size than the render is an error naming `what`.
+pub fn depth_loss_of_render(
+    ctx: &LossContext<'_>,
+    what: &str,
+    depth: &[f32],
+    weights: &[f32],
+    weight: f32,
+) -> Result<Option<Tensor<1>>, TrainError> {
+    let [h, w, _] = ctx.render.image.dims();
+    if depth.len() != h * w || weights.len() != h * w {
+        return Err(TrainError::Invalid(format!(
+            "{what} depth of {} pixels for a {w}×{h} render",
+            depth.len()
+        )));
+    }
+    let rendered = ctx.render.image.clone().slice([0..h, 0..w, 3..4]);
+    Ok(weighted_relative_depth_l1(rendered, depth, weights).map(|l| l * weight))
 }
 
 #[cfg(test)]

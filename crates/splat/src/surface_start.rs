@@ -440,18 +440,8 @@ impl LossTerm for SurfaceDepthTerm {
         let Some(depth) = self.depths.get(ctx.view_index) else {
             return Ok(None);
         };
-        let [h, w, _] = ctx.render.image.dims();
-        if depth.len() != h * w {
-            return Err(TrainError::Invalid(format!(
-                "surface depth of {} pixels for a {w}×{h} render",
-                depth.len()
-            )));
-        }
-        let rendered = ctx.render.image.clone().slice([0..h, 0..w, 3..4]);
-        let Some(l1) = relative_depth_l1(rendered, depth) else {
-            return Ok(None);
-        };
-        Ok(Some(l1 * self.weight))
+        let weights = vec![1.0; depth.len()];
+        crate::stereo_depth::depth_loss_of_render(ctx, "surface", depth, &weights, self.weight)
     }
 }
 
