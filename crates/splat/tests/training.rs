@@ -193,6 +193,41 @@ fn checkpoint_of_a_small_run(dir: &std::path::Path, ds: &Dataset, cfg: &RunConfi
     save_checkpoint(&dir.join("checkpoint.bin"), &t.config, &data, &state).unwrap();
 }
 
+/// A co-regularised run resumes only when both fields' checkpoints stopped at one iteration.
+#[test]
+fn a_pair_resumes_only_from_checkpoints_of_one_iteration() {
+    let ds = small_demo();
+    let mut cfg = short_config(20);
+    cfg.co_reg = Some(CoRegConfig::default());
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    checkpoint_of_a_small_run(&run, &ds, &cfg);
+    let e = train_run(&ds, &cfg, &run, true, |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("checkpoint_second.bin"), "{e}");
+    let mut b = second(&ds, &cfg);
+    for _ in 0..3 {
+        b.step().unwrap();
+    }
+    let data = RunData::of(&ds).unwrap();
+    let path = run.join("checkpoint_second.bin");
+    let state = b.state().unwrap().clone();
+    save_checkpoint(&path, &b.config, &data, &state).unwrap();
+    let e = train_run(&ds, &cfg, &run, true, |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("iteration 3, the first at 5"), "{e}");
+    for _ in 0..2 {
+        b.step().unwrap();
+    }
+    let state = b.state().unwrap().clone();
+    save_checkpoint(&path, &b.config, &data, &state).unwrap();
+    let summary = train_run(&ds, &cfg, &run, true, |_| {}).unwrap();
+    assert_eq!((summary.resumed_from, summary.iterations), (Some(5), 20));
+    assert!(!path.exists(), "the finished run keeps no checkpoint");
+}
+
 #[test]
 fn resuming_on_other_views_or_another_size_is_refused_before_anything_is_written() {
     let ds = small_demo();

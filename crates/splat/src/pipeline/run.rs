@@ -73,7 +73,7 @@ pub fn train_run_with(
 
     let views = train_views(ds, &device);
     let second_start = second_start(cfg, &run, &begun)?;
-    let mut trainer = begun.trainer(cfg, views.clone(), extent as f32, device.clone())?;
+    let mut trainer = begun.trainer(cfg, views.clone(), extent as f32, device)?;
     for term in terms {
         trainer.add_term(term);
     }
@@ -81,38 +81,21 @@ pub fn train_run_with(
     add_stereo_terms(ds, cfg, &begun, &mut trainer)?;
     let resumed_from = (trainer.iteration() > 0).then_some(trainer.iteration());
     let clock = Instant::now();
-    let ckpt_path = run.checkpoint();
-    let trainer = match (cfg.co_reg, second_start) {
-        (Some(co), Some(mut start)) => {
-            let mut second = start.trainer(cfg, views, extent as f32, device)?;
-            add_surface_depth(ds, cfg, &mut second)?;
-            add_stereo_terms(ds, cfg, &begun, &mut second)?;
-            let cameras = ds.train_views().map(|v| v.camera.clone()).collect();
-            let mut pair = TrainerPair::new(trainer, second, cameras, co)?;
-            let second_path = run.checkpoint_second();
-            memory.measure("training", || {
-                pair.run(on_progress, |first, second, config| {
-                    let save = |path: &Path, config: &TrainConfig, state: &TrainState| {
-                        save_checkpoint(path, config, &resolved.data, state)
-                            .map_err(|e| e.to_string())
-                    };
-                    save(&second_path, &second_config(config), second)?;
-                    save(&ckpt_path, config, first)
-                })
-            })?;
-            pair.first
-        }
-        _ => {
-            let mut trainer = trainer;
-            memory.measure("training", || {
-                trainer.run(on_progress, |state, config| {
-                    save_checkpoint(&ckpt_path, config, &resolved.data, state)
-                        .map_err(|e| e.to_string())
-                })
-            })?;
-            trainer
-        }
-    };
+    let trainer = train_to_end(
+        ds,
+        cfg,
+        &begun,
+        (trainer, second_start.map(|s| (s, views))),
+        |first, second, config| {
+            if let Some(second) = second {
+                let config = second_config(config);
+                save_checkpoint(&run.checkpoint_second(), &config, &resolved.data, second)?;
+            }
+            save_checkpoint(&run.checkpoint(), config, &resolved.data, first)
+        },
+        &mut memory,
+        on_progress,
+    )?;
     let trained = Trained {
         train_seconds: clock.elapsed().as_secs_f64(),
         iterations: trainer.iteration(),
@@ -123,6 +106,42 @@ pub fn train_run_with(
         memory,
     };
     finish(ds, cfg, &run, trained)
+}
+
+/// The first field's trainer and, for CoR-GS, the second's start and views.
+type Fields = (Trainer, Option<(Begun, Vec<TrainView>)>);
+
+/// Trains to the end: one field, or CoR-GS's pair when the run has a second field, saving
+/// checkpoints through `save(first, second, config)`; returns the first field's trainer.
+fn train_to_end(
+    ds: &Dataset,
+    cfg: &RunConfig,
+    begun: &Begun,
+    (mut trainer, second): Fields,
+    mut save: impl FnMut(&TrainState, Option<&TrainState>, &TrainConfig) -> Result<(), PipelineError>,
+    memory: &mut StagePeaks,
+    on_progress: impl FnMut(&Progress),
+) -> Result<Trainer, PipelineError> {
+    let (Some(co), Some((mut start, views))) = (cfg.co_reg, second) else {
+        memory.measure("training", || {
+            trainer.run(on_progress, |state, config| {
+                save(state, None, config).map_err(|e| e.to_string())
+            })
+        })?;
+        return Ok(trainer);
+    };
+    let device = trainer.device.clone();
+    let mut second = start.trainer(cfg, views, trainer.extent, device)?;
+    add_surface_depth(ds, cfg, &mut second)?;
+    add_stereo_terms(ds, cfg, begun, &mut second)?;
+    let cameras = ds.train_views().map(|v| v.camera.clone()).collect();
+    let mut pair = TrainerPair::new(trainer, second, cameras, co)?;
+    memory.measure("training", || {
+        pair.run(on_progress, |first, second, config| {
+            save(first, Some(second), config).map_err(|e| e.to_string())
+        })
+    })?;
+    Ok(pair.first)
 }
 
 /// The training views of `ds` on `device`, with their valid-pixel masks and, for photos with
@@ -345,6 +364,17 @@ fn second_start(
         Some(model) => (Some(model.clone()), None),
         None => {
             let saved = load_checkpoint(&run.checkpoint_second())?;
+            let first = begun.resumed.as_ref().map_or(0, |s| s.iteration);
+            if saved.state.iteration != first {
+                return Err(PipelineError::Checkpoint {
+                    path: run.checkpoint_second(),
+                    message: format!(
+                        "the second field stopped at iteration {}, the first at {first}; start \
+                         the run again without --resume",
+                        saved.state.iteration
+                    ),
+                });
+            }
             (None, Some(saved.state))
         }
     };
