@@ -20,6 +20,7 @@ use crate::train::{LossContext, LossTerm, TrainError};
 pub const FLOATER_MARGIN: f32 = 0.1;
 
 /// One training view as the floater test sees it.
+#[derive(Clone)]
 struct ViewDepth {
     camera: Camera,
     /// The stereo depth at R^c and R^o pixels, 0 elsewhere (row-major).
@@ -27,6 +28,7 @@ struct ViewDepth {
 }
 
 /// The floater loss (see the module docs).
+#[derive(Clone)]
 pub struct FloaterTerm {
     views: Vec<ViewDepth>,
     weight: f32,

@@ -25,6 +25,7 @@ use crate::train::{LossContext, LossTerm, TrainError};
 pub const TIER_WEIGHTS: [f32; 3] = [1.0, 0.5, 0.0];
 
 /// The stereo depth loss on the training views (see the module docs).
+#[derive(Clone)]
 pub struct StereoDepthTerm {
     /// Per training view: the stereo depth and the pixel's weight, 0 where there is none.
     targets: Vec<(Vec<f32>, Vec<f32>)>,

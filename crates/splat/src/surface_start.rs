@@ -400,6 +400,7 @@ pub fn surface_model(
 /// views, relative to the mesh's depth, over the pixels the mesh covers (see the module docs).
 /// The rendered depth is the blend `Σ wᵢ zᵢ`, so a pixel the splats leave partly transparent
 /// reads nearer than the mesh and is pulled to opacity too.
+#[derive(Clone)]
 pub struct SurfaceDepthTerm {
     /// Per training view: the mesh's z-depth, 0 where it shows nothing.
     depths: Vec<Vec<f32>>,

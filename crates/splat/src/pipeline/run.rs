@@ -21,6 +21,7 @@ use crate::ply::write_ply;
 use crate::raster::{RenderCamera, RenderSettings};
 use crate::stereo_depth::StereoDepthTerm;
 use crate::stereo_start::{StereoStart, stereo_start};
+use crate::surface_start::{SurfaceDepthTerm, SurfaceRun};
 use crate::train::pair::{TrainerPair, second_seed};
 use crate::train::{AlphaImage, LossTerm, Progress, TrainConfig, TrainState, TrainView, Trainer};
 
@@ -77,14 +78,14 @@ pub fn train_run_with(
     for term in terms {
         trainer.add_term(term);
     }
-    add_surface_depth(ds, cfg, &mut trainer)?;
-    add_stereo_terms(ds, cfg, &begun, &mut trainer)?;
+    let configured = ConfiguredTerms::new(ds, cfg, &begun)?;
+    configured.add_to(&mut trainer);
     let resumed_from = (trainer.iteration() > 0).then_some(trainer.iteration());
     let clock = Instant::now();
     let trainer = train_to_end(
         ds,
         cfg,
-        &begun,
+        &configured,
         (trainer, second_start.map(|s| (s, views))),
         |first, second, config| {
             if let Some(second) = second {
@@ -116,7 +117,7 @@ type Fields = (Trainer, Option<(Begun, Vec<TrainView>)>);
 fn train_to_end(
     ds: &Dataset,
     cfg: &RunConfig,
-    begun: &Begun,
+    configured: &ConfiguredTerms,
     (mut trainer, second): Fields,
     mut save: impl FnMut(&TrainState, Option<&TrainState>, &TrainConfig) -> Result<(), PipelineError>,
     memory: &mut StagePeaks,
@@ -132,8 +133,7 @@ fn train_to_end(
     };
     let device = trainer.device.clone();
     let mut second = start.trainer(cfg, views, trainer.extent, device)?;
-    add_surface_depth(ds, cfg, &mut second)?;
-    add_stereo_terms(ds, cfg, begun, &mut second)?;
+    configured.add_to(&mut second);
     let cameras = ds.train_views().map(|v| v.camera.clone()).collect();
     let mut pair = TrainerPair::new(trainer, second, cameras, co)?;
     memory.measure("training", || {
@@ -284,62 +284,65 @@ fn write_header(
     Ok(())
 }
 
-/// The surface start's depth term, when the run starts from a surface run and weighs it.
-fn add_surface_depth(
-    ds: &Dataset,
-    cfg: &RunConfig,
-    trainer: &mut Trainer,
-) -> Result<(), PipelineError> {
-    if let InitStrategy::Surface(surface_dir) = &cfg.init
-        && cfg.surface_depth_weight > 0.0
-    {
-        let surface = crate::surface_start::SurfaceRun::load(surface_dir, ds)?;
-        trainer.add_term(Box::new(crate::surface_start::SurfaceDepthTerm::new(
-            ds,
-            &surface.mesh,
-            cfg.surface_depth_weight,
-        )?));
-    }
-    Ok(())
+/// The loss terms the run's configuration adds beside the caller's, built once: the surface
+/// start's depth ([`SurfaceDepthTerm`]) and the terms on the stereo start's depth
+/// ([`StereoDepthTerm`], [`FloaterTerm`]), those the run weighs. A co-regularised run gives each
+/// field its own copy.
+#[derive(Clone, Default)]
+struct ConfiguredTerms {
+    surface_depth: Option<SurfaceDepthTerm>,
+    stereo_depth: Option<StereoDepthTerm>,
+    floaters: Option<FloaterTerm>,
 }
 
-/// The terms built on the stereo start's depth ([`StereoDepthTerm`], [`FloaterTerm`]), those the
-/// run weighs, when it starts from stereo. A resumed run builds its stereo start again (the
-/// same, from the same seed): the checkpoint keeps only the Gaussians.
-fn add_stereo_terms(
-    ds: &Dataset,
-    cfg: &RunConfig,
-    begun: &Begun,
-    trainer: &mut Trainer,
-) -> Result<(), PipelineError> {
-    let wanted = cfg.stereo_depth_weight > 0.0 || cfg.floater_weight > 0.0;
-    if !wanted || begun.used != InitStrategy::Stereo {
-        return Ok(());
-    }
-    let rebuilt;
-    let start = match &begun.start {
-        Some(start) => start,
-        None => {
-            rebuilt = stereo_start(ds, &cfg.stereo, cfg.train.seed, &mut |_, _| {})
-                .map_err(|e| PipelineError::Init(e.to_string()))?;
-            &rebuilt
+impl ConfiguredTerms {
+    /// The terms of `cfg` on `ds`. A resumed run builds its stereo start again (the same, from
+    /// the same seed) when a stereo term needs it: the checkpoint keeps only the Gaussians.
+    fn new(ds: &Dataset, cfg: &RunConfig, begun: &Begun) -> Result<Self, PipelineError> {
+        let mut terms = Self::default();
+        if let InitStrategy::Surface(surface_dir) = &cfg.init
+            && cfg.surface_depth_weight > 0.0
+        {
+            let surface = SurfaceRun::load(surface_dir, ds)?;
+            let term = SurfaceDepthTerm::new(ds, &surface.mesh, cfg.surface_depth_weight)?;
+            terms.surface_depth = Some(term);
         }
-    };
-    if cfg.stereo_depth_weight > 0.0 {
-        trainer.add_term(Box::new(StereoDepthTerm::new(
-            &start.cloud,
-            cfg.stereo_depth_weight,
-        )));
+        let wanted = cfg.stereo_depth_weight > 0.0 || cfg.floater_weight > 0.0;
+        if !wanted || begun.used != InitStrategy::Stereo {
+            return Ok(terms);
+        }
+        let rebuilt;
+        let start = match &begun.start {
+            Some(start) => start,
+            None => {
+                rebuilt = stereo_start(ds, &cfg.stereo, cfg.train.seed, &mut |_, _| {})
+                    .map_err(|e| PipelineError::Init(e.to_string()))?;
+                &rebuilt
+            }
+        };
+        if cfg.stereo_depth_weight > 0.0 {
+            let term = StereoDepthTerm::new(&start.cloud, cfg.stereo_depth_weight);
+            terms.stereo_depth = Some(term);
+        }
+        if cfg.floater_weight > 0.0 {
+            let cameras = ds.train_views().map(|v| v.camera.clone()).collect();
+            terms.floaters = Some(FloaterTerm::new(cameras, &start.cloud, cfg.floater_weight));
+        }
+        Ok(terms)
     }
-    if cfg.floater_weight > 0.0 {
-        let cameras = ds.train_views().map(|v| v.camera.clone()).collect();
-        trainer.add_term(Box::new(FloaterTerm::new(
-            cameras,
-            &start.cloud,
-            cfg.floater_weight,
-        )));
+
+    /// Adds a copy of each term to `trainer`.
+    fn add_to(&self, trainer: &mut Trainer) {
+        if let Some(t) = &self.surface_depth {
+            trainer.add_term(Box::new(t.clone()));
+        }
+        if let Some(t) = &self.stereo_depth {
+            trainer.add_term(Box::new(t.clone()));
+        }
+        if let Some(t) = &self.floaters {
+            trainer.add_term(Box::new(t.clone()));
+        }
     }
-    Ok(())
 }
 
 /// The training configuration of CoR-GS's second field: the first's with another seed.
