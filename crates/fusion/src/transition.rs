@@ -27,7 +27,7 @@
 
 use fewview_geom::colormap::colorize_range;
 use fewview_metrics::flow::{Onlooker, path_flows, views_seeing};
-use fewview_metrics::gain::{gain_matched, sequence_gain_matched};
+use fewview_metrics::gain::sequence_gain_matched;
 use fewview_metrics::lpips::Lpips;
 use fewview_metrics::popping::{
     Popping, local_popping, local_popping_with, popping_excess, popping_of_maps,
@@ -480,23 +480,16 @@ pub(crate) fn model_of_run(
 }
 
 /// Mean LPIPS of `model`'s renders of the held-out views against their photos: raw, and after
-/// the per-channel gain fit ([`fewview_metrics::gain`]).
+/// the per-channel gain fit ([`fewview_splat::eval::held_out_lpips`], whole images).
 pub fn held_out_lpips(
     ds: &Dataset,
     model: &GaussianModel,
     settings: &RenderSettings,
     lpips: &Lpips,
 ) -> Result<(f64, f64), FusionError> {
-    let views: Vec<_> = ds.test_views().collect();
-    let (mut raw, mut matched) = (0.0, 0.0);
-    for v in &views {
-        let r = render_model(model, &RenderCamera::from(&v.camera), settings);
-        raw += lpips.distance(&r.rgb, &v.image)?;
-        let gm = gain_matched(&r.rgb, &v.image, v.valid.as_ref())?;
-        matched += lpips.distance(&gm, &v.image)?;
-    }
-    let n = views.len().max(1) as f64;
-    Ok((raw / n, matched / n))
+    Ok(fewview_splat::eval::held_out_lpips(
+        ds, model, settings, lpips, false,
+    )?)
 }
 
 #[cfg(test)]

@@ -4,9 +4,10 @@
 //! [`fewview_metrics::gain`], as evaluations of captures with varying exposure do).
 
 use fewview_metrics::gain::gain_matched;
+use fewview_metrics::lpips::Lpips;
 use fewview_metrics::psnr::{psnr, psnr_masked};
 use fewview_metrics::ssim::{SsimOptions, ssim_masked, ssim_with};
-use fewview_scene::{Image, View};
+use fewview_scene::{Dataset, Image, View};
 use serde::Serialize;
 
 use crate::model::GaussianModel;
@@ -183,6 +184,45 @@ pub fn evaluate(
         views: scores,
     };
     Ok((report, renders))
+}
+
+/// Mean LPIPS of `model`'s renders of `ds`'s held-out views against their photos: raw, and after
+/// the per-channel gain fit ([`fewview_metrics::gain`]). With `masked`, both images are black
+/// outside each view's object mask first (RegNeRF's masked DTU metrics); a view without a mask
+/// is scored whole.
+pub fn held_out_lpips(
+    ds: &Dataset,
+    model: &GaussianModel,
+    settings: &RenderSettings,
+    lpips: &Lpips,
+    masked: bool,
+) -> Result<(f64, f64), fewview_metrics::MetricsError> {
+    let (mut raw, mut matched) = (0.0, 0.0);
+    for v in ds.test_views() {
+        let mut rendered = render_model(model, &RenderCamera::from(&v.camera), settings).rgb;
+        let mut truth = v.image.clone();
+        if let (true, Some(mask)) = (masked, &v.mask) {
+            rendered = times_mask(&rendered, mask);
+            truth = times_mask(&truth, mask);
+        }
+        raw += lpips.distance(&rendered, &truth)?;
+        let gm = gain_matched(&rendered, &truth, v.valid.as_ref())?;
+        matched += lpips.distance(&gm, &truth)?;
+    }
+    let n = ds.test.len().max(1) as f64;
+    Ok((raw / n, matched / n))
+}
+
+/// `image` with every channel multiplied by the 1-channel `mask`.
+fn times_mask(image: &Image, mask: &Image) -> Image {
+    let c = image.channels;
+    let data = image
+        .data
+        .iter()
+        .enumerate()
+        .map(|(i, v)| v * mask.data[i / c])
+        .collect();
+    Image::from_vec(image.width, image.height, c, data)
 }
 
 #[cfg(test)]

@@ -4,15 +4,14 @@
 use std::path::Path;
 
 use fewview_metrics::lpips::Lpips;
-use fewview_scene::{Dataset, Image};
+use fewview_scene::Dataset;
 use serde::{Deserialize, Serialize};
 
 use super::error::BenchmarkError;
 use super::protocol::Protocol;
-use crate::eval::render_model;
 use crate::pipeline::{ResolvedConfig, RunDir};
 use crate::ply::read_ply;
-use crate::raster::{RenderCamera, RenderSettings};
+use crate::raster::RenderSettings;
 
 /// The scores of one seed's run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -104,29 +103,7 @@ fn held_out_lpips(ds: &Dataset, run: &RunDir, net: &Lpips, masked: bool) -> Resu
         sh_degree: config.run.train.sh_degree,
         near_plane: config.run.train.near_plane,
     };
-    let mut total = 0.0;
-    for v in ds.test_views() {
-        let mut rendered = render_model(&model, &RenderCamera::from(&v.camera), &settings).rgb;
-        let mut truth = v.image.clone();
-        if let (true, Some(mask)) = (masked, &v.mask) {
-            rendered = times_mask(&rendered, mask);
-            truth = times_mask(&truth, mask);
-        }
-        total += net
-            .distance(&rendered, &truth)
-            .map_err(|e| format!("LPIPS of view {}: {e}", v.name))?;
-    }
-    Ok(total / ds.test.len().max(1) as f64)
-}
-
-/// `image` with every channel multiplied by the 1-channel `mask`.
-fn times_mask(image: &Image, mask: &Image) -> Image {
-    let c = image.channels;
-    let data = image
-        .data
-        .iter()
-        .enumerate()
-        .map(|(i, v)| v * mask.data[i / c])
-        .collect();
-    Image::from_vec(image.width, image.height, c, data)
+    let (raw, _) = crate::eval::held_out_lpips(ds, &model, &settings, net, masked)
+        .map_err(|e| format!("LPIPS of the held-out views: {e}"))?;
+    Ok(raw)
 }
