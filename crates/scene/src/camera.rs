@@ -226,6 +226,15 @@ impl Camera {
         Some((k.fx * p.x / p.z + k.cx, k.fy * p.y / p.z + k.cy, p.z))
     }
 
+    /// The pixel (row-major index) a world point projects into and its depth there; `None`
+    /// behind the camera or outside the image.
+    pub fn pixel_of(&self, p_world: &Vector3<f64>) -> Option<(usize, f64)> {
+        let (u, v, z) = self.project(p_world)?;
+        let (w, h) = (self.width() as f64, self.height() as f64);
+        (u >= 0.0 && v >= 0.0 && u < w && v < h)
+            .then(|| ((v as usize) * self.width() as usize + u as usize, z))
+    }
+
     /// The world-space point at pixel coordinates `(u, v)` and depth `z` along the optical axis.
     pub fn unproject(&self, u: f64, v: f64, z: f64) -> Vector3<f64> {
         let k = &self.intrinsics;

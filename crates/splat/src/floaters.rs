@@ -65,7 +65,7 @@ impl FloaterTerm {
                 let mut seen = self
                     .views
                     .iter()
-                    .filter_map(|v| pixel_of(&v.camera, &p).map(|px| (v, px)));
+                    .filter_map(|v| v.camera.pixel_of(&p).map(|px| (v, px)));
                 match (seen.next(), seen.next()) {
                     (Some((v, (index, z))), None) => {
                         let d = v.depth[index];
@@ -76,16 +76,6 @@ impl FloaterTerm {
             })
             .collect()
     }
-}
-
-/// The pixel (row-major index) and depth at which `camera` sees `p`, if inside its image.
-fn pixel_of(camera: &Camera, p: &Vector3<f64>) -> Option<(usize, f64)> {
-    let (u, v, z) = camera.project(p)?;
-    let (w, h) = (camera.width() as f64, camera.height() as f64);
-    if z <= 0.0 || !(0.0..w).contains(&u) || !(0.0..h).contains(&v) {
-        return None;
-    }
-    Some((v as usize * camera.width() as usize + u as usize, z))
 }
 
 impl LossTerm for FloaterTerm {

@@ -344,10 +344,7 @@ fn point_agreement(
             let points = observed.as_deref().unwrap_or(view.sparse_points);
             let pixels = points.iter().filter_map(|p| {
                 let x = nalgebra::Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-                let (u, v, z) = view.camera.project(&x)?;
-                let (w, h) = (view.camera.width() as f64, view.camera.height() as f64);
-                (u >= 0.0 && v >= 0.0 && u < w && v < h)
-                    .then(|| (v as usize * w as usize + u as usize, z))
+                view.camera.pixel_of(&x)
             });
             let (mut seen, mut all, mut sure) = (0, Vec::new(), Vec::new());
             for (p, z) in pixels {

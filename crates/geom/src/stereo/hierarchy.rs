@@ -434,7 +434,7 @@ impl Accepted {
     fn occludes(&self, x: &Vector3<f64>, cameras: &[&Camera], margin: f64) -> bool {
         cameras.iter().zip(&self.nearest).any(|(cam, nearest)| {
             // An empty pixel (infinite nearest depth) hides nothing.
-            pixel_of(cam, x).is_some_and(|(p, z)| {
+            cam.pixel_of(x).is_some_and(|(p, z)| {
                 nearest[p].is_finite() && z < nearest[p] as f64 * (1.0 - margin)
             })
         })
@@ -443,7 +443,7 @@ impl Accepted {
     fn add(&mut self, points: Vec<(usize, usize, Vector3<f64>)>, region: Region, cams: &[&Camera]) {
         for (cam, nearest) in cams.iter().zip(self.nearest.iter_mut()) {
             for (_, _, x) in &points {
-                if let Some((p, z)) = pixel_of(cam, x) {
+                if let Some((p, z)) = cam.pixel_of(x) {
                     nearest[p] = nearest[p].min(z as f32);
                 }
             }
@@ -500,14 +500,6 @@ impl Accepted {
             skipped: Vec::new(),
         }
     }
-}
-
-/// The pixel (row-major index) `x` projects into and its depth there, when inside the image.
-fn pixel_of(camera: &Camera, x: &Vector3<f64>) -> Option<(usize, f64)> {
-    let (u, v, z) = camera.project(x)?;
-    let (w, h) = (camera.width() as f64, camera.height() as f64);
-    (u >= 0.0 && v >= 0.0 && u < w && v < h)
-        .then(|| ((v as usize) * camera.width() as usize + u as usize, z))
 }
 
 fn pixel_color(image: &Image, p: usize) -> [f32; 3] {
