@@ -20,6 +20,7 @@ pub mod model;
 pub mod op;
 pub mod pipeline;
 pub mod ply;
+pub mod pseudo_depth;
 pub mod raster;
 pub mod real;
 pub mod sh;

@@ -14,6 +14,7 @@ mod fusion;
 mod fusion_outputs;
 mod fusion_study;
 mod geom_common;
+mod geometry_args;
 mod human;
 mod leave_one_out;
 mod matching;

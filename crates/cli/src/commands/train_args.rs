@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use super::geometry_args::GeometryArgs;
 use anyhow::bail;
 use clap::{Args, ValueEnum};
 use fewview_geom::stereo::source::Photometry;
@@ -12,7 +13,6 @@ use fewview_splat::sky_shell::SkyShell;
 use fewview_splat::stereo_pair_check::PairCheck;
 use fewview_splat::stereo_start::{DepthFrom, StereoInit};
 use fewview_splat::surface_start::SurfacePoses;
-use fewview_splat::train::pair::CoRegConfig;
 use fewview_splat::train::{AppearanceConfig, AppearanceModel, TrainConfig};
 
 /// What the Gaussians are composited over during training on images with alpha.
@@ -125,6 +125,14 @@ pub struct TrainArgs {
     /// Weight λ of the SSIM term in `(1 − λ) L1 + λ (1 − SSIM)`.
     #[arg(long, default_value_t = TrainConfig::inria().lambda_dssim)]
     pub lambda_dssim: f32,
+    /// Densification threshold on the mean screen-space position gradient.
+    ///
+    /// A Gaussian whose mean screen-space position gradient exceeds this is cloned or split
+    /// (3DGS §5.2; Inria's 0.0002). Raising it densifies less: FSGS and CoR-GS train their
+    /// sparse-view runs at 0.0005.
+    #[arg(long, value_name = "G", default_value_t = TrainConfig::sparse_view(1).densify.grad_threshold,
+          value_parser = super::number_args::non_negative_f32)]
+    pub densify_grad_threshold: f32,
     /// Background of training images with alpha.
     ///
     /// Background behind the Gaussians while training on images with alpha (NeRF-synthetic
@@ -145,38 +153,8 @@ pub struct TrainArgs {
     /// (`fewview_fusion::FUSION_DROPOUT`).
     #[arg(long, value_name = "GAMMA", value_parser = super::number_args::non_negative_f32)]
     pub dropout: Option<f32>,
-    /// Weight of the stereo start's depth as a loss, 0: off.
-    ///
-    /// Weight of the stereo start's depth as a training loss: each training render's depth is
-    /// pulled to the depth stereo accepted at its pixels (R^c fully, R^o half, R^s not), as a
-    /// relative L1. Only with the stereo start.
-    #[arg(long, value_name = "W", default_value_t = RunConfig::new(TrainConfig::sparse_view(1)).stereo_depth_weight,
-          value_parser = super::number_args::non_negative_f32)]
-    pub stereo_depth_weight: f32,
-    /// Weight of the floater loss, 0: off.
-    ///
-    /// Weight of the floater loss: a Gaussian that one training view sees alone, in front of
-    /// the depth stereo confirmed there, has its opacity pulled down until densification prunes
-    /// it. Only with the stereo start.
-    #[arg(long, value_name = "W", default_value_t = RunConfig::new(TrainConfig::sparse_view(1)).floater_weight,
-          value_parser = super::number_args::non_negative_f32)]
-    pub floater_weight: f32,
-    /// CoR-GS: two fields regularised by their disagreement.
-    ///
-    /// CoR-GS's co-regularisation: a second field trains beside the first from the same start
-    /// with other random draws; Gaussians without a counterpart in the other field within
-    /// `--co-reg-tau` are pruned every 5 densification steps, and each field's render of a view
-    /// between the training cameras is pulled to the other's. Doubles the training time or more.
-    #[arg(long)]
-    pub co_reg: bool,
-    /// CoR-GS co-pruning distance, a fraction of the scene extent.
-    #[arg(long, value_name = "F", default_value_t = CoRegConfig::default().tau,
-          requires = "co_reg", value_parser = super::number_args::non_negative_f32)]
-    pub co_reg_tau: f32,
-    /// CoR-GS pseudo-view weight λ_p (0: co-pruning only).
-    #[arg(long, value_name = "W", default_value_t = CoRegConfig::default().pseudo_weight,
-          requires = "co_reg", value_parser = super::number_args::non_negative_f32)]
-    pub co_reg_pseudo_weight: f32,
+    #[command(flatten)]
+    pub geometry: GeometryArgs,
     /// Save a checkpoint every N iterations (0: never).
     #[arg(long, value_name = "N", default_value_t = 500)]
     pub checkpoint_every: usize,
@@ -235,6 +213,7 @@ impl TrainArgs {
         train.seed = self.seed;
         train.sh_degree = self.sh_degree;
         train.lambda_dssim = self.lambda_dssim;
+        train.densify.grad_threshold = self.densify_grad_threshold;
         train.background = background;
         train.random_background = self.train_background == TrainBackground::Random;
         train.checkpoint_interval = self.checkpoint_every;
@@ -278,13 +257,10 @@ impl TrainArgs {
             stereo,
             device: self.device,
             surface_depth_weight: self.surface_depth_weight,
-            stereo_depth_weight: self.stereo_depth_weight,
-            floater_weight: self.floater_weight,
-            co_reg: self.co_reg.then_some(CoRegConfig {
-                tau: self.co_reg_tau,
-                pseudo_weight: self.co_reg_pseudo_weight,
-                ..CoRegConfig::default()
-            }),
+            stereo_depth_weight: self.geometry.stereo_depth_weight,
+            pseudo_depth_weight: self.geometry.pseudo_depth_weight,
+            floater_weight: self.geometry.floater_weight,
+            co_reg: self.geometry.co_reg(),
         })
     }
 }
@@ -357,6 +333,7 @@ mod tests {
         assert_eq!(run.stereo, library.stereo);
         assert_eq!(run.surface_depth_weight, library.surface_depth_weight);
         assert_eq!(run.stereo_depth_weight, library.stereo_depth_weight);
+        assert_eq!(run.pseudo_depth_weight, library.pseudo_depth_weight);
         assert_eq!(run.co_reg, library.co_reg);
         assert_eq!(run.floater_weight, library.floater_weight);
     }

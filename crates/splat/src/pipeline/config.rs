@@ -57,6 +57,10 @@ pub struct RunConfig {
     /// ([`crate::stereo_depth::StereoDepthTerm`]) when the run starts from stereo; 0: none.
     #[serde(default)]
     pub stereo_depth_weight: f32,
+    /// Weight of the stereo start's depth reprojected into pseudo views
+    /// ([`crate::pseudo_depth::PseudoDepthTerm`]) when the run starts from stereo; 0: none.
+    #[serde(default)]
+    pub pseudo_depth_weight: f32,
     /// Weight of the floater loss ([`crate::floaters::FloaterTerm`]) when the run starts from
     /// stereo; 0: none.
     #[serde(default)]
@@ -85,6 +89,7 @@ impl RunConfig {
             device: ComputeDevice::Cpu,
             surface_depth_weight: default_surface_depth_weight(),
             stereo_depth_weight: 0.0,
+            pseudo_depth_weight: 0.0,
             floater_weight: 0.0,
             co_reg: None,
         }

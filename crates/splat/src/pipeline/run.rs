@@ -18,6 +18,7 @@ use crate::eval::{check_scorable, evaluate};
 use crate::floaters::FloaterTerm;
 use crate::model::GaussianModel;
 use crate::ply::write_ply;
+use crate::pseudo_depth::PseudoDepthTerm;
 use crate::raster::{RenderCamera, RenderSettings};
 use crate::stereo_depth::StereoDepthTerm;
 use crate::stereo_start::{StereoStart, stereo_start};
@@ -286,12 +287,13 @@ fn write_header(
 
 /// The loss terms the run's configuration adds beside the caller's, built once: the surface
 /// start's depth ([`SurfaceDepthTerm`]) and the terms on the stereo start's depth
-/// ([`StereoDepthTerm`], [`FloaterTerm`]), those the run weighs. A co-regularised run gives each
+/// ([`StereoDepthTerm`], [`PseudoDepthTerm`], [`FloaterTerm`]), those the run weighs. A co-regularised run gives each
 /// field its own copy.
 #[derive(Clone, Default)]
 struct ConfiguredTerms {
     surface_depth: Option<SurfaceDepthTerm>,
     stereo_depth: Option<StereoDepthTerm>,
+    pseudo_depth: Option<PseudoDepthTerm>,
     floaters: Option<FloaterTerm>,
 }
 
@@ -307,7 +309,9 @@ impl ConfiguredTerms {
             let term = SurfaceDepthTerm::new(ds, &surface.mesh, cfg.surface_depth_weight)?;
             terms.surface_depth = Some(term);
         }
-        let wanted = cfg.stereo_depth_weight > 0.0 || cfg.floater_weight > 0.0;
+        let wanted = cfg.stereo_depth_weight > 0.0
+            || cfg.pseudo_depth_weight > 0.0
+            || cfg.floater_weight > 0.0;
         if !wanted || begun.used != InitStrategy::Stereo {
             return Ok(terms);
         }
@@ -324,8 +328,13 @@ impl ConfiguredTerms {
             let term = StereoDepthTerm::new(&start.cloud, cfg.stereo_depth_weight);
             terms.stereo_depth = Some(term);
         }
+        let cameras: Vec<_> = ds.train_views().map(|v| v.camera.clone()).collect();
+        if cfg.pseudo_depth_weight > 0.0 {
+            let (w, seed) = (cfg.pseudo_depth_weight, cfg.train.seed);
+            let term = PseudoDepthTerm::new(cameras.clone(), &start.cloud, w, seed);
+            terms.pseudo_depth = Some(term);
+        }
         if cfg.floater_weight > 0.0 {
-            let cameras = ds.train_views().map(|v| v.camera.clone()).collect();
             terms.floaters = Some(FloaterTerm::new(cameras, &start.cloud, cfg.floater_weight));
         }
         Ok(terms)
@@ -337,6 +346,9 @@ impl ConfiguredTerms {
             trainer.add_term(Box::new(t.clone()));
         }
         if let Some(t) = &self.stereo_depth {
+            trainer.add_term(Box::new(t.clone()));
+        }
+        if let Some(t) = &self.pseudo_depth {
             trainer.add_term(Box::new(t.clone()));
         }
         if let Some(t) = &self.floaters {

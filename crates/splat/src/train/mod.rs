@@ -12,6 +12,7 @@ pub mod config;
 pub mod densify;
 pub mod dropout;
 pub mod pair;
+pub mod pseudo;
 mod resident;
 pub mod state;
 pub mod term;

@@ -6,21 +6,18 @@
 //!
 //! The two fields start from the same Gaussians and differ by their random draws (view order,
 //! densification, dropout): the second trains with another seed. The first is the run's result.
-//! The pseudo views lie on the segment between a training camera and its nearest neighbour, at a
-//! random fraction of the way, rotations interpolated (the fusion module's virtual views);
-//! CoR-GS perturbs a training camera's position by Gaussian noise and averages the two
-//! rotations, which at a few views stays as close to the training cameras.
+//! The pseudo views are [`super::pseudo::pseudo_camera`]'s, between a training camera and its
+//! nearest neighbour.
 
 use std::sync::{Arc, Mutex};
 
 use burn::tensor::{Tensor, TensorData};
 use fewview_scene::Camera;
-use rand::rngs::StdRng;
-use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
 use super::co_prune::{co_prune, depth_scale};
 use super::config::TrainConfig;
+use super::pseudo::pseudo_camera;
 use super::state::{Progress, TrainError, TrainState};
 use super::term::{LossContext, LossTerm};
 use super::trainer::Trainer;
@@ -160,23 +157,9 @@ struct PseudoViewTerm {
 }
 
 impl PseudoViewTerm {
-    /// The pseudo view of `iteration`, the same for both fields: a training camera, its nearest
-    /// other, and a random point between them.
+    /// The pseudo view of `iteration`, the same for both fields ([`pseudo_camera`]).
     fn camera(&self, iteration: usize) -> Option<Camera> {
-        if self.cameras.len() < 2 {
-            return None;
-        }
-        let mut rng = StdRng::seed_from_u64(self.seed ^ (iteration as u64).rotate_left(17));
-        let i = rng.random_range(0..self.cameras.len());
-        let c = self.cameras[i].center();
-        let j = (0..self.cameras.len())
-            .filter(|&j| j != i)
-            .min_by(|&a, &b| {
-                let d = |k: usize| (self.cameras[k].center() - c).norm();
-                d(a).total_cmp(&d(b))
-            })
-            .expect("two cameras");
-        Some(self.cameras[i].interpolate(&self.cameras[j], rng.random::<f64>()))
+        pseudo_camera(&self.cameras, self.seed, iteration)
     }
 }
 
