@@ -22,7 +22,8 @@ use nalgebra::Vector3;
 #[serde(rename_all = "kebab-case")]
 pub enum SkyShell {
     /// On for a capture whose poses the run estimated from its photos, off for a dataset that
-    /// brings its own (the curated benchmarks, reproduced as their papers ran them).
+    /// brings its own (the curated benchmarks, reproduced as their papers ran them), but for
+    /// DTU's protocol ([`crate::benchmark::Protocol::sky_shell`]).
     #[default]
     Auto,
     On,

@@ -6,6 +6,7 @@ use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
 use fewview_splat::benchmark::{self, Protocol};
 use fewview_splat::pipeline::default_iterations;
+use fewview_splat::sky_shell::SkyShell;
 
 use super::output_paths::check_folder;
 use super::train::train_with_progress;
@@ -62,6 +63,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .run_config(ds.background, default_iterations(ds), false)
             .map_err(|e| format!("{e:#}"))?;
         cfg.train.seed = seed;
+        if args.train.sky_shell == SkyShell::Auto {
+            cfg.stereo.sky_shell = args.protocol.sky_shell();
+        }
         eprintln!(
             "{} seed {seed} ({} train / {} held-out views) → {}",
             ds.name,

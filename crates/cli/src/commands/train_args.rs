@@ -94,9 +94,9 @@ pub struct TrainArgs {
     /// A shell of Gaussians on the sphere beyond the stereo start's far bound (Eq. 2's `B_far`
     /// around `T`), one per 16-px block of a training view where the stereo found no depth, in
     /// the block's colour: the sky and far background then start where they are instead of
-    /// being filled by floaters in front of the cameras. `auto`: on for a folder of photos, off
-    /// for a dataset with its own poses (the benchmarks, run as their papers ran them). Not in
-    /// the fusion paper.
+    /// being filled by floaters in front of the cameras. `auto`: on for a folder of photos and
+    /// for `benchmark --protocol dtu` (its black curtain), off for other datasets with their own
+    /// poses. Not in the fusion paper.
     #[arg(long, value_name = "HOW", value_enum, default_value_t)]
     pub sky_shell: SkyShell,
     /// How the stereo start evens the pairs' exposures.

@@ -103,6 +103,15 @@ impl Protocol {
         self == Protocol::Dtu
     }
 
+    /// Whether `--sky-shell auto` gives the stereo start its shell of far Gaussians
+    /// ([`crate::sky_shell`]) under this protocol: DTU's photos show a black curtain and the
+    /// table's far edge beyond the object, where stereo finds no depth and a few views let
+    /// floaters paint them in front of it. LLFF (forward-facing, its depth bounds given) and
+    /// Blender (objects on a transparent background) have no such background.
+    pub fn sky_shell(self) -> bool {
+        self == Protocol::Dtu
+    }
+
     /// The peers' published means under this protocol (each paper's own LPIPS).
     pub fn peers(self) -> &'static [Peer] {
         match self {
