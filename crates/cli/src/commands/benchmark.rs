@@ -66,6 +66,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if args.train.sky_shell == SkyShell::Auto {
             cfg.stereo.sky_shell = args.protocol.sky_shell();
         }
+        if args.train.geometry.pseudo_depth_weight.is_none() {
+            cfg.pseudo_depth_weight = args.protocol.pseudo_depth_weight();
+        }
         eprintln!(
             "{} seed {seed} ({} train / {} held-out views) → {}",
             ds.name,

@@ -16,15 +16,16 @@ pub struct GeometryArgs {
     #[arg(long, value_name = "W", default_value_t = RunConfig::new(TrainConfig::sparse_view(1)).stereo_depth_weight,
           value_parser = super::number_args::non_negative_f32)]
     pub stereo_depth_weight: f32,
-    /// Weight of the stereo depth seen from pseudo views, 0: off.
+    /// Weight of the stereo depth seen from pseudo views, 0: off [default: 0; benchmark
+    /// --protocol dtu: 0.1].
     ///
     /// Weight of the stereo start's depth reprojected into a view between two training cameras
     /// at each iteration: that view's render is pulled to it (R^c fully, R^o half, R^s not, as a
     /// relative L1), which constrains the depth of Gaussians that the training views alone leave
-    /// free. One extra render per iteration. Only with the stereo start.
-    #[arg(long, value_name = "W", default_value_t = RunConfig::new(TrainConfig::sparse_view(1)).pseudo_depth_weight,
-          value_parser = super::number_args::non_negative_f32)]
-    pub pseudo_depth_weight: f32,
+    /// free. One extra render per iteration. Only with the stereo start. Default: off
+    /// (`RunConfig`'s), but under `benchmark --protocol dtu` (`Protocol::pseudo_depth_weight`).
+    #[arg(long, value_name = "W", value_parser = super::number_args::non_negative_f32)]
+    pub pseudo_depth_weight: Option<f32>,
     /// Weight of the floater loss, 0: off.
     ///
     /// Weight of the floater loss: a Gaussian that one training view sees alone, in front of

@@ -258,7 +258,7 @@ impl TrainArgs {
             device: self.device,
             surface_depth_weight: self.surface_depth_weight,
             stereo_depth_weight: self.geometry.stereo_depth_weight,
-            pseudo_depth_weight: self.geometry.pseudo_depth_weight,
+            pseudo_depth_weight: self.geometry.pseudo_depth_weight.unwrap_or(0.0),
             floater_weight: self.geometry.floater_weight,
             co_reg: self.geometry.co_reg(),
         })
