@@ -1,7 +1,8 @@
 //! The stereo start's depth seen from between the training views: at each iteration the points
-//! stereo accepted in the training views (R^c fully, R^o half, R^s not: [`TIER_WEIGHTS`]) are
-//! reprojected into a pseudo view ([`crate::train::pseudo::pseudo_camera`]), and the render of
-//! that view is pulled to their depth by the relative L1 of [`crate::stereo_depth`].
+//! stereo accepted in the training views (R^c fully, R^o half, R^s not:
+//! [`crate::stereo_depth::TIER_WEIGHTS`]) are reprojected into a pseudo view
+//! ([`crate::train::pseudo::pseudo_camera`]), and the render of that view is pulled to their
+//! depth by the relative L1 of [`crate::stereo_depth`].
 //!
 //! On a training view the render can match the photo with Gaussians anywhere along each ray;
 //! from between the views a Gaussian at the wrong depth lands on the wrong pixel, so the same
@@ -21,7 +22,7 @@ use fewview_scene::Camera;
 use nalgebra::Vector3;
 
 use crate::raster::RenderCamera;
-use crate::stereo_depth::{TIER_WEIGHTS, weighted_relative_depth_l1};
+use crate::stereo_depth::{pixel_weight, weighted_relative_depth_l1};
 use crate::train::pseudo::pseudo_camera;
 use crate::train::{LossContext, LossTerm, TrainError};
 
@@ -65,9 +66,9 @@ impl PseudoDepthTerm {
         let mut points = Vec::new();
         for (camera, (depths, regions)) in cameras.iter().zip(depths.iter().zip(regions)) {
             let w = camera.width() as usize;
-            for (p, (&d, r)) in depths.iter().zip(regions).enumerate() {
-                let tier = r.map_or(0.0, |r| TIER_WEIGHTS[tier_index(r)]);
-                if d > 0.0 && tier > 0.0 {
+            for (p, (&d, &r)) in depths.iter().zip(regions).enumerate() {
+                let tier = pixel_weight(d, r);
+                if tier > 0.0 {
                     let (u, v) = ((p % w) as f64 + 0.5, (p / w) as f64 + 0.5);
                     points.push((camera.unproject(u, v, d as f64), tier));
                 }
@@ -104,13 +105,6 @@ impl PseudoDepthTerm {
         }
         (depth, weight)
     }
-}
-
-fn tier_index(region: Region) -> usize {
-    Region::ALL
-        .iter()
-        .position(|r| *r == region)
-        .expect("every region is in ALL")
 }
 
 /// The smallest value within `radius` pixels (a square window) of each pixel.
@@ -150,23 +144,15 @@ impl LossTerm for PseudoDepthTerm {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fewview_scene::{Intrinsics, Se3};
-    use nalgebra::Matrix3;
+    use crate::train::pseudo::tests::camera_on_x_axis;
 
+    /// The size of [`camera_on_x_axis`]'s image.
     const W: usize = 64;
     const H: usize = 48;
 
     /// A camera at `x` on the x axis looking down +z.
     fn camera_at(x: f64) -> Camera {
-        let k = Intrinsics {
-            fx: 60.0,
-            fy: 60.0,
-            cx: 32.0,
-            cy: 24.0,
-            width: W as u32,
-            height: H as u32,
-        };
-        Camera::new(k, Se3::new(Matrix3::identity(), Vector3::new(-x, 0.0, 0.0)))
+        camera_on_x_axis(x, 60.0)
     }
 
     /// The z-depth at each pixel of a camera at `x` of a plane z = 4 with a square z = 2 in front

@@ -44,10 +44,7 @@ impl StereoDepthTerm {
                 let weights = depths
                     .iter()
                     .zip(regions)
-                    .map(|(&d, r)| match r {
-                        Some(r) if d > 0.0 => TIER_WEIGHTS[tier_index(*r)],
-                        _ => 0.0,
-                    })
+                    .map(|(&d, &r)| pixel_weight(d, r))
                     .collect();
                 (depths.clone(), weights)
             })
@@ -56,11 +53,16 @@ impl StereoDepthTerm {
     }
 }
 
-fn tier_index(region: Region) -> usize {
-    Region::ALL
-        .iter()
-        .position(|r| *r == region)
-        .expect("every region is in ALL")
+/// The weight of a stereo pixel of depth `depth` (0: none) and tier `region`: its tier's
+/// [`TIER_WEIGHTS`] where it has depth, 0 elsewhere.
+pub fn pixel_weight(depth: f32, region: Option<Region>) -> f32 {
+    match region {
+        Some(r) if depth > 0.0 => {
+            let tier = Region::ALL.iter().position(|x| *x == r);
+            TIER_WEIGHTS[tier.expect("every region is in ALL")]
+        }
+        _ => 0.0,
+    }
 }
 
 /// `Σ w |rendered − d| / d / Σ w` over the pixels with `w > 0` and `d > 0` (`rendered` is

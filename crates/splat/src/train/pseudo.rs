@@ -31,21 +31,26 @@ pub fn pseudo_camera(cameras: &[Camera], seed: u64, iteration: usize) -> Option<
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use fewview_scene::{Intrinsics, Se3};
     use nalgebra::{Matrix3, Vector3};
 
-    fn camera_at(x: f64) -> Camera {
+    /// A 64×48 camera of focal length `focal` (pixels) at `x` on the x axis, looking down +z.
+    pub(crate) fn camera_on_x_axis(x: f64, focal: f64) -> Camera {
         let k = Intrinsics {
-            fx: 50.0,
-            fy: 50.0,
+            fx: focal,
+            fy: focal,
             cx: 32.0,
             cy: 24.0,
             width: 64,
             height: 48,
         };
         Camera::new(k, Se3::new(Matrix3::identity(), Vector3::new(-x, 0.0, 0.0)))
+    }
+
+    fn camera_at(x: f64) -> Camera {
+        camera_on_x_axis(x, 50.0)
     }
 
     /// Each pseudo view lies between a camera and its nearest other: with cameras at 0, 1, 10
