@@ -488,7 +488,7 @@ pub fn held_out_lpips(
     lpips: &Lpips,
 ) -> Result<(f64, f64), FusionError> {
     Ok(fewview_splat::eval::held_out_lpips(
-        ds, model, settings, lpips, false,
+        ds, model, settings, lpips,
     )?)
 }
 

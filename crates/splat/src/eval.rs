@@ -187,42 +187,23 @@ pub fn evaluate(
 }
 
 /// Mean LPIPS of `model`'s renders of `ds`'s held-out views against their photos: raw, and after
-/// the per-channel gain fit ([`fewview_metrics::gain`]). With `masked`, both images are black
-/// outside each view's object mask first (RegNeRF's masked DTU metrics); a view without a mask
-/// is scored whole.
+/// the per-channel gain fit ([`fewview_metrics::gain`]), whole images (the masked DTU scores are
+/// [`crate::benchmark::masked`]'s).
 pub fn held_out_lpips(
     ds: &Dataset,
     model: &GaussianModel,
     settings: &RenderSettings,
     lpips: &Lpips,
-    masked: bool,
 ) -> Result<(f64, f64), fewview_metrics::MetricsError> {
     let (mut raw, mut matched) = (0.0, 0.0);
     for v in ds.test_views() {
-        let mut rendered = render_model(model, &RenderCamera::from(&v.camera), settings).rgb;
-        let mut truth = v.image.clone();
-        if let (true, Some(mask)) = (masked, &v.mask) {
-            rendered = times_mask(&rendered, mask);
-            truth = times_mask(&truth, mask);
-        }
-        raw += lpips.distance(&rendered, &truth)?;
-        let gm = gain_matched(&rendered, &truth, v.valid.as_ref())?;
-        matched += lpips.distance(&gm, &truth)?;
+        let rendered = render_model(model, &RenderCamera::from(&v.camera), settings).rgb;
+        raw += lpips.distance(&rendered, &v.image)?;
+        let gm = gain_matched(&rendered, &v.image, v.valid.as_ref())?;
+        matched += lpips.distance(&gm, &v.image)?;
     }
     let n = ds.test.len().max(1) as f64;
     Ok((raw / n, matched / n))
-}
-
-/// `image` with every channel multiplied by the 1-channel `mask`.
-fn times_mask(image: &Image, mask: &Image) -> Image {
-    let c = image.channels;
-    let data = image
-        .data
-        .iter()
-        .enumerate()
-        .map(|(i, v)| v * mask.data[i / c])
-        .collect();
-    Image::from_vec(image.width, image.height, c, data)
 }
 
 #[cfg(test)]

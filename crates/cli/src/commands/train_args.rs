@@ -37,6 +37,15 @@ pub struct TrainArgs {
     /// schedule is rescaled to the run length (see `TrainConfig::sparse_view` and docs/guide/splatting.md).
     #[arg(long)]
     pub iterations: Option<usize>,
+    /// Iterations over which the position learning rate decays.
+    ///
+    /// The position learning rate falls log-linearly from 1.6e-4 to 1.6e-6 (times the scene
+    /// extent) over this many iterations and stays there after (Inria's
+    /// `position_lr_max_steps`, 30000). FSGS, DNGaussian and CoR-GS set it to their run length;
+    /// a short run with the default keeps its early step sizes to the end.
+    #[arg(long, value_name = "N", default_value_t = TrainConfig::sparse_view(1).lr.position_decay_steps,
+          value_parser = super::number_args::positive_count)]
+    pub position_lr_steps: usize,
     /// Seed of every random choice (initialisation, view order, splits of Gaussians).
     #[arg(long, default_value_t = TrainConfig::inria().seed)]
     pub seed: u64,
@@ -211,6 +220,7 @@ impl TrainArgs {
     ) -> anyhow::Result<RunConfig> {
         let mut train = TrainConfig::sparse_view(self.iterations.unwrap_or(default_iterations));
         train.seed = self.seed;
+        train.lr.position_decay_steps = self.position_lr_steps;
         train.sh_degree = self.sh_degree;
         train.lambda_dssim = self.lambda_dssim;
         train.densify.grad_threshold = self.densify_grad_threshold;

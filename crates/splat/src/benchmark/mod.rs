@@ -12,6 +12,7 @@
 //! from it, a finished run that was not scored is scored.
 
 mod error;
+pub mod masked;
 pub mod protocol;
 mod score;
 mod table;

@@ -1,5 +1,6 @@
-//! One run's scores under a protocol: PSNR and SSIM from its `metrics.json` (inside the masks
-//! where the protocol scores there), ST-LPIPS of its held-out renders, its size and time.
+//! One run's scores under a protocol: PSNR and SSIM from its `metrics.json` and ST-LPIPS of its
+//! held-out renders, or, where the protocol scores inside object masks, all three from its
+//! renders as the peers take them ([`super::masked`]); its size and time.
 
 use std::path::Path;
 
@@ -8,7 +9,9 @@ use fewview_scene::Dataset;
 use serde::{Deserialize, Serialize};
 
 use super::error::BenchmarkError;
+use super::masked::held_out_masked_scores;
 use super::protocol::Protocol;
+use crate::model::GaussianModel;
 use crate::pipeline::{ResolvedConfig, RunDir};
 use crate::ply::read_ply;
 use crate::raster::RenderSettings;
@@ -42,24 +45,30 @@ impl SeedScore {
             message,
         };
         let metrics: serde_json::Value = read_json(&run.metrics()).map_err(bad)?;
-        let test = &metrics["test"];
-        let (psnr, ssim) = if protocol.masked() {
-            (&test["mean_masked_psnr"], &test["mean_masked_ssim"])
-        } else {
-            (&test["mean_psnr"], &test["mean_ssim"])
-        };
         let number = |v: &serde_json::Value, what: &str| {
             v.as_f64()
                 .ok_or_else(|| bad(format!("metrics.json has no {what}")))
         };
-        let lpips = match lpips {
-            Some(net) => Some(held_out_lpips(ds, &run, net, protocol.masked()).map_err(bad)?),
-            None => None,
+        let (psnr, ssim, lpips) = if protocol.masked() {
+            let (model, settings) = load_run(&run).map_err(bad)?;
+            let s = held_out_masked_scores(ds, &model, &settings, lpips).map_err(bad)?;
+            (s.psnr, s.ssim, s.lpips)
+        } else {
+            let test = &metrics["test"];
+            let lpips = match lpips {
+                Some(net) => Some(held_out_lpips(ds, &run, net).map_err(bad)?),
+                None => None,
+            };
+            (
+                number(&test["mean_psnr"], "PSNR")?,
+                number(&test["mean_ssim"], "SSIM")?,
+                lpips,
+            )
         };
         Ok(Self {
             seed,
-            psnr: number(psnr, "PSNR")?,
-            ssim: number(ssim, "SSIM")?,
+            psnr,
+            ssim,
             lpips,
             gaussians: number(&metrics["gaussians"], "Gaussian count")? as usize,
             train_seconds: number(&metrics["train_seconds"], "training time")?,
@@ -93,9 +102,8 @@ fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, String> {
     serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
 }
 
-/// Mean ST-LPIPS of the run's Gaussians rendered at `ds`'s held-out views, with both images
-/// set to black outside the view's object mask when `masked` (RegNeRF's masked DTU metrics).
-fn held_out_lpips(ds: &Dataset, run: &RunDir, net: &Lpips, masked: bool) -> Result<f64, String> {
+/// The run's Gaussians and the settings it renders with.
+fn load_run(run: &RunDir) -> Result<(GaussianModel, RenderSettings), String> {
     let config: ResolvedConfig = read_json(&run.config())?;
     let model = read_ply(&run.ply()).map_err(|e| e.to_string())?;
     let settings = RenderSettings {
@@ -103,7 +111,13 @@ fn held_out_lpips(ds: &Dataset, run: &RunDir, net: &Lpips, masked: bool) -> Resu
         sh_degree: config.run.train.sh_degree,
         near_plane: config.run.train.near_plane,
     };
-    let (raw, _) = crate::eval::held_out_lpips(ds, &model, &settings, net, masked)
+    Ok((model, settings))
+}
+
+/// Mean ST-LPIPS of the run's Gaussians rendered at `ds`'s held-out views, whole images.
+fn held_out_lpips(ds: &Dataset, run: &RunDir, net: &Lpips) -> Result<f64, String> {
+    let (model, settings) = load_run(run)?;
+    let (raw, _) = crate::eval::held_out_lpips(ds, &model, &settings, net)
         .map_err(|e| format!("LPIPS of the held-out views: {e}"))?;
     Ok(raw)
 }
