@@ -24,7 +24,7 @@ use super::trainer::Trainer;
 use crate::eval::render_model;
 use crate::loss::photometric_loss;
 use crate::model::GaussianModel;
-use crate::raster::{RenderCamera, RenderSettings};
+use crate::raster::RenderCamera;
 
 /// CoR-GS's settings.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -84,11 +84,9 @@ impl TrainerPair {
         if config.pseudo_weight > 0.0 {
             let seed = first.config.seed;
             for (trainer, other) in [(&mut first, &snapshots[1]), (&mut second, &snapshots[0])] {
-                let settings = trainer.settings(trainer.config.iterations);
                 trainer.add_term(Box::new(PseudoViewTerm {
                     cameras: cameras.clone(),
                     other: other.clone(),
-                    settings,
                     weight: config.pseudo_weight,
                     lambda_dssim: trainer.config.lambda_dssim,
                     seed,
@@ -146,11 +144,13 @@ impl TrainerPair {
     }
 }
 
-/// Eq. 9 for one field: its render of the iteration's pseudo view against the other field's.
+/// Eq. 9 for one field: its render of the iteration's pseudo view against the other field's,
+/// both with the iteration's render settings. On views with alpha each iteration trains over a
+/// random background ([`TrainConfig::random_background`]); the other field's render takes the
+/// same one, so that the two disagree where their opacities do, not where their backgrounds do.
 struct PseudoViewTerm {
     cameras: Vec<Camera>,
     other: Snapshot,
-    settings: RenderSettings,
     weight: f32,
     lambda_dssim: f32,
     seed: u64,
@@ -173,11 +173,9 @@ impl LossTerm for PseudoViewTerm {
             return Ok(None);
         };
         let camera = RenderCamera::from(&camera);
-        let mut settings = self.settings.clone();
-        settings.sh_degree = ctx.settings.sh_degree;
         let target = {
             let other = self.other.lock().expect("not poisoned");
-            render_model(&other, &camera, &settings).rgb
+            render_model(&other, &camera, ctx.settings).rgb
         };
         let own = ctx.render(&camera).image;
         let [h, w, _] = own.dims();
@@ -187,5 +185,53 @@ impl LossTerm for PseudoViewTerm {
         Ok(Some(
             photometric_loss(own, target, self.lambda_dssim) * self.weight,
         ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::raster::RenderSettings;
+    use crate::train::pseudo::tests::camera_on_x_axis;
+    use crate::train::term::HostModel;
+
+    /// With two equal fields the pseudo-view term is zero whatever the iteration's background:
+    /// the other field's render takes the iteration's (here not the configured black), so a
+    /// random background shows where the fields' opacities differ and nowhere else.
+    #[test]
+    fn equal_fields_agree_over_the_iterations_background() {
+        let mut model = GaussianModel::new(0);
+        model.push_isotropic([0.5, 0.0, 3.0], 0.3, [0.8, 0.3, 0.2], 0.6);
+        let cameras = vec![camera_on_x_axis(0.0, 50.0), camera_on_x_axis(1.0, 50.0)];
+        let mut term = PseudoViewTerm {
+            cameras: cameras.clone(),
+            other: Arc::new(Mutex::new(model.clone())),
+            weight: 1.0,
+            lambda_dssim: 0.2,
+            seed: 0,
+        };
+        let gaussians = model.to_tensors(&Default::default(), false);
+        let settings = RenderSettings {
+            background: [0.3, 0.6, 0.9],
+            sh_degree: 0,
+            near_plane: 0.2,
+        };
+        let ctx = LossContext {
+            iteration: 1,
+            view_index: 0,
+            views: &[],
+            gaussians: &gaussians,
+            settings: &settings,
+            extent: 1.0,
+            render: &crate::raster::tests::render_from_camera(&gaussians),
+            appearance: &[],
+            host: HostModel::Ready(&model),
+        };
+        let loss = term
+            .loss(&ctx)
+            .unwrap()
+            .expect("a pseudo view between two cameras");
+        let value = fewview_optim::f32_values(loss, "loss").unwrap()[0];
+        assert!(value.abs() < 1e-5, "{value}");
     }
 }
