@@ -32,7 +32,7 @@ pub enum Which {
 /// Renders a trained model (Inria PLY) at a dataset's cameras to PNG, and optionally along a smooth
 /// camera path through the training views (rotations by SLERP, centres linearly) to a video.
 #[derive(Debug, ClapArgs)]
-#[command(mut_arg("data", |a| a.required_unless_present("cameras")))]
+#[command(mut_arg("data", |a| a.required(false).required_unless_present("cameras")))]
 pub struct Args {
     /// Trained Gaussians (Inria PLY layout).
     #[arg(long, value_name = "FILE")]
