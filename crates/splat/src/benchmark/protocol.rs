@@ -18,7 +18,8 @@ pub enum Protocol {
     /// LLFF, 3 views: every 8th image held out (0, 8, 16, …), 3 training views evenly spaced
     /// over the rest (fern: 1, 10, 19), at 504×378 (`images_8`).
     Llff,
-    /// DTU, 3 views 25, 22, 28 at 400×300; scored on the 25 test views inside the object masks.
+    /// DTU, 3 views 25, 22, 28 at 400×300; scored on the 25 test views with their object masks,
+    /// as the peers score them ([`super::masked`]).
     Dtu,
     /// NeRF-synthetic (Blender), 8 views 26, 86, 2, 55, 75, 93, 16, 73 at 400×400; scored on the
     /// test set over a white background.
@@ -98,7 +99,7 @@ impl Protocol {
         }
     }
 
-    /// Whether the scores are taken inside the test views' object masks.
+    /// Whether the scores are taken with the test views' object masks ([`super::masked`]).
     pub fn masked(self) -> bool {
         self == Protocol::Dtu
     }
