@@ -204,7 +204,7 @@ mod tests {
         model.push_isotropic([0.5, 0.0, 3.0], 0.3, [0.8, 0.3, 0.2], 0.6);
         let cameras = vec![camera_on_x_axis(0.0, 50.0), camera_on_x_axis(1.0, 50.0)];
         let mut term = PseudoViewTerm {
-            cameras: cameras.clone(),
+            cameras,
             other: Arc::new(Mutex::new(model.clone())),
             weight: 1.0,
             lambda_dssim: 0.2,
